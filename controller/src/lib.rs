@@ -1,0 +1,16 @@
+//! forcecell's force controller, written against the HAL only.
+//!
+//! * [`law`] — the paper's adaptive position-based impedance law (and the fixed-reference law it improves
+//!   on) as a pure `step` over an injected `dt`;
+//! * [`control_loop`] — the loop that wires any [`hal::RobotLink`] and [`hal::ForceSensor`] to a law,
+//!   gating bad input so it never reaches the command.
+#![cfg_attr(not(test), warn(missing_docs))]
+
+pub mod control_loop;
+pub mod law;
+
+pub use control_loop::{ControlLoop, CycleReport, Fault, LoopConfig, LoopError, LoopStats};
+pub use law::{
+    AdaptiveParams, ForceLaw, ImpedanceLaw, ImpedanceParams, Output, Reference,
+    fixed_reference_steady_state_error,
+};
