@@ -1,1 +1,13 @@
-pub fn placeholder() {}
+//! The other side of every wire: the contact plant (physical truth), the robot's inner position loop,
+//! a sensor model, and the simulated peers that speak to forcecell's drivers.
+#![cfg_attr(not(test), warn(missing_docs))]
+
+pub mod inner;
+pub mod plant;
+pub mod sensor_model;
+pub mod world;
+
+pub use inner::{InnerLoop, InnerLoopModel};
+pub use plant::{ContactPlant, Event, Schedule};
+pub use sensor_model::{SensorModel, SensorParams, Window};
+pub use world::{InProcRobot, InProcSensor, SharedWorld, World};
