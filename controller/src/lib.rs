@@ -6,9 +6,11 @@
 //!   gating bad input so it never reaches the command.
 #![cfg_attr(not(test), warn(missing_docs))]
 
+pub mod config;
 pub mod control_loop;
 pub mod law;
 
+pub use config::{LawConfig, Overrides, Tuning};
 pub use control_loop::{ControlLoop, CycleReport, Fault, LoopConfig, LoopError, LoopStats};
 pub use law::{
     AdaptiveParams, ForceLaw, ImpedanceLaw, ImpedanceParams, Output, Reference,
