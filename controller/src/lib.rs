@@ -3,16 +3,22 @@
 //! * [`law`] — the paper's adaptive position-based impedance law (and the fixed-reference law it improves
 //!   on) as a pure `step` over an injected `dt`;
 //! * [`control_loop`] — the loop that wires any [`hal::RobotLink`] and [`hal::ForceSensor`] to a law,
-//!   gating bad input so it never reaches the command.
+//!   gating bad input so it never reaches the command;
+//! * [`robust`] — forcecell's robust law (with [`estimator`] and [`conditioning`]): what holds the force
+//!   on a cell with sampling, lag, delay and a noisy sensor.
 #![cfg_attr(not(test), warn(missing_docs))]
 
+pub mod conditioning;
 pub mod config;
 pub mod control_loop;
+pub mod estimator;
 pub mod law;
+pub mod robust;
 
 pub use config::{LawConfig, Overrides, Tuning};
 pub use control_loop::{ControlLoop, CycleReport, Fault, LoopConfig, LoopError, LoopStats};
 pub use law::{
-    AdaptiveParams, ForceLaw, ImpedanceLaw, ImpedanceParams, Output, Reference,
-    fixed_reference_steady_state_error,
+    AdaptiveParams, ContactState, EventCounts, Events, ForceLaw, ImpedanceLaw, ImpedanceParams,
+    Output, Reference, fixed_reference_steady_state_error,
 };
+pub use robust::{ContactParams, LimitParams, ResponseParams, RobustLaw, RobustParams};

@@ -1,0 +1,291 @@
+//! Online identification of the environment `f = k_c·(x − x_c)` by recursive least squares with
+//! forgetting, well scaled, gated and projected.
+//!
+//! # Why not the paper's gradient law
+//! The paper adapts `[k_c, K_c = k_c·x_c]` on the regressor `[x, −1]` with `x ≈ 0.01 m`, so the stiffness
+//! channel moves at `r1·x² ≈ 5·10⁻⁴ s⁻¹` and never learns anything. Here the model is written around a
+//! reference position `x₀` captured at contact onset and the position is scaled by `s = f_r/k̂_c(0)` (the
+//! expected penetration), so both regressor entries are of order one:
+//!
+//! `f = θ₀·φ₀ + θ₁`, `φ₀ = (x − x₀)/s`, `θ₀ = k_c·s` (N), `θ₁ = k_c·(x₀ − x_c)` (N).
+//!
+//! # Safeguards
+//! * **excitation gate** — update only while the position moves by more than a force-equivalent
+//!   threshold from its slow average (`k̂_c·|x − x̄| ≥ excitation`) *and* the force moves from its own
+//!   (`|f − f̄| ≥ excitation`): a static contact carries no information about `k_c`, and adapting on it
+//!   lets bias drift (which the closed loop turns into a correlated position drift) pull `k̂_c` away;
+//!   a moving surface under a held force moves the position alone;
+//! * **dead-zone** on the prediction error;
+//! * **forgetting** with a time constant counted in *adapting* time only, so the covariance cannot wind
+//!   up while the gate is closed, plus a covariance ceiling;
+//! * **projection** of `k̂_c` into `[kc_min, kc_max]`, reported every time it acts.
+//!
+//! The estimator uses the raw (unfiltered) force and the measured position of the same instant: the
+//! output noise of a force sensor does not bias least squares, a filter's lag would.
+
+use serde::{Deserialize, Serialize};
+
+/// Estimator configuration.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EstimatorParams {
+    /// Initial stiffness estimate `k̂_c(0)`, N/m.
+    pub kc0: f64,
+    /// Lower bound of `k̂_c`, N/m.
+    pub kc_min: f64,
+    /// Upper bound of `k̂_c`, N/m.
+    pub kc_max: f64,
+    /// Forgetting time constant, s of adapting time.
+    pub memory: f64,
+    /// Force-equivalent excitation needed to adapt, N (`k̂_c·|x − x̄|`).
+    pub excitation: f64,
+    /// Time constant of the slow position average `x̄` the excitation is measured from, s.
+    pub excitation_window: f64,
+    /// Dead-zone on the prediction error, N.
+    pub dead_zone: f64,
+    /// Initial relative uncertainty of `k̂_c` at each contact onset (1 = ±100 %).
+    pub initial_uncertainty: f64,
+}
+
+impl EstimatorParams {
+    /// Checks the values.
+    pub fn validate(&self) -> Result<(), String> {
+        let pos = |n: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(format!("estimator.{n} must be > 0, got {v}"))
+            }
+        };
+        let nonneg = |n: &str, v: f64| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(format!("estimator.{n} must be >= 0, got {v}"))
+            }
+        };
+        pos("kc0", self.kc0)?;
+        pos("kc_min", self.kc_min)?;
+        pos("kc_max", self.kc_max)?;
+        pos("memory", self.memory)?;
+        pos("excitation_window", self.excitation_window)?;
+        pos("initial_uncertainty", self.initial_uncertainty)?;
+        nonneg("excitation", self.excitation)?;
+        nonneg("dead_zone", self.dead_zone)?;
+        if self.kc_min > self.kc_max {
+            return Err(format!(
+                "estimator.kc_min {} N/m is above kc_max {} N/m",
+                self.kc_min, self.kc_max
+            ));
+        }
+        if !(self.kc_min..=self.kc_max).contains(&self.kc0) {
+            return Err(format!(
+                "estimator.kc0 {} N/m is outside [kc_min, kc_max] = [{}, {}] N/m",
+                self.kc0, self.kc_min, self.kc_max
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// What one estimator update did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Update {
+    /// The estimate moved.
+    pub adapted: bool,
+    /// `k̂_c` had to be projected back into its bounds.
+    pub projected: bool,
+}
+
+/// Recursive least squares on `f = k_c·(x − x_c)`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StiffnessEstimator {
+    p: EstimatorParams,
+    /// Position scale `s`, m.
+    scale: f64,
+    /// `[k_c·s, k_c·(x₀ − x_c)]`, N.
+    theta: [f64; 2],
+    /// Covariance, symmetric.
+    cov: [[f64; 2]; 2],
+    /// Reference position `x₀`, m.
+    x0: f64,
+    /// Slow average of the position, m.
+    x_slow: f64,
+    /// Slow average of the force, N.
+    f_slow: f64,
+}
+
+/// Covariance given to the intercept at each contact onset (the surface may be anywhere), N²-normalised.
+const INTERCEPT_UNCERTAINTY: f64 = 100.0;
+/// Ceiling of either diagonal covariance entry.
+const COV_MAX: f64 = 1.0e4;
+
+impl StiffnessEstimator {
+    /// An estimator at `k̂_c(0)` with position scale `scale` (m, typically `f_r/k̂_c(0)`).
+    pub fn new(p: EstimatorParams, scale: f64) -> Self {
+        Self {
+            scale,
+            theta: [p.kc0 * scale, 0.0],
+            cov: [[0.0; 2]; 2],
+            x0: 0.0,
+            x_slow: 0.0,
+            f_slow: 0.0,
+            p,
+        }
+    }
+
+    /// Change the configuration keeping the estimate (projected into the new bounds).
+    pub fn set_params(&mut self, p: EstimatorParams) {
+        self.p = p;
+        let k = self.kc().clamp(p.kc_min, p.kc_max);
+        self.theta[0] = k * self.scale;
+    }
+
+    /// Start over at `k̂_c(0)`.
+    pub fn reset(&mut self) {
+        self.theta = [self.p.kc0 * self.scale, 0.0];
+        self.cov = [[0.0; 2]; 2];
+    }
+
+    /// Contact begins at measured position `x` (m) with measured force `f` (N): re-anchor the model there
+    /// and open the covariance (the stiffness estimate is kept, its uncertainty restored).
+    pub fn begin_contact(&mut self, x: f64, f: f64) {
+        self.x0 = x;
+        self.x_slow = x;
+        self.f_slow = f;
+        self.theta[1] = f;
+        let u = self.p.initial_uncertainty * self.theta[0];
+        self.cov = [[u * u, 0.0], [0.0, INTERCEPT_UNCERTAINTY]];
+    }
+
+    /// Stiffness estimate, N/m.
+    pub fn kc(&self) -> f64 {
+        self.theta[0] / self.scale
+    }
+
+    /// Surface position estimate `x̂_c = x₀ − θ₁/k̂_c`, m.
+    pub fn xc(&self) -> f64 {
+        self.x0 - self.theta[1] / self.kc()
+    }
+
+    /// Predicted force at `x`, N.
+    pub fn predict(&self, x: f64) -> f64 {
+        self.theta[0] * (x - self.x0) / self.scale + self.theta[1]
+    }
+
+    /// One update in contact with measured `x` (m), raw measured force `f` (N), step `dt` (s).
+    pub fn update(&mut self, x: f64, f: f64, dt: f64) -> Update {
+        let a = (dt / self.p.excitation_window).min(1.0);
+        self.x_slow += a * (x - self.x_slow);
+        self.f_slow += a * (f - self.f_slow);
+        let mut up = Update::default();
+        // Excited only when position *and* force move against their slow averages: a moving position
+        // under a steady force (a moving surface) or a moving force at a still position (bias drift)
+        // carries no information about the stiffness.
+        let excited = self.kc() * (x - self.x_slow).abs() >= self.p.excitation
+            && (f - self.f_slow).abs() >= self.p.excitation;
+        let phi = [(x - self.x0) / self.scale, 1.0];
+        let err = f - self.predict(x);
+        if !excited || err.abs() <= self.p.dead_zone {
+            return up;
+        }
+        let lambda = (-dt / self.p.memory).exp();
+        let c = &self.cov;
+        let pphi = [
+            c[0][0] * phi[0] + c[0][1] * phi[1],
+            c[1][0] * phi[0] + c[1][1] * phi[1],
+        ];
+        let denom = lambda + phi[0] * pphi[0] + phi[1] * pphi[1];
+        let gain = [pphi[0] / denom, pphi[1] / denom];
+        self.theta[0] += gain[0] * err;
+        self.theta[1] += gain[1] * err;
+        let mut n = [[0.0; 2]; 2];
+        for (i, row) in n.iter_mut().enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v = ((c[i][j] - gain[i] * pphi[j]) / lambda).clamp(-COV_MAX, COV_MAX);
+            }
+        }
+        // Keep it symmetric and positive on the diagonal.
+        let off = 0.5 * (n[0][1] + n[1][0]);
+        n[0][1] = off;
+        n[1][0] = off;
+        n[0][0] = n[0][0].max(0.0);
+        n[1][1] = n[1][1].max(0.0);
+        self.cov = n;
+        up.adapted = true;
+        let k = self.kc();
+        let kp = k.clamp(self.p.kc_min, self.p.kc_max);
+        if kp != k || !k.is_finite() {
+            up.projected = true;
+            let kp = if k.is_finite() { kp } else { self.p.kc0 };
+            // Keep the prediction at the current position unchanged while moving the slope.
+            let f_here = self.predict(x);
+            self.theta[0] = kp * self.scale;
+            self.theta[1] = f_here - self.theta[0] * phi[0];
+        }
+        if !self.theta[1].is_finite() {
+            self.theta[1] = f;
+            self.x0 = x;
+        }
+        up
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn params() -> EstimatorParams {
+        EstimatorParams {
+            kc0: 50_000.0,
+            kc_min: 10_000.0,
+            kc_max: 500_000.0,
+            memory: 0.5,
+            excitation: 0.2,
+            excitation_window: 0.05,
+            dead_zone: 0.0,
+            initial_uncertainty: 1.0,
+        }
+    }
+
+    #[test]
+    fn learns_stiffness_and_surface_from_a_transient() {
+        let (k, xc) = (70_000.0, 0.010);
+        let mut e = StiffnessEstimator::new(params(), 1e-4);
+        e.begin_contact(0.01001, k * 0.00001);
+        for i in 0..300 {
+            let t = i as f64 * 1e-3;
+            let x = 0.01001 + 0.00006 * (1.0 - (-t / 0.02).exp()) + 1e-5 * (t * 30.0).sin();
+            e.update(x, k * (x - xc), 1e-3);
+        }
+        assert!((e.kc() - k).abs() / k < 0.01, "k̂ {}", e.kc());
+        assert!((e.xc() - xc).abs() < 1e-6, "x̂ {}", e.xc());
+    }
+
+    #[test]
+    fn static_contact_does_not_adapt() {
+        let mut e = StiffnessEstimator::new(params(), 1e-4);
+        e.begin_contact(0.0101, 5.0);
+        for i in 0..1000 {
+            // Drifting force at a still position: bias drift, no information about k_c.
+            let up = e.update(0.0101, 5.0 + i as f64 * 1e-3, 1e-3);
+            assert!(!up.adapted);
+        }
+        assert_eq!(e.kc(), 50_000.0);
+    }
+
+    #[test]
+    fn projection_holds_the_bounds_and_says_so() {
+        let mut e = StiffnessEstimator::new(params(), 1e-4);
+        e.begin_contact(0.0, 0.0);
+        let mut projected = false;
+        for i in 0..200 {
+            let x = 1e-4 * (i as f64 * 0.1).sin();
+            // A "stiffness" of 5 MN/m, far above kc_max.
+            let up = e.update(x, 5.0e6 * x, 1e-3);
+            projected |= up.projected;
+            assert!(e.kc() <= 500_000.0 + 1e-6);
+        }
+        assert!(projected);
+    }
+}

@@ -1,0 +1,474 @@
+//! The robust force law: forcecell's own mode beside the paper's.
+//!
+//! # The law (in contact)
+//! With the measured position `x`, the conditioned force `f̃`, the stiffness estimate `k̂_c` and the
+//! force set-point `f_r`, the command is
+//!
+//! `x_cmd = x + κ·(f_r − f̃)/k̂_c + T_lead·v̂_c + I`, `İ = k_i·(f_r − f̃)/k̂_c` (clamped),
+//!
+//! i.e. "go to where the spring would give `f_r`", anchored on the position the robot *reports* rather
+//! than on an internal integrator. Written as the paper's eq. 23, it is `x_cmd = x̃_c + [κ·f_r +
+//! (1 − κ)·f̃]/k̂_c` with the surface observed directly, `x̃_c = x − f̃/k̂_c`, instead of estimated slowly.
+//!
+//! Why this shape: the robot's inner loop `P(s) = e^{−sT_d}/(τs + 1)` carries the command to the
+//! position, so with `g = κ·k_c/k̂_c` the closed loop's characteristic equation is
+//! `e^{sT_d}·(τs + 1) = 1 − g·F(s)` (`F` the force low-pass). For `Re s ≥ 0` the left side has modulus
+//! ≥ 1 and the right side < 1 whenever `0 < g < 2`: **the loop is stable for any delay and any lag as long
+//! as the stiffness estimate is not more than `2κ`… times too small**. The estimator only has to be
+//! roughly right for stability, and exact for speed. With `κ = 1`, `F = 1` and an exact `k̂_c` the force
+//! simply follows the inner loop's own step response.
+//!
+//! Moving surfaces: the observed surface `x̃_c` goes through a second-order tracking observer whose
+//! velocity `v̂_c` is fed forward over the inner loop's lead time `T_lead` (delay + lag); the small integral
+//! `I` removes what a wrong `T_lead` leaves.
+//!
+//! # Contact state machine
+//! `Approach` (bounded speed, anchored to the measured position) → `Contact` when the conditioned force
+//! reaches `contact_force` (or one raw sample three times that) → `Reacquire` when the raw force stays
+//! below `lift_force` for `lift_time` (fast for `reacquire_distance`, then at approach speed) →
+//! `Contact` … and from anywhere `Retract` when the conditioned force exceeds `max_force`.
+//!
+//! # Limits
+//! Deviation from the programmed path, command velocity and acceleration (with braking distance), the
+//! estimator's bounds and the force limit. Every one that acts is an [`Events`] flag of the step and a
+//! counter ([`ForceLaw::counters`]).
+
+use serde::{Deserialize, Serialize};
+
+use crate::conditioning::{ConditioningParams, SignalFilter};
+use crate::estimator::{EstimatorParams, StiffnessEstimator};
+use crate::law::{ContactState, EventCounts, Events, ForceLaw, Output};
+
+/// How the law responds in contact.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ResponseParams {
+    /// Fraction `κ` of the force error, converted to a position by `k̂_c`, corrected per command. In
+    /// (0, 1]; the loop stays stable while `κ·k_c/k̂_c < 2`.
+    pub kappa: f64,
+    /// Lead time `T_lead` of the inner loop (delay + lag) over which the surface velocity is fed forward, s.
+    pub lead: f64,
+    /// Integral gain `k_i`, 1/s (0: none).
+    pub integral: f64,
+    /// Largest magnitude of the integral term, m.
+    pub integral_limit: f64,
+    /// Natural frequency of the surface observer, Hz.
+    pub surface_bandwidth: f64,
+    /// Largest rate of change of the set-point when it is changed, N/s (bumpless changes).
+    pub set_point_rate: f64,
+}
+
+/// The contact state machine.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ContactParams {
+    /// Speed towards an unknown surface, m/s.
+    pub approach_speed: f64,
+    /// Conditioned force that means contact, N.
+    pub contact_force: f64,
+    /// Raw force below which contact is lost, N (< `contact_force`).
+    pub lift_force: f64,
+    /// How long the force must stay below `lift_force`, s.
+    pub lift_time: f64,
+    /// Speed after a loss of contact, m/s.
+    pub reacquire_speed: f64,
+    /// Distance covered at `reacquire_speed` before falling back to `approach_speed`, m.
+    pub reacquire_distance: f64,
+    /// Speed away from the surface after the force limit, m/s.
+    pub retract_speed: f64,
+    /// Distance to retract before approaching again, m.
+    pub retract_distance: f64,
+}
+
+/// Hard limits. Each one that acts is reported.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LimitParams {
+    /// Conditioned force above which the law retracts, N.
+    pub max_force: f64,
+    /// Largest command velocity, m/s.
+    pub max_velocity: f64,
+    /// Largest command acceleration, m/s².
+    pub max_acceleration: f64,
+    /// Largest magnitude of the command, i.e. deviation from the programmed path along the normal, m.
+    pub max_deviation: f64,
+}
+
+/// Everything the robust law needs.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobustParams {
+    /// Force set-point `f_r`, N.
+    pub f_r: f64,
+    /// Response in contact.
+    pub response: ResponseParams,
+    /// Force conditioning.
+    pub conditioning: ConditioningParams,
+    /// Stiffness estimator.
+    pub estimator: EstimatorParams,
+    /// Contact state machine.
+    pub contact: ContactParams,
+    /// Limits.
+    pub limits: LimitParams,
+}
+
+fn positive(name: &str, v: f64) -> Result<(), String> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(format!("{name} must be > 0, got {v}"))
+    }
+}
+
+fn non_negative(name: &str, v: f64) -> Result<(), String> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        Err(format!("{name} must be >= 0, got {v}"))
+    }
+}
+
+impl RobustParams {
+    /// Checks every value and the relations between them.
+    pub fn validate(&self) -> Result<(), String> {
+        non_negative("f_r", self.f_r)?;
+        let r = &self.response;
+        positive("response.kappa", r.kappa)?;
+        if r.kappa > 1.0 {
+            return Err(format!("response.kappa must be <= 1, got {}", r.kappa));
+        }
+        non_negative("response.lead", r.lead)?;
+        non_negative("response.integral", r.integral)?;
+        non_negative("response.integral_limit", r.integral_limit)?;
+        positive("response.surface_bandwidth", r.surface_bandwidth)?;
+        positive("response.set_point_rate", r.set_point_rate)?;
+        self.conditioning.validate()?;
+        self.estimator.validate()?;
+        let c = &self.contact;
+        positive("contact.approach_speed", c.approach_speed)?;
+        positive("contact.contact_force", c.contact_force)?;
+        non_negative("contact.lift_force", c.lift_force)?;
+        non_negative("contact.lift_time", c.lift_time)?;
+        positive("contact.reacquire_speed", c.reacquire_speed)?;
+        non_negative("contact.reacquire_distance", c.reacquire_distance)?;
+        positive("contact.retract_speed", c.retract_speed)?;
+        non_negative("contact.retract_distance", c.retract_distance)?;
+        if c.lift_force >= c.contact_force {
+            return Err(format!(
+                "contact.lift_force {} N must be below contact.contact_force {} N",
+                c.lift_force, c.contact_force
+            ));
+        }
+        let l = &self.limits;
+        positive("limits.max_force", l.max_force)?;
+        positive("limits.max_velocity", l.max_velocity)?;
+        positive("limits.max_acceleration", l.max_acceleration)?;
+        positive("limits.max_deviation", l.max_deviation)?;
+        if l.max_force <= self.f_r.max(c.contact_force) {
+            return Err(format!(
+                "limits.max_force {} N must be above the set-point {} N and contact.contact_force",
+                l.max_force, self.f_r
+            ));
+        }
+        for (n, v) in [
+            ("contact.approach_speed", c.approach_speed),
+            ("contact.reacquire_speed", c.reacquire_speed),
+            ("contact.retract_speed", c.retract_speed),
+        ] {
+            if v > l.max_velocity {
+                return Err(format!(
+                    "{n} {v} m/s is above limits.max_velocity {} m/s",
+                    l.max_velocity
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Position scale of the estimator's regressor: the penetration the set-point needs at `k̂_c(0)`, m.
+    fn scale(&self) -> f64 {
+        self.f_r.max(1.0) / self.estimator.kc0
+    }
+}
+
+/// Relative force error within which the integral acts.
+const INTEGRATION_BAND: f64 = 0.3;
+
+/// The robust law. See the module documentation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RobustLaw {
+    p: RobustParams,
+    state: ContactState,
+    /// Active set-point, slewing towards `p.f_r`, N.
+    f_r: f64,
+    force: SignalFilter,
+    position: SignalFilter,
+    est: StiffnessEstimator,
+    /// Observed surface, m, and its velocity, m/s.
+    zc: f64,
+    vc: f64,
+    integ: f64,
+    /// Last command, m, and its velocity, m/s.
+    u: f64,
+    v: f64,
+    /// Time the raw force has been below the lift force, s.
+    below: f64,
+    /// Distance travelled in the current re-acquire or retract, m.
+    travelled: f64,
+    counts: EventCounts,
+}
+
+impl RobustLaw {
+    /// A law with validated parameters, at rest at 0.
+    pub fn new(p: RobustParams) -> Result<Self, String> {
+        p.validate()?;
+        let position_params = ConditioningParams {
+            notch: None,
+            ..p.conditioning
+        };
+        Ok(Self {
+            state: ContactState::Approach,
+            f_r: p.f_r,
+            force: SignalFilter::new(p.conditioning),
+            position: SignalFilter::new(position_params),
+            est: StiffnessEstimator::new(p.estimator, p.scale()),
+            zc: f64::NAN,
+            vc: 0.0,
+            integ: 0.0,
+            u: 0.0,
+            v: 0.0,
+            below: 0.0,
+            travelled: 0.0,
+            counts: EventCounts::default(),
+            p,
+        })
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &RobustParams {
+        &self.p
+    }
+
+    /// The contact state.
+    pub fn state(&self) -> ContactState {
+        self.state
+    }
+
+    /// The set-point in force now (it slews towards a new one), N.
+    pub fn active_set_point(&self) -> f64 {
+        self.f_r
+    }
+
+    /// Change the parameters while running, without a bump: the estimates, filters, contact state and
+    /// command are kept, a new set-point is approached at `set_point_rate`, and the velocity and
+    /// acceleration limits keep acting on the command.
+    pub fn set_params(&mut self, p: RobustParams) -> Result<(), String> {
+        p.validate()?;
+        self.force.set_params(p.conditioning);
+        self.position.set_params(ConditioningParams {
+            notch: None,
+            ..p.conditioning
+        });
+        self.est.set_params(p.estimator);
+        self.p = p;
+        Ok(())
+    }
+
+    /// Change the force set-point only (bumpless, see [`set_params`](Self::set_params)).
+    pub fn set_set_point(&mut self, f_r: f64) -> Result<(), String> {
+        let mut p = self.p;
+        p.f_r = f_r;
+        self.set_params(p)
+    }
+
+    fn output(&self, events: Events) -> Output {
+        let k = self.est.kc();
+        Output {
+            x_cmd: self.u,
+            x_r: self.zc + self.f_r / k,
+            kc_hat: k,
+            xc_hat: self.zc,
+            state: Some(self.state),
+            events,
+        }
+    }
+
+    fn enter_contact(&mut self, x: f64, f: f64, ff: f64, xf: f64, ev: &mut Events) {
+        self.state = ContactState::Contact;
+        self.est.begin_contact(x, f);
+        self.zc = xf - ff / self.est.kc();
+        self.vc = 0.0;
+        self.integ = 0.0;
+        self.below = 0.0;
+        ev.contact = true;
+    }
+
+    /// Advance the contact state machine with the raw force `f` and the conditioned force `ff`.
+    fn transitions(&mut self, x: f64, f: f64, ff: f64, xf: f64, dt: f64, ev: &mut Events) {
+        let c = self.p.contact;
+        if ff > self.p.limits.max_force && self.state != ContactState::Retract {
+            ev.force_limit = true;
+            self.state = ContactState::Retract;
+            self.travelled = 0.0;
+            return;
+        }
+        match self.state {
+            ContactState::Approach | ContactState::Reacquire => {
+                if ff >= c.contact_force || f >= 3.0 * c.contact_force {
+                    self.enter_contact(x, f, ff, xf, ev);
+                }
+            }
+            ContactState::Contact => {
+                if f < c.lift_force {
+                    self.below += dt;
+                    if self.below >= c.lift_time {
+                        self.state = ContactState::Reacquire;
+                        self.travelled = 0.0;
+                        ev.lift_off = true;
+                    }
+                } else {
+                    self.below = 0.0;
+                }
+            }
+            ContactState::Retract => {
+                if self.travelled >= c.retract_distance && ff < c.lift_force {
+                    self.state = ContactState::Approach;
+                }
+            }
+        }
+    }
+
+    /// The command the state wants before limits.
+    fn desired(&mut self, x: f64, ff: f64, xf: f64, dt: f64) -> f64 {
+        let c = self.p.contact;
+        let r = self.p.response;
+        match self.state {
+            ContactState::Approach => {
+                // Anchored: never more than a few lead times of approach ahead of the robot.
+                let gap = c.approach_speed * (4.0 * r.lead).max(0.05);
+                (self.u + c.approach_speed * dt).min(x + gap)
+            }
+            ContactState::Reacquire => {
+                let speed = if self.travelled < c.reacquire_distance {
+                    c.reacquire_speed
+                } else {
+                    c.approach_speed
+                };
+                self.travelled += speed * dt;
+                let gap = c.reacquire_distance + c.approach_speed * (4.0 * r.lead).max(0.05);
+                (self.u + speed * dt).min(x + gap)
+            }
+            ContactState::Retract => {
+                self.travelled += c.retract_speed * dt;
+                self.u - c.retract_speed * dt
+            }
+            ContactState::Contact => {
+                let k = self.est.kc();
+                // Surface observer: second-order tracker on x̃_c = x̄ − f̃/k̂_c.
+                let z = xf - ff / k;
+                let w = core::f64::consts::TAU * r.surface_bandwidth;
+                let w = w.min(0.5 / dt);
+                let e = z - self.zc;
+                self.vc += dt * w * w * e;
+                self.zc += dt * (self.vc + 2.0 * 0.8 * w * e);
+                let delta = (self.f_r - ff) / k;
+                // Conditional integration: only near the set-point, where what is left is a ramp's lag
+                // (a transient's error is the proportional path's business, integrating it overshoots).
+                if (self.f_r - ff).abs()
+                    <= INTEGRATION_BAND * self.f_r.max(self.p.contact.contact_force)
+                {
+                    let lim = r.integral_limit;
+                    self.integ = (self.integ + dt * r.integral * delta).clamp(-lim, lim);
+                }
+                xf + r.kappa * delta + r.lead * self.vc + self.integ
+            }
+        }
+    }
+
+    /// Apply deviation, velocity and acceleration limits to `want`, flagging each one that acts.
+    fn limit(&mut self, want: f64, dt: f64, ev: &mut Events) -> f64 {
+        let l = self.p.limits;
+        let mut target = want;
+        if target.abs() > l.max_deviation {
+            target = target.clamp(-l.max_deviation, l.max_deviation);
+            ev.deviation_limit = true;
+        }
+        let dist = target - self.u;
+        let mut v = dist / dt;
+        if v.abs() > l.max_velocity {
+            v = v.clamp(-l.max_velocity, l.max_velocity);
+            ev.velocity_limit = true;
+        }
+        // Braking: never faster than what can still stop at the target (not a limit event: it is how
+        // an acceleration-limited command reaches a target without overshoot).
+        let v_brake = (2.0 * l.max_acceleration * dist.abs()).sqrt() + l.max_acceleration * dt;
+        v = v.clamp(-v_brake, v_brake);
+        let dv = l.max_acceleration * dt;
+        if (v - self.v).abs() > dv * (1.0 + 1e-9) {
+            v = v.clamp(self.v - dv, self.v + dv);
+            ev.acceleration_limit = true;
+        }
+        let mut u = self.u + v * dt;
+        if u.abs() > l.max_deviation {
+            u = u.clamp(-l.max_deviation, l.max_deviation);
+            v = (u - self.u) / dt;
+            ev.deviation_limit = true;
+        }
+        self.v = v;
+        u
+    }
+}
+
+impl ForceLaw for RobustLaw {
+    fn start(&mut self, x: f64) {
+        self.state = ContactState::Approach;
+        self.f_r = self.p.f_r;
+        self.force.clear();
+        self.position.clear();
+        self.est.reset();
+        self.zc = f64::NAN;
+        self.vc = 0.0;
+        self.integ = 0.0;
+        self.u = if x.is_finite() { x } else { 0.0 };
+        self.v = 0.0;
+        self.below = 0.0;
+        self.travelled = 0.0;
+        self.counts = EventCounts::default();
+    }
+
+    fn step(&mut self, x: f64, f: f64, dt: f64) -> Output {
+        let mut ev = Events::default();
+        if !(x.is_finite() && f.is_finite() && dt.is_finite() && dt > 0.0) {
+            ev.bad_input = true;
+            self.counts.add(&ev);
+            return self.output(ev);
+        }
+        let df = self.p.response.set_point_rate * dt;
+        self.f_r += (self.p.f_r - self.f_r).clamp(-df, df);
+        let ff = self.force.step(f, dt);
+        let xf = self.position.step(x, dt);
+        self.transitions(x, f, ff, xf, dt, &mut ev);
+        if self.state == ContactState::Contact && self.est.update(x, f, dt).projected {
+            ev.estimator_bound = true;
+        }
+        let want = self.desired(x, ff, xf, dt);
+        let u = if want.is_finite() {
+            self.limit(want, dt, &mut ev)
+        } else {
+            ev.bad_input = true;
+            self.v = 0.0;
+            self.u
+        };
+        self.u = u;
+        self.counts.add(&ev);
+        self.output(ev)
+    }
+
+    fn set_point(&self) -> f64 {
+        self.p.f_r
+    }
+
+    fn counters(&self) -> EventCounts {
+        self.counts
+    }
+}
