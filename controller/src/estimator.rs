@@ -45,6 +45,10 @@ pub struct EstimatorParams {
     pub dead_zone: f64,
     /// Initial relative uncertainty of `k̂_c` at each contact onset (1 = ±100 %).
     pub initial_uncertainty: f64,
+    /// Adapt only while the observed surface moves slower than this, m/s: on a moving surface the
+    /// position follows the surface under a steady force, and the regression learns the motion instead of
+    /// the stiffness.
+    pub max_surface_speed: f64,
 }
 
 impl EstimatorParams {
@@ -70,6 +74,7 @@ impl EstimatorParams {
         pos("memory", self.memory)?;
         pos("excitation_window", self.excitation_window)?;
         pos("initial_uncertainty", self.initial_uncertainty)?;
+        pos("max_surface_speed", self.max_surface_speed)?;
         nonneg("excitation", self.excitation)?;
         nonneg("dead_zone", self.dead_zone)?;
         if self.kc_min > self.kc_max {
@@ -97,27 +102,31 @@ pub struct Update {
     pub projected: bool,
 }
 
-/// Recursive least squares on `f = k_c·(x − x_c)`.
+/// Recursive least squares on `f = k_c·(x − x_c(t))`, with the surface locally linear in time.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StiffnessEstimator {
     p: EstimatorParams,
     /// Position scale `s`, m.
     scale: f64,
-    /// `[k_c·s, k_c·(x₀ − x_c)]`, N.
-    theta: [f64; 2],
+    /// `[k_c·s, k_c·(x₀ − x_c(t₀)), −k_c·ẋ_c·memory]`, N.
+    theta: [f64; 3],
     /// Covariance, symmetric.
-    cov: [[f64; 2]; 2],
+    cov: [[f64; 3]; 3],
     /// Reference position `x₀`, m.
     x0: f64,
+    /// Time since the reference `t₀`, s.
+    t: f64,
     /// Slow average of the position, m.
     x_slow: f64,
     /// Slow average of the force, N.
     f_slow: f64,
 }
 
-/// Covariance given to the intercept at each contact onset (the surface may be anywhere), N²-normalised.
+/// Covariance given to the intercept and the surface-velocity term at each contact onset.
 const INTERCEPT_UNCERTAINTY: f64 = 100.0;
-/// Ceiling of either diagonal covariance entry.
+/// Multiple of `excitation` above which a force transient is informative on a moving surface too.
+const STRONG_EXCITATION: f64 = 10.0;
+/// Ceiling of any diagonal covariance entry.
 const COV_MAX: f64 = 1.0e4;
 
 impl StiffnessEstimator {
@@ -125,9 +134,10 @@ impl StiffnessEstimator {
     pub fn new(p: EstimatorParams, scale: f64) -> Self {
         Self {
             scale,
-            theta: [p.kc0 * scale, 0.0],
-            cov: [[0.0; 2]; 2],
+            theta: [p.kc0 * scale, 0.0, 0.0],
+            cov: [[0.0; 3]; 3],
             x0: 0.0,
+            t: 0.0,
             x_slow: 0.0,
             f_slow: 0.0,
             p,
@@ -143,19 +153,25 @@ impl StiffnessEstimator {
 
     /// Start over at `k̂_c(0)`.
     pub fn reset(&mut self) {
-        self.theta = [self.p.kc0 * self.scale, 0.0];
-        self.cov = [[0.0; 2]; 2];
+        self.theta = [self.p.kc0 * self.scale, 0.0, 0.0];
+        self.cov = [[0.0; 3]; 3];
     }
 
     /// Contact begins at measured position `x` (m) with measured force `f` (N): re-anchor the model there
     /// and open the covariance (the stiffness estimate is kept, its uncertainty restored).
     pub fn begin_contact(&mut self, x: f64, f: f64) {
         self.x0 = x;
+        self.t = 0.0;
         self.x_slow = x;
         self.f_slow = f;
         self.theta[1] = f;
+        self.theta[2] = 0.0;
         let u = self.p.initial_uncertainty * self.theta[0];
-        self.cov = [[u * u, 0.0], [0.0, INTERCEPT_UNCERTAINTY]];
+        self.cov = [
+            [u * u, 0.0, 0.0],
+            [0.0, INTERCEPT_UNCERTAINTY, 0.0],
+            [0.0, 0.0, INTERCEPT_UNCERTAINTY],
+        ];
     }
 
     /// Stiffness estimate, N/m.
@@ -163,69 +179,92 @@ impl StiffnessEstimator {
         self.theta[0] / self.scale
     }
 
-    /// Surface position estimate `x̂_c = x₀ − θ₁/k̂_c`, m.
+    /// Surface position estimate now, m.
     pub fn xc(&self) -> f64 {
-        self.x0 - self.theta[1] / self.kc()
+        self.x0 - (self.theta[1] + self.theta[2] * self.t / self.p.memory) / self.kc()
     }
 
-    /// Predicted force at `x`, N.
+    fn regressor(&self, x: f64) -> [f64; 3] {
+        [(x - self.x0) / self.scale, 1.0, self.t / self.p.memory]
+    }
+
+    /// Predicted force at `x` now, N.
     pub fn predict(&self, x: f64) -> f64 {
-        self.theta[0] * (x - self.x0) / self.scale + self.theta[1]
+        let phi = self.regressor(x);
+        (0..3).map(|i| self.theta[i] * phi[i]).sum()
     }
 
-    /// One update in contact with measured `x` (m), raw measured force `f` (N), step `dt` (s).
-    pub fn update(&mut self, x: f64, f: f64, dt: f64) -> Update {
+    /// One update in contact with measured `x` (m), raw measured force `f` (N), step `dt` (s), and the
+    /// caller's estimate of the surface's speed (m/s; the robust law's surface observer).
+    ///
+    /// `f_gate` is the force the excitation gate looks at — the robust law passes its conditioned force,
+    /// so that sensor noise alone never opens the gate — while the regression itself uses the raw `f`.
+    pub fn update(&mut self, x: f64, f: f64, f_gate: f64, dt: f64, surface_speed: f64) -> Update {
+        self.t += dt;
+        if self.t > self.p.memory {
+            // Re-anchor the time origin so the regressor stays of order one.
+            self.theta[1] += self.theta[2] * self.t / self.p.memory;
+            self.t = 0.0;
+        }
         let a = (dt / self.p.excitation_window).min(1.0);
         self.x_slow += a * (x - self.x_slow);
-        self.f_slow += a * (f - self.f_slow);
+        self.f_slow += a * (f_gate - self.f_slow);
         let mut up = Update::default();
-        // Excited only when position *and* force move against their slow averages: a moving position
-        // under a steady force (a moving surface) or a moving force at a still position (bias drift)
-        // carries no information about the stiffness.
+        // Excited only when position *and* force move against their slow averages: a moving force at a
+        // still position (bias drift) carries no information about the stiffness, nor does a position
+        // following a moving surface under a steady force.
         let excited = self.kc() * (x - self.x_slow).abs() >= self.p.excitation
-            && (f - self.f_slow).abs() >= self.p.excitation;
-        let phi = [(x - self.x0) / self.scale, 1.0];
+            && (f_gate - self.f_slow).abs() >= self.p.excitation;
+        let phi = self.regressor(x);
         let err = f - self.predict(x);
-        if !excited || err.abs() <= self.p.dead_zone {
+        // A strong force transient (an impact, a stiffness change) is informative even when the observer,
+        // misled by a wrong k̂_c itself, reports a moving surface.
+        let strong = (f_gate - self.f_slow).abs() >= STRONG_EXCITATION * self.p.excitation;
+        let still = surface_speed.abs() <= self.p.max_surface_speed || strong;
+        if !excited || !still || err.abs() <= self.p.dead_zone {
             return up;
         }
         let lambda = (-dt / self.p.memory).exp();
-        let c = &self.cov;
-        let pphi = [
-            c[0][0] * phi[0] + c[0][1] * phi[1],
-            c[1][0] * phi[0] + c[1][1] * phi[1],
-        ];
-        let denom = lambda + phi[0] * pphi[0] + phi[1] * pphi[1];
-        let gain = [pphi[0] / denom, pphi[1] / denom];
-        self.theta[0] += gain[0] * err;
-        self.theta[1] += gain[1] * err;
-        let mut n = [[0.0; 2]; 2];
-        for (i, row) in n.iter_mut().enumerate() {
-            for (j, v) in row.iter_mut().enumerate() {
-                *v = ((c[i][j] - gain[i] * pphi[j]) / lambda).clamp(-COV_MAX, COV_MAX);
+        let c = self.cov;
+        let mut pphi = [0.0; 3];
+        for (i, v) in pphi.iter_mut().enumerate() {
+            *v = (0..3).map(|j| c[i][j] * phi[j]).sum();
+        }
+        let denom = lambda + (0..3).map(|i| phi[i] * pphi[i]).sum::<f64>();
+        let mut n = [[0.0; 3]; 3];
+        for i in 0..3 {
+            self.theta[i] += pphi[i] / denom * err;
+            for j in 0..3 {
+                n[i][j] = (c[i][j] - pphi[i] * pphi[j] / denom) / lambda;
             }
         }
-        // Keep it symmetric and positive on the diagonal.
-        let off = 0.5 * (n[0][1] + n[1][0]);
-        n[0][1] = off;
-        n[1][0] = off;
-        n[0][0] = n[0][0].max(0.0);
-        n[1][1] = n[1][1].max(0.0);
+        // Symmetric, with a bounded, non-negative diagonal.
+        for i in 0..3 {
+            n[i][i] = n[i][i].clamp(0.0, COV_MAX);
+            for j in 0..i {
+                let v = 0.5 * (n[i][j] + n[j][i]);
+                let lim = (n[i][i] * n[j][j]).sqrt();
+                n[i][j] = v.clamp(-lim, lim);
+                n[j][i] = n[i][j];
+            }
+        }
         self.cov = n;
         up.adapted = true;
         let k = self.kc();
-        let kp = k.clamp(self.p.kc_min, self.p.kc_max);
-        if kp != k || !k.is_finite() {
+        if !(k.is_finite() && (self.p.kc_min..=self.p.kc_max).contains(&k)) {
             up.projected = true;
-            let kp = if k.is_finite() { kp } else { self.p.kc0 };
+            let kp = if k.is_finite() {
+                k.clamp(self.p.kc_min, self.p.kc_max)
+            } else {
+                self.p.kc0
+            };
             // Keep the prediction at the current position unchanged while moving the slope.
-            let f_here = self.predict(x);
+            let f_here = if k.is_finite() { self.predict(x) } else { f };
             self.theta[0] = kp * self.scale;
-            self.theta[1] = f_here - self.theta[0] * phi[0];
+            self.theta[1] = f_here - self.theta[0] * phi[0] - self.theta[2] * phi[2];
         }
-        if !self.theta[1].is_finite() {
-            self.theta[1] = f;
-            self.x0 = x;
+        if !self.theta.iter().all(|v| v.is_finite()) {
+            self.begin_contact(x, f);
         }
         up
     }
@@ -241,10 +280,11 @@ mod tests {
             kc_min: 10_000.0,
             kc_max: 500_000.0,
             memory: 0.5,
-            excitation: 0.2,
+            excitation: 0.1,
             excitation_window: 0.05,
             dead_zone: 0.0,
             initial_uncertainty: 1.0,
+            max_surface_speed: 1e-3,
         }
     }
 
@@ -256,7 +296,7 @@ mod tests {
         for i in 0..300 {
             let t = i as f64 * 1e-3;
             let x = 0.01001 + 0.00006 * (1.0 - (-t / 0.02).exp()) + 1e-5 * (t * 30.0).sin();
-            e.update(x, k * (x - xc), 1e-3);
+            e.update(x, k * (x - xc), k * (x - xc), 1e-3, 0.0);
         }
         assert!((e.kc() - k).abs() / k < 0.01, "k̂ {}", e.kc());
         assert!((e.xc() - xc).abs() < 1e-6, "x̂ {}", e.xc());
@@ -268,7 +308,8 @@ mod tests {
         e.begin_contact(0.0101, 5.0);
         for i in 0..1000 {
             // Drifting force at a still position: bias drift, no information about k_c.
-            let up = e.update(0.0101, 5.0 + i as f64 * 1e-3, 1e-3);
+            let f = 5.0 + i as f64 * 1e-3;
+            let up = e.update(0.0101, f, f, 1e-3, 0.0);
             assert!(!up.adapted);
         }
         assert_eq!(e.kc(), 50_000.0);
@@ -282,7 +323,7 @@ mod tests {
         for i in 0..200 {
             let x = 1e-4 * (i as f64 * 0.1).sin();
             // A "stiffness" of 5 MN/m, far above kc_max.
-            let up = e.update(x, 5.0e6 * x, 1e-3);
+            let up = e.update(x, 5.0e6 * x, 5.0e6 * x, 1e-3, 0.0);
             projected |= up.projected;
             assert!(e.kc() <= 500_000.0 + 1e-6);
         }

@@ -448,7 +448,7 @@ impl ForceLaw for RobustLaw {
         let ff = self.force.step(f, dt);
         let xf = self.position.step(x, dt);
         self.transitions(x, f, ff, xf, dt, &mut ev);
-        if self.state == ContactState::Contact && self.est.update(x, f, dt).projected {
+        if self.state == ContactState::Contact && self.est.update(x, f, ff, dt, self.vc).projected {
             ev.estimator_bound = true;
         }
         let want = self.desired(x, ff, xf, dt);
