@@ -10,4 +10,4 @@ pub mod world;
 pub use inner::{InnerLoop, InnerLoopModel};
 pub use plant::{ContactPlant, Event, Schedule};
 pub use sensor_model::{SensorModel, SensorParams, Window};
-pub use world::{InProcRobot, InProcSensor, SharedWorld, World};
+pub use world::{InProcRobot, InProcSensor, SharedWorld, Truth, World};
