@@ -12,7 +12,7 @@ fn robust_law() -> RobustLaw {
     let LawConfig::Robust(p) = t.law else {
         panic!("robust tuning")
     };
-    RobustLaw::new(p).unwrap()
+    RobustLaw::new(*p).unwrap()
 }
 
 /// One step of a law in contact with a spring, the plant folded in so the law sees realistic input.

@@ -27,7 +27,7 @@ pub enum LawConfig {
         x_r: f64,
     },
     /// forcecell's robust law (`controller::robust`): estimator, observer, state machine, limits.
-    Robust(RobustParams),
+    Robust(Box<RobustParams>),
 }
 
 /// A named tuning: a law and the loop's limits.
@@ -111,7 +111,7 @@ impl LawConfig {
             Self::Impedance { impedance, x_r } => {
                 Box::new(ImpedanceLaw::new(impedance, Reference::Fixed { x_r })?)
             }
-            Self::Robust(p) => Box::new(RobustLaw::new(p)?),
+            Self::Robust(ref p) => Box::new(RobustLaw::new(**p)?),
         })
     }
 }

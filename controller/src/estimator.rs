@@ -11,7 +11,7 @@
 //!
 //! # Safeguards
 //! * **excitation gate** — update only while the position moves by more than a force-equivalent
-//!   threshold from its slow average (`k̂_c·|x − x̄| ≥ excitation`) *and* the force moves from its own
+//!   threshold from its slow average (`kc_max·|x − x̄| ≥ excitation`) *and* the force moves from its own
 //!   (`|f − f̄| ≥ excitation`): a static contact carries no information about `k_c`, and adapting on it
 //!   lets bias drift (which the closed loop turns into a correlated position drift) pull `k̂_c` away;
 //!   a moving surface under a held force moves the position alone;
@@ -37,7 +37,8 @@ pub struct EstimatorParams {
     pub kc_max: f64,
     /// Forgetting time constant, s of adapting time.
     pub memory: f64,
-    /// Force-equivalent excitation needed to adapt, N (`k̂_c·|x − x̄|`).
+    /// Excitation needed to adapt, N: the conditioned force must leave its slow average by this much, and
+    /// the position by this much at `kc_max` (`kc_max·|x − x̄|`).
     pub excitation: f64,
     /// Time constant of the slow position average `x̄` the excitation is measured from, s.
     pub excitation_window: f64,
@@ -45,9 +46,9 @@ pub struct EstimatorParams {
     pub dead_zone: f64,
     /// Initial relative uncertainty of `k̂_c` at each contact onset (1 = ±100 %).
     pub initial_uncertainty: f64,
-    /// Adapt only while the observed surface moves slower than this, m/s: on a moving surface the
-    /// position follows the surface under a steady force, and the regression learns the motion instead of
-    /// the stiffness.
+    /// Adapt only while the observed surface moves slower than this, m/s (see
+    /// [`surface_moving`]): on a moving surface the position follows the surface under a steady force,
+    /// and the regression learns the motion instead of the stiffness.
     pub max_surface_speed: f64,
 }
 
@@ -102,6 +103,20 @@ pub struct Update {
     pub projected: bool,
 }
 
+/// Whether the surface observer reports real surface motion rather than the apparent motion a wrong
+/// `k̂_c` produces.
+///
+/// The observer sees `x̃_c = x − f/k̂_c`. With a still surface and `k̂_c ≠ k_c` it reports
+/// `(1 − k_c/k̂_c)·ẋ`: opposite to the robot's velocity when `k̂_c` is too low, smaller than it when too
+/// high. A surface that really moves shows an observed velocity that leads the robot's (the robot
+/// follows it) or comes while the robot is still. `v_c` is the observed surface velocity, `v_x` the
+/// robot's (same filtering), m/s.
+pub fn surface_moving(v_c: f64, v_x: f64, max_surface_speed: f64) -> bool {
+    v_c.abs() > max_surface_speed
+        && (v_c * v_x >= 0.0 || v_x.abs() < 0.1 * v_c.abs())
+        && v_c.abs() >= 0.85 * v_x.abs()
+}
+
 /// Recursive least squares on `f = k_c·(x − x_c(t))`, with the surface locally linear in time.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StiffnessEstimator {
@@ -126,6 +141,8 @@ pub struct StiffnessEstimator {
 const INTERCEPT_UNCERTAINTY: f64 = 100.0;
 /// Multiple of `excitation` above which a force transient is informative on a moving surface too.
 const STRONG_EXCITATION: f64 = 10.0;
+/// Largest relative rate of change of `k̂_c`, 1/s.
+const MAX_RATE: f64 = 20.0;
 /// Ceiling of any diagonal covariance entry.
 const COV_MAX: f64 = 1.0e4;
 
@@ -194,12 +211,12 @@ impl StiffnessEstimator {
         (0..3).map(|i| self.theta[i] * phi[i]).sum()
     }
 
-    /// One update in contact with measured `x` (m), raw measured force `f` (N), step `dt` (s), and the
-    /// caller's estimate of the surface's speed (m/s; the robust law's surface observer).
+    /// One update in contact with measured `x` (m), raw measured force `f` (N), step `dt` (s), and
+    /// whether the surface is moving (see [`surface_moving`]).
     ///
     /// `f_gate` is the force the excitation gate looks at — the robust law passes its conditioned force,
     /// so that sensor noise alone never opens the gate — while the regression itself uses the raw `f`.
-    pub fn update(&mut self, x: f64, f: f64, f_gate: f64, dt: f64, surface_speed: f64) -> Update {
+    pub fn update(&mut self, x: f64, f: f64, f_gate: f64, dt: f64, moving: bool) -> Update {
         self.t += dt;
         if self.t > self.p.memory {
             // Re-anchor the time origin so the regressor stays of order one.
@@ -213,14 +230,16 @@ impl StiffnessEstimator {
         // Excited only when position *and* force move against their slow averages: a moving force at a
         // still position (bias drift) carries no information about the stiffness, nor does a position
         // following a moving surface under a steady force.
-        let excited = self.kc() * (x - self.x_slow).abs() >= self.p.excitation
+        // The position criterion is taken at the stiffest expected surface: with k̂_c still too low it
+        // would otherwise hide exactly the transients that correct it.
+        let excited = self.p.kc_max * (x - self.x_slow).abs() >= self.p.excitation
             && (f_gate - self.f_slow).abs() >= self.p.excitation;
         let phi = self.regressor(x);
         let err = f - self.predict(x);
         // A strong force transient (an impact, a stiffness change) is informative even when the observer,
         // misled by a wrong k̂_c itself, reports a moving surface.
         let strong = (f_gate - self.f_slow).abs() >= STRONG_EXCITATION * self.p.excitation;
-        let still = surface_speed.abs() <= self.p.max_surface_speed || strong;
+        let still = !moving || strong;
         if !excited || !still || err.abs() <= self.p.dead_zone {
             return up;
         }
@@ -250,6 +269,16 @@ impl StiffnessEstimator {
         }
         self.cov = n;
         up.adapted = true;
+        // No single step moves k̂_c by more than MAX_RATE·dt relative: a burst of biased samples (a
+        // surface starting to move, an impact) cannot throw the estimate across its range at once.
+        let k_before = self.theta[0] - pphi[0] / denom * err;
+        let max_step = MAX_RATE * dt * k_before.abs();
+        if (self.theta[0] - k_before).abs() > max_step {
+            let k_lim = k_before + (self.theta[0] - k_before).clamp(-max_step, max_step);
+            let f_here = self.predict(x);
+            self.theta[0] = k_lim;
+            self.theta[1] = f_here - self.theta[0] * phi[0] - self.theta[2] * phi[2];
+        }
         let k = self.kc();
         if !(k.is_finite() && (self.p.kc_min..=self.p.kc_max).contains(&k)) {
             up.projected = true;
@@ -296,10 +325,24 @@ mod tests {
         for i in 0..300 {
             let t = i as f64 * 1e-3;
             let x = 0.01001 + 0.00006 * (1.0 - (-t / 0.02).exp()) + 1e-5 * (t * 30.0).sin();
-            e.update(x, k * (x - xc), k * (x - xc), 1e-3, 0.0);
+            e.update(x, k * (x - xc), k * (x - xc), 1e-3, false);
         }
         assert!((e.kc() - k).abs() / k < 0.01, "k̂ {}", e.kc());
         assert!((e.xc() - xc).abs() < 1e-6, "x̂ {}", e.xc());
+    }
+
+    #[test]
+    fn apparent_motion_from_a_wrong_stiffness_is_not_surface_motion() {
+        let v = 0.002;
+        // k̂ too low by 4: the observer moves against the robot.
+        assert!(!surface_moving(-3.0 * v, v, 1e-3));
+        // k̂ too high by 2: it moves with the robot, but slower.
+        assert!(!surface_moving(0.5 * v, v, 1e-3));
+        // A ramp the robot follows, and one it has not started to follow.
+        assert!(surface_moving(v, v, 1e-3));
+        assert!(surface_moving(v, 0.0, 1e-3));
+        // Slow enough to ignore.
+        assert!(!surface_moving(0.0005, 0.0, 1e-3));
     }
 
     #[test]
@@ -309,7 +352,7 @@ mod tests {
         for i in 0..1000 {
             // Drifting force at a still position: bias drift, no information about k_c.
             let f = 5.0 + i as f64 * 1e-3;
-            let up = e.update(0.0101, f, f, 1e-3, 0.0);
+            let up = e.update(0.0101, f, f, 1e-3, false);
             assert!(!up.adapted);
         }
         assert_eq!(e.kc(), 50_000.0);
@@ -323,7 +366,7 @@ mod tests {
         for i in 0..200 {
             let x = 1e-4 * (i as f64 * 0.1).sin();
             // A "stiffness" of 5 MN/m, far above kc_max.
-            let up = e.update(x, 5.0e6 * x, 5.0e6 * x, 1e-3, 0.0);
+            let up = e.update(x, 5.0e6 * x, 5.0e6 * x, 1e-3, false);
             projected |= up.projected;
             assert!(e.kc() <= 500_000.0 + 1e-6);
         }

@@ -36,7 +36,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::conditioning::{ConditioningParams, SignalFilter};
-use crate::estimator::{EstimatorParams, StiffnessEstimator};
+use crate::estimator::{EstimatorParams, StiffnessEstimator, surface_moving};
 use crate::law::{ContactState, EventCounts, Events, ForceLaw, Output};
 
 /// How the law responds in contact.
@@ -54,8 +54,16 @@ pub struct ResponseParams {
     pub integral_limit: f64,
     /// Natural frequency of the surface observer, Hz.
     pub surface_bandwidth: f64,
+    /// Dead-band on the fed-forward surface velocity, m/s: below it the observed velocity is taken for
+    /// sensor noise (differentiated) rather than motion; above it only the excess is fed forward.
+    pub feedforward_deadband: f64,
     /// Largest rate of change of the set-point when it is changed, N/s (bumpless changes).
     pub set_point_rate: f64,
+    /// Noise gate: the proportional correction is weighted by `e²/(e² + (noise_gate·σ)²)`, with `e` the
+    /// conditioned force error and `σ` the sensor noise the law measures online. 0 switches it off.
+    /// Errors well above the noise get the full gain, errors inside it a small one (the integral keeps
+    /// the mean), so noise does not shake the tool.
+    pub noise_gate: f64,
 }
 
 /// The contact state machine.
@@ -141,7 +149,9 @@ impl RobustParams {
         non_negative("response.integral", r.integral)?;
         non_negative("response.integral_limit", r.integral_limit)?;
         positive("response.surface_bandwidth", r.surface_bandwidth)?;
+        non_negative("response.feedforward_deadband", r.feedforward_deadband)?;
         positive("response.set_point_rate", r.set_point_rate)?;
+        non_negative("response.noise_gate", r.noise_gate)?;
         self.conditioning.validate()?;
         self.estimator.validate()?;
         let c = &self.contact;
@@ -191,6 +201,14 @@ impl RobustParams {
     }
 }
 
+/// Time constant of the sensor-noise estimate, s.
+const NOISE_WINDOW: f64 = 1.0;
+/// Floor of the clipping level of the noise estimate, N.
+const NOISE_FLOOR: f64 = 0.05;
+
+/// A loss of contact sooner than this after contact was detected is a bounce, s.
+const BOUNCE_TIME: f64 = 0.5;
+
 /// Relative force error within which the integral acts.
 const INTEGRATION_BAND: f64 = 0.3;
 
@@ -215,6 +233,13 @@ pub struct RobustLaw {
     below: f64,
     /// Distance travelled in the current re-acquire or retract, m.
     travelled: f64,
+    /// Time since contact was last detected, s.
+    in_contact: f64,
+    /// The two previous raw forces, N, and the sensor noise variance measured from them, N².
+    f_prev: Option<(f64, f64)>,
+    /// Previous conditioned position, m.
+    xf_prev: Option<f64>,
+    noise_var: f64,
     counts: EventCounts,
 }
 
@@ -239,6 +264,10 @@ impl RobustLaw {
             v: 0.0,
             below: 0.0,
             travelled: 0.0,
+            in_contact: f64::INFINITY,
+            f_prev: None,
+            xf_prev: None,
+            noise_var: 0.0,
             counts: EventCounts::default(),
             p,
         })
@@ -300,6 +329,7 @@ impl RobustLaw {
         self.vc = 0.0;
         self.integ = 0.0;
         self.below = 0.0;
+        self.in_contact = 0.0;
         ev.contact = true;
     }
 
@@ -314,17 +344,28 @@ impl RobustLaw {
         }
         match self.state {
             ContactState::Approach | ContactState::Reacquire => {
-                if ff >= c.contact_force || f >= 3.0 * c.contact_force {
+                // The conditioned force, confirmed by the raw one (the filter still remembers a
+                // contact just lost), or one strong raw sample.
+                if (ff >= c.contact_force && f >= c.lift_force) || f >= 3.0 * c.contact_force {
                     self.enter_contact(x, f, ff, xf, ev);
                 }
             }
             ContactState::Contact => {
+                self.in_contact += dt;
                 if f < c.lift_force {
                     self.below += dt;
                     if self.below >= c.lift_time {
                         self.state = ContactState::Reacquire;
-                        self.travelled = 0.0;
+                        // A contact lost again soon after a re-acquisition is a bounce: no second fast
+                        // search, approach speed only.
+                        self.travelled = if self.in_contact < BOUNCE_TIME {
+                            c.reacquire_distance
+                        } else {
+                            0.0
+                        };
                         ev.lift_off = true;
+                        // The force is gone: forget the filter's memory of it.
+                        self.force.reset_to(f);
                     }
                 } else {
                     self.below = 0.0;
@@ -371,7 +412,10 @@ impl RobustLaw {
                 let e = z - self.zc;
                 self.vc += dt * w * w * e;
                 self.zc += dt * (self.vc + 2.0 * 0.8 * w * e);
-                let delta = (self.f_r - ff) / k;
+                let e = self.f_r - ff;
+                let n = r.noise_gate * r.noise_gate * self.noise_var;
+                let weight = if n > 0.0 { e * e / (e * e + n) } else { 1.0 };
+                let delta = e / k;
                 // Conditional integration: only near the set-point, where what is left is a ramp's lag
                 // (a transient's error is the proportional path's business, integrating it overshoots).
                 if (self.f_r - ff).abs()
@@ -380,7 +424,8 @@ impl RobustLaw {
                     let lim = r.integral_limit;
                     self.integ = (self.integ + dt * r.integral * delta).clamp(-lim, lim);
                 }
-                xf + r.kappa * delta + r.lead * self.vc + self.integ
+                let v_ff = self.vc.signum() * (self.vc.abs() - r.feedforward_deadband).max(0.0);
+                xf + weight * r.kappa * delta + r.lead * v_ff + self.integ
             }
         }
     }
@@ -433,22 +478,42 @@ impl ForceLaw for RobustLaw {
         self.v = 0.0;
         self.below = 0.0;
         self.travelled = 0.0;
+        self.in_contact = f64::INFINITY;
+        self.f_prev = None;
+        self.xf_prev = None;
+        self.noise_var = 0.0;
         self.counts = EventCounts::default();
     }
 
     fn step(&mut self, x: f64, f: f64, dt: f64) -> Output {
         let mut ev = Events::default();
         if !(x.is_finite() && f.is_finite() && dt.is_finite() && dt > 0.0) {
+            // Hold: the command stands still this step, and moves off from rest afterwards.
             ev.bad_input = true;
+            self.v = 0.0;
             self.counts.add(&ev);
             return self.output(ev);
         }
         let df = self.p.response.set_point_rate * dt;
         self.f_r += (self.p.f_r - self.f_r).clamp(-df, df);
         let ff = self.force.step(f, dt);
+        // Sensor noise: the mean square of the raw force's second difference over six (white noise of
+        // variance σ² gives σ²; ramps give nothing, smooth motion little), averaged over NOISE_WINDOW.
+        // Each difference is clipped at three of its own standard deviations (plus a floor), so impacts
+        // and steps — rare, large — cannot pass for noise; true noise still builds the estimate up.
+        if let Some((p1, p2)) = self.f_prev {
+            let a = (dt / NOISE_WINDOW).min(1.0);
+            let clip = 3.0 * (6.0 * self.noise_var).sqrt() + NOISE_FLOOR;
+            let d2 = (f - 2.0 * p1 + p2).clamp(-clip, clip);
+            self.noise_var += a * (d2 * d2 / 6.0 - self.noise_var);
+        }
+        self.f_prev = Some((f, self.f_prev.map_or(f, |p| p.0)));
         let xf = self.position.step(x, dt);
         self.transitions(x, f, ff, xf, dt, &mut ev);
-        if self.state == ContactState::Contact && self.est.update(x, f, ff, dt, self.vc).projected {
+        let v_x = self.xf_prev.map_or(0.0, |p| (xf - p) / dt);
+        self.xf_prev = Some(xf);
+        let moving = surface_moving(self.vc, v_x, self.p.estimator.max_surface_speed);
+        if self.state == ContactState::Contact && self.est.update(x, f, ff, dt, moving).projected {
             ev.estimator_bound = true;
         }
         let want = self.desired(x, ff, xf, dt);
@@ -470,5 +535,142 @@ impl ForceLaw for RobustLaw {
 
     fn counters(&self) -> EventCounts {
         self.counts
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{LawConfig, Tuning};
+
+    fn params() -> RobustParams {
+        let t: Tuning = toml::from_str(include_str!("../../tunings/robust.toml")).unwrap();
+        match t.law {
+            LawConfig::Robust(p) => *p,
+            other => panic!("robust tuning expected, got {other:?}"),
+        }
+    }
+
+    /// Ideal inner loop against a spring whose surface is `xc(step)`; returns the law and the position.
+    fn drive(
+        law: &mut RobustLaw,
+        x: &mut f64,
+        steps: usize,
+        k: f64,
+        xc: impl Fn(usize) -> f64,
+    ) -> Vec<Output> {
+        (0..steps)
+            .map(|i| {
+                let f = (k * (*x - xc(i))).max(0.0);
+                let out = law.step(*x, f, 1e-3);
+                *x += 0.2 * (out.x_cmd - *x);
+                out
+            })
+            .collect()
+    }
+
+    #[test]
+    fn start_is_bumpless_and_approach_is_bounded() {
+        let p = params();
+        let mut law = RobustLaw::new(p).unwrap();
+        law.start(0.004);
+        let out = law.step(0.004, 0.0, 1e-3);
+        assert_eq!(out.state, Some(ContactState::Approach));
+        assert!((out.x_cmd - 0.004).abs() <= p.contact.approach_speed * 1e-3 + 1e-15);
+    }
+
+    #[test]
+    fn state_machine_contact_lift_off_reacquire() {
+        let p = params();
+        let mut law = RobustLaw::new(p).unwrap();
+        let mut x = 0.0095;
+        law.start(x);
+        let outs = drive(&mut law, &mut x, 6000, 70_000.0, |i| {
+            if i < 3000 { 0.010 } else { 0.0115 }
+        });
+        let first_contact = outs.iter().position(|o| o.events.contact).unwrap();
+        assert!(
+            outs[..first_contact]
+                .iter()
+                .all(|o| o.state == Some(ContactState::Approach))
+        );
+        let lift = outs.iter().position(|o| o.events.lift_off).unwrap();
+        assert!(lift >= 3000, "lift-off only after the surface retreats");
+        assert_eq!(outs[lift].state, Some(ContactState::Reacquire));
+        assert!(outs[lift..].iter().any(|o| o.events.contact));
+        assert_eq!(outs.last().unwrap().state, Some(ContactState::Contact));
+        let c = law.counters();
+        // The fast re-acquisition may bounce once; the search after a bounce is slow and holds.
+        assert!(
+            (2..=3).contains(&c.contacts) && c.lift_offs == c.contacts - 1,
+            "{c:?}"
+        );
+        let f = 70_000.0 * (x - 0.0115);
+        assert!((f - p.f_r).abs() < 0.05, "force {f} N");
+    }
+
+    #[test]
+    fn force_limit_retracts_and_is_reported() {
+        let p = params();
+        let mut law = RobustLaw::new(p).unwrap();
+        let mut x = 0.0100714;
+        law.start(x);
+        drive(&mut law, &mut x, 1000, 70_000.0, |_| 0.010);
+        // The surface jumps 2 mm towards the tool: 140 N.
+        let outs = drive(&mut law, &mut x, 400, 70_000.0, |_| 0.008);
+        let hit = outs.iter().position(|o| o.events.force_limit).unwrap();
+        assert!(hit < 20, "limit seen after {hit} steps");
+        assert_eq!(outs[hit].state, Some(ContactState::Retract));
+        assert!(outs[hit + 10].x_cmd < outs[hit].x_cmd, "moving away");
+        assert_eq!(law.counters().force_limits, 1);
+    }
+
+    #[test]
+    fn set_point_change_is_bumpless() {
+        let p = params();
+        let mut law = RobustLaw::new(p).unwrap();
+        let mut x = 0.0100714;
+        law.start(x);
+        drive(&mut law, &mut x, 1500, 70_000.0, |_| 0.010);
+        law.set_set_point(10.0).unwrap();
+        let before = x;
+        let outs = drive(&mut law, &mut x, 1500, 70_000.0, |_| 0.010);
+        // The set-point slews at its rate: the first command moves by no more than rate·dt/k̂ and κ.
+        let first_move = (outs[0].x_cmd - before).abs();
+        assert!(first_move < 2e-6, "first move {first_move} m");
+        assert!(outs.iter().all(|o| !o.events.any_limit()));
+        assert!((law.active_set_point() - 10.0).abs() < 1e-12);
+        let f = 70_000.0 * (x - 0.010);
+        assert!((f - 10.0).abs() < 0.05, "force {f} N");
+    }
+
+    #[test]
+    fn deviation_limit_is_an_event_never_a_silent_clamp() {
+        let mut p = params();
+        p.limits.max_deviation = 0.0002;
+        let mut law = RobustLaw::new(p).unwrap();
+        let mut x = 0.0;
+        law.start(x);
+        // The surface is out of reach (1 mm): the approach runs into the deviation limit.
+        let outs = drive(&mut law, &mut x, 2000, 70_000.0, |_| 0.001);
+        assert!(outs.iter().all(|o| o.x_cmd.abs() <= 0.0002 + 1e-15));
+        assert!(outs.iter().any(|o| o.events.deviation_limit));
+        assert!(law.counters().deviation_limits > 0);
+    }
+
+    #[test]
+    fn validation_names_what_is_wrong() {
+        let mut p = params();
+        p.contact.lift_force = p.contact.contact_force;
+        assert!(RobustLaw::new(p).unwrap_err().contains("lift_force"));
+        let mut p = params();
+        p.response.kappa = 1.5;
+        assert!(RobustLaw::new(p).unwrap_err().contains("kappa"));
+        let mut p = params();
+        p.estimator.kc0 = 1e7;
+        assert!(RobustLaw::new(p).unwrap_err().contains("kc0"));
+        let mut p = params();
+        p.limits.max_force = 1.0;
+        assert!(RobustLaw::new(p).unwrap_err().contains("max_force"));
     }
 }

@@ -15,7 +15,7 @@ fn robust_step_does_not_allocate() {
     let LawConfig::Robust(p) = t.law else {
         panic!("robust tuning")
     };
-    let mut law = RobustLaw::new(p).unwrap();
+    let mut law = RobustLaw::new(*p).unwrap();
     law.start(0.009);
     // Drive it through approach, contact, lift-off, re-acquire and back against a spring.
     let (k, mut xc): (f64, f64) = (70_000.0, 0.010);
