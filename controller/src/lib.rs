@@ -5,7 +5,8 @@
 //! * [`control_loop`] — the loop that wires any [`hal::RobotLink`] and [`hal::ForceSensor`] to a law,
 //!   gating bad input so it never reaches the command;
 //! * [`robust`] — forcecell's robust law (with [`estimator`] and [`conditioning`]): what holds the force
-//!   on a cell with sampling, lag, delay and a noisy sensor.
+//!   on a cell with sampling, lag, delay and a noisy sensor;
+//! * [`tune`] — damping ratio and delay margin of impedance parameters, proposals, verdicts.
 #![cfg_attr(not(test), warn(missing_docs))]
 
 pub mod conditioning;
@@ -14,6 +15,7 @@ pub mod control_loop;
 pub mod estimator;
 pub mod law;
 pub mod robust;
+pub mod tune;
 
 pub use config::{LawConfig, Overrides, Tuning};
 pub use control_loop::{ControlLoop, CycleReport, Fault, LoopConfig, LoopError, LoopStats};
