@@ -2,8 +2,10 @@
 //! recording, metrics and plots. The `forcecell` binary is a thin CLI over it.
 #![cfg_attr(not(test), warn(missing_docs))]
 
+pub mod bench;
 pub mod metrics;
 pub mod plot;
 pub mod record;
 pub mod runner;
 pub mod scenario;
+pub mod tune;

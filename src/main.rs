@@ -29,6 +29,51 @@ enum Command {
     Sim(SimArgs),
     /// Plot a recorded trace (CSV written by `sim` or `run`) to PNG and print its metrics.
     Plot(PlotArgs),
+    /// Judge a tuning (damping ratio, delay margin) or propose impedance parameters for a stiffness range
+    /// and the robot's loop.
+    Tune(TuneArgs),
+    /// Run the B scenarios on P1 and P2 with the robust and the paper's tuning: one table, plots in OUT.
+    BenchScenarios(BenchArgs),
+}
+
+#[derive(Args)]
+struct TuneArgs {
+    /// Softest expected surface, N/m.
+    #[arg(long, default_value_t = 10_000.0)]
+    k_min: f64,
+    /// Stiffest expected surface, N/m.
+    #[arg(long, default_value_t = 500_000.0)]
+    k_max: f64,
+    /// The robot's loop by plant name (p0, p1, p2); --period/--lag/--delay override its values.
+    #[arg(long, default_value = "p2", value_parser = ["p0", "p1", "p2"])]
+    plant: String,
+    /// Control period, s.
+    #[arg(long)]
+    period: Option<f64>,
+    /// Position-loop lag, s.
+    #[arg(long)]
+    lag: Option<f64>,
+    /// Pure delay, s.
+    #[arg(long)]
+    delay: Option<f64>,
+    /// A tuning to judge (built-in name or TOML file); without it, parameters are proposed.
+    #[arg(long)]
+    tuning: Option<String>,
+    /// Force set-point of a proposal, N.
+    #[arg(long, default_value_t = 5.0)]
+    f_r: f64,
+}
+
+#[derive(Args)]
+struct BenchArgs {
+    /// Only scenarios whose name starts with one of these (e.g. b01 b05).
+    only: Vec<String>,
+    /// Output directory for the CSVs and plots.
+    #[arg(long, default_value = "out/bench")]
+    out: PathBuf,
+    /// Exit with status 1 when the robust tuning misses a target.
+    #[arg(long)]
+    check: bool,
 }
 
 #[derive(Args)]
@@ -67,6 +112,8 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Sim(a) => sim(a),
         Command::Plot(a) => plot_trace(a),
+        Command::Tune(a) => tune(a),
+        Command::BenchScenarios(a) => bench_scenarios(a),
     };
     match result {
         Ok(code) => code,
@@ -103,6 +150,43 @@ fn sim(a: SimArgs) -> Result<ExitCode> {
     let run = run_inproc(&spec, &mut |frac| bar.update(frac))?;
     bar.finish();
     report(&spec, &run, &a.out, a.check)
+}
+
+fn tune(a: TuneArgs) -> Result<ExitCode> {
+    let mut model = forcecell::tune::loop_of_plant(&a.plant)?;
+    model.period = a.period.unwrap_or(model.period);
+    model.lag = a.lag.unwrap_or(model.lag);
+    model.delay = a.delay.unwrap_or(model.delay);
+    let req = forcecell::tune::TuneRequest {
+        k_min: a.k_min,
+        k_max: a.k_max,
+        model,
+        tuning: a.tuning,
+        f_r: a.f_r,
+    };
+    let (text, safe) = forcecell::tune::report(&req)?;
+    println!("{text}");
+    Ok(if safe {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
+}
+
+fn bench_scenarios(a: BenchArgs) -> Result<ExitCode> {
+    let opts = forcecell::bench::BenchOptions {
+        only: a.only,
+        ..Default::default()
+    };
+    let rows = forcecell::bench::run(&opts, &a.out, &mut |label| eprintln!("running {label}"))?;
+    print!("{}", forcecell::bench::table(&rows));
+    println!("plots and traces in {}", a.out.display());
+    let missed = rows.iter().any(|r| r.tuning == "robust" && !r.pass);
+    Ok(if a.check && missed {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    })
 }
 
 fn plot_trace(a: PlotArgs) -> Result<ExitCode> {

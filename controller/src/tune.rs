@@ -69,7 +69,7 @@ pub struct ContactAnalysis {
     pub phase_margin: f64,
     /// Extra delay the loop absorbs before it goes unstable, s (∞ without a crossover; ≤ 0: unstable).
     pub delay_margin: f64,
-    /// Settling time (2 %) of the ideal closed loop, s.
+    /// Settling time (2 %) of the ideal closed loop (no lag, no delay), s: a lower bound.
     pub settle: f64,
 }
 
@@ -167,9 +167,11 @@ pub fn analyse_contact(p: &ImpedanceParams, m: &LoopModel, k_c: f64) -> ContactA
 
 fn stiffness_grid(k_min: f64, k_max: f64) -> Vec<f64> {
     let n = 7;
-    (0..n)
+    let mut v: Vec<f64> = (0..n)
         .map(|i| k_min * (k_max / k_min).powf(i as f64 / (n - 1) as f64))
-        .collect()
+        .collect();
+    v.dedup();
+    v
 }
 
 /// Judge impedance parameters over the stiffness range `[k_min, k_max]` (N/m) on loop `m`.
@@ -313,13 +315,13 @@ impl fmt::Display for ImpedanceReport {
         )?;
         writeln!(
             f,
-            "  {:>10}  {:>7}  {:>9}  {:>12}  {:>12}  {:>15}  {:>9}",
-            "k_c N/m", "ζ", "f_n Hz", "crossover Hz", "phase margin", "delay margin ms", "settle s"
+            "  {:>10}  {:>7}  {:>9}  {:>12}  {:>12}  {:>15}  {:>14}",
+            "k_c N/m", "ζ", "f_n Hz", "crossover Hz", "phase margin", "delay margin ms", "ideal settle s"
         )?;
         for c in &self.contacts {
             writeln!(
                 f,
-                "  {:>10.0}  {:>7.3}  {:>9.2}  {:>12.2}  {:>11.1}°  {:>15.2}  {:>9.3}",
+                "  {:>10.0}  {:>7.3}  {:>9.2}  {:>12.2}  {:>11.1}°  {:>15.2}  {:>14.3}",
                 c.k_c,
                 c.zeta,
                 c.omega_n / (2.0 * PI),
