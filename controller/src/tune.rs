@@ -316,7 +316,13 @@ impl fmt::Display for ImpedanceReport {
         writeln!(
             f,
             "  {:>10}  {:>7}  {:>9}  {:>12}  {:>12}  {:>15}  {:>14}",
-            "k_c N/m", "ζ", "f_n Hz", "crossover Hz", "phase margin", "delay margin ms", "ideal settle s"
+            "k_c N/m",
+            "ζ",
+            "f_n Hz",
+            "crossover Hz",
+            "phase margin",
+            "delay margin ms",
+            "ideal settle s"
         )?;
         for c in &self.contacts {
             writeln!(
