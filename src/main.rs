@@ -312,6 +312,19 @@ fn report(spec: &RunSpec, run: &RunResult, out: &Path, check: bool) -> Result<Ex
                 run.stats.sensor_faults, run.stats.nonfinite_inputs, run.stats.limited
             ),
         ),
+        ("law events", {
+            let e = &run.law_events;
+            format!(
+                "{} contacts, {} lift-offs, {} force-limit retracts; limited: {} velocity, {} acceleration, {} deviation, {} estimator bound",
+                e.contacts,
+                e.lift_offs,
+                e.force_limits,
+                e.velocity_limits,
+                e.acceleration_limits,
+                e.deviation_limits,
+                e.estimator_bounds
+            )
+        }),
     ];
     println!();
     for (k, v) in table {

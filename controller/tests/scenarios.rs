@@ -339,10 +339,6 @@ fn b8_identification() {
 
 // ---------------------------------------------------------------- B6 (long)
 #[test]
-#[cfg_attr(
-    debug_assertions,
-    ignore = "10 min of simulated time on two plants: run with --release"
-)]
 fn b6_noise_and_drift_ten_minutes() {
     let mut fails: Vec<String> = Vec::new();
     for (name, plant) in PLANTS {
