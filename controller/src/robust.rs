@@ -48,14 +48,20 @@ pub struct ResponseParams {
     pub kappa: f64,
     /// Lead time `T_lead` of the inner loop (delay + lag) over which the surface velocity is fed forward, s.
     pub lead: f64,
+    /// Further lead in control periods (robot interfaces delay by whole cycles: one tuning then fits a
+    /// 1 kHz and a 250 Hz cell), periods.
+    #[serde(default)]
+    pub lead_cycles: f64,
     /// Integral gain `k_i`, 1/s (0: none).
     pub integral: f64,
     /// Largest magnitude of the integral term, m.
     pub integral_limit: f64,
     /// Natural frequency of the surface observer, Hz.
     pub surface_bandwidth: f64,
-    /// Dead-band on the fed-forward surface velocity, m/s: below it the observed velocity is taken for
-    /// sensor noise (differentiated) rather than motion; above it only the excess is fed forward.
+    /// Dead-band on the fed-forward surface velocity per newton of sensor noise, (m/s)/N: the law
+    /// measures the noise online, and inside `σ·feedforward_deadband` the observed velocity is taken for
+    /// differentiated noise rather than motion (above it only the excess is fed forward). A noise-free
+    /// sensor gets no dead-band.
     pub feedforward_deadband: f64,
     /// Largest rate of change of the set-point when it is changed, N/s (bumpless changes).
     pub set_point_rate: f64,
@@ -146,6 +152,7 @@ impl RobustParams {
             return Err(format!("response.kappa must be <= 1, got {}", r.kappa));
         }
         non_negative("response.lead", r.lead)?;
+        non_negative("response.lead_cycles", r.lead_cycles)?;
         non_negative("response.integral", r.integral)?;
         non_negative("response.integral_limit", r.integral_limit)?;
         positive("response.surface_bandwidth", r.surface_bandwidth)?;
@@ -209,6 +216,9 @@ const NOISE_FLOOR: f64 = 0.05;
 /// A loss of contact sooner than this after contact was detected is a bounce, s.
 const BOUNCE_TIME: f64 = 0.5;
 
+/// Smallest dead-band on the fed-forward surface velocity, m/s (transients of the observer).
+const DEADBAND_FLOOR: f64 = 0.0001;
+
 /// Relative force error within which the integral acts.
 const INTEGRATION_BAND: f64 = 0.3;
 
@@ -237,8 +247,9 @@ pub struct RobustLaw {
     in_contact: f64,
     /// The two previous raw forces, N, and the sensor noise variance measured from them, N².
     f_prev: Option<(f64, f64)>,
-    /// Previous conditioned position, m.
+    /// Previous conditioned position, m, and its velocity, m/s.
     xf_prev: Option<f64>,
+    v_x: f64,
     noise_var: f64,
     counts: EventCounts,
 }
@@ -267,6 +278,7 @@ impl RobustLaw {
             in_contact: f64::INFINITY,
             f_prev: None,
             xf_prev: None,
+            v_x: 0.0,
             noise_var: 0.0,
             counts: EventCounts::default(),
             p,
@@ -424,8 +436,10 @@ impl RobustLaw {
                     let lim = r.integral_limit;
                     self.integ = (self.integ + dt * r.integral * delta).clamp(-lim, lim);
                 }
-                let v_ff = self.vc.signum() * (self.vc.abs() - r.feedforward_deadband).max(0.0);
-                xf + weight * r.kappa * delta + r.lead * v_ff + self.integ
+                let deadband = (r.feedforward_deadband * self.noise_var.sqrt()).max(DEADBAND_FLOOR);
+                let v_ff = self.vc.signum() * (self.vc.abs() - deadband).max(0.0);
+                let lead = r.lead + r.lead_cycles * dt;
+                xf + weight * r.kappa * delta + lead * v_ff + self.integ
             }
         }
     }
@@ -481,6 +495,7 @@ impl ForceLaw for RobustLaw {
         self.in_contact = f64::INFINITY;
         self.f_prev = None;
         self.xf_prev = None;
+        self.v_x = 0.0;
         self.noise_var = 0.0;
         self.counts = EventCounts::default();
     }
@@ -512,6 +527,7 @@ impl ForceLaw for RobustLaw {
         self.transitions(x, f, ff, xf, dt, &mut ev);
         let v_x = self.xf_prev.map_or(0.0, |p| (xf - p) / dt);
         self.xf_prev = Some(xf);
+        self.v_x = v_x;
         let moving = surface_moving(self.vc, v_x, self.p.estimator.max_surface_speed);
         if self.state == ContactState::Contact && self.est.update(x, f, ff, dt, moving).projected {
             ev.estimator_bound = true;
