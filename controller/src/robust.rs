@@ -245,6 +245,8 @@ pub struct RobustLaw {
     travelled: f64,
     /// Time since contact was last detected, s.
     in_contact: f64,
+    /// The observed surface velocity away from the tool when contact was last lost, m/s.
+    v_lost: f64,
     /// The two previous raw forces, N, and the sensor noise variance measured from them, N².
     f_prev: Option<(f64, f64)>,
     /// Previous conditioned position, m, and its velocity, m/s.
@@ -276,6 +278,7 @@ impl RobustLaw {
             below: 0.0,
             travelled: 0.0,
             in_contact: f64::INFINITY,
+            v_lost: 0.0,
             f_prev: None,
             xf_prev: None,
             v_x: 0.0,
@@ -368,14 +371,18 @@ impl RobustLaw {
                     self.below += dt;
                     if self.below >= c.lift_time {
                         self.state = ContactState::Reacquire;
-                        // A contact lost again soon after a re-acquisition is a bounce: no second fast
-                        // search, approach speed only.
-                        self.travelled = if self.in_contact < BOUNCE_TIME {
-                            c.reacquire_distance
-                        } else {
+                        // The fast search is for a surface that went away. A contact lost while the
+                        // tool itself was moving away (the law's own answer to a force jump), or lost
+                        // again soon after a re-acquisition (a bounce), is searched for at approach
+                        // speed.
+                        let retracting = self.v_x < -c.approach_speed;
+                        self.travelled = if !retracting && self.in_contact >= BOUNCE_TIME {
                             0.0
+                        } else {
+                            c.reacquire_distance
                         };
                         ev.lift_off = true;
+                        self.v_lost = self.vc.max(0.0);
                         // The force is gone: forget the filter's memory of it.
                         self.force.reset_to(f);
                     }
@@ -402,10 +409,12 @@ impl RobustLaw {
                 (self.u + c.approach_speed * dt).min(x + gap)
             }
             ContactState::Reacquire => {
+                // Fast first; then at approach speed, or faster when the surface was seen receding at
+                // lift-off (a receding surface outruns a slow search).
                 let speed = if self.travelled < c.reacquire_distance {
                     c.reacquire_speed
                 } else {
-                    c.approach_speed
+                    (c.approach_speed + 1.5 * self.v_lost).min(c.reacquire_speed)
                 };
                 self.travelled += speed * dt;
                 let gap = c.reacquire_distance + c.approach_speed * (4.0 * r.lead).max(0.05);
@@ -493,6 +502,7 @@ impl ForceLaw for RobustLaw {
         self.below = 0.0;
         self.travelled = 0.0;
         self.in_contact = f64::INFINITY;
+        self.v_lost = 0.0;
         self.f_prev = None;
         self.xf_prev = None;
         self.v_x = 0.0;
@@ -524,10 +534,10 @@ impl ForceLaw for RobustLaw {
         }
         self.f_prev = Some((f, self.f_prev.map_or(f, |p| p.0)));
         let xf = self.position.step(x, dt);
-        self.transitions(x, f, ff, xf, dt, &mut ev);
         let v_x = self.xf_prev.map_or(0.0, |p| (xf - p) / dt);
         self.xf_prev = Some(xf);
         self.v_x = v_x;
+        self.transitions(x, f, ff, xf, dt, &mut ev);
         let moving = surface_moving(self.vc, v_x, self.p.estimator.max_surface_speed);
         if self.state == ContactState::Contact && self.est.update(x, f, ff, dt, moving).projected {
             ev.estimator_bound = true;
