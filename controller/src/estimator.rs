@@ -142,7 +142,7 @@ const INTERCEPT_UNCERTAINTY: f64 = 100.0;
 /// Multiple of `excitation` above which a force transient is informative on a moving surface too.
 const STRONG_EXCITATION: f64 = 10.0;
 /// Largest relative rate of change of `k̂_c`, 1/s.
-const MAX_RATE: f64 = 20.0;
+const MAX_RATE: f64 = 30.0;
 /// Ceiling of any diagonal covariance entry.
 const COV_MAX: f64 = 1.0e4;
 
@@ -233,7 +233,10 @@ impl StiffnessEstimator {
         // The position criterion is taken at the stiffest expected surface: with k̂_c still too low it
         // would otherwise hide exactly the transients that correct it.
         let excited = self.p.kc_max * (x - self.x_slow).abs() >= self.p.excitation
-            && (f_gate - self.f_slow).abs() >= self.p.excitation;
+            && (f_gate - self.f_slow).abs() >= self.p.excitation
+            // …and the same way, as a positive stiffness against a still surface makes them: a force
+            // falling while the position advances is a surface moving away, not information on k_c.
+            && (f_gate - self.f_slow) * (x - self.x_slow) > 0.0;
         let phi = self.regressor(x);
         let err = f - self.predict(x);
         // A strong force transient (an impact, a stiffness change) is informative even when the observer,

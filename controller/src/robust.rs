@@ -219,6 +219,14 @@ const BOUNCE_TIME: f64 = 0.5;
 /// Smallest dead-band on the fed-forward surface velocity, m/s (transients of the observer).
 const DEADBAND_FLOOR: f64 = 0.0001;
 
+/// An observed-surface innovation above this fraction of the set-point's penetration `f_r/k̂_c` in one
+/// step is a jump, not motion.
+const STEP_INNOVATION: f64 = 0.25;
+
+/// How long large innovations count as one jump rather than motion, s (a step needs about this long
+/// to pass the force conditioning).
+const JUMP_TIME: f64 = 0.03;
+
 /// Relative force error within which the integral acts.
 const INTEGRATION_BAND: f64 = 0.3;
 
@@ -232,6 +240,8 @@ pub struct RobustLaw {
     force: SignalFilter,
     position: SignalFilter,
     est: StiffnessEstimator,
+    /// How long the observer's innovation has been a jump, s.
+    jump_time: f64,
     /// Observed surface, m, and its velocity, m/s.
     zc: f64,
     vc: f64,
@@ -270,6 +280,7 @@ impl RobustLaw {
             force: SignalFilter::new(p.conditioning),
             position: SignalFilter::new(position_params),
             est: StiffnessEstimator::new(p.estimator, p.scale()),
+            jump_time: 0.0,
             zc: f64::NAN,
             vc: 0.0,
             integ: 0.0,
@@ -431,8 +442,18 @@ impl RobustLaw {
                 let w = core::f64::consts::TAU * r.surface_bandwidth;
                 let w = w.min(0.5 / dt);
                 let e = z - self.zc;
-                self.vc += dt * w * w * e;
-                self.zc += dt * (self.vc + 2.0 * 0.8 * w * e);
+                let jump =
+                    e.abs() > STEP_INNOVATION * self.f_r.max(self.p.contact.contact_force) / k;
+                self.jump_time = if jump { self.jump_time + dt } else { 0.0 };
+                if jump && self.jump_time <= JUMP_TIME {
+                    // A jump (a surface step, a stiffness change seen through a stale k̂_c) is not
+                    // motion: the observed surface moves there without a velocity kick. What keeps
+                    // jumping for longer than the conditioning takes to pass a step is motion.
+                    self.zc = z;
+                } else {
+                    self.vc += dt * w * w * e;
+                    self.zc += dt * (self.vc + 2.0 * 0.8 * w * e);
+                }
                 let e = self.f_r - ff;
                 let n = r.noise_gate * r.noise_gate * self.noise_var;
                 let weight = if n > 0.0 { e * e / (e * e + n) } else { 1.0 };
@@ -495,6 +516,7 @@ impl ForceLaw for RobustLaw {
         self.position.clear();
         self.est.reset();
         self.zc = f64::NAN;
+        self.jump_time = 0.0;
         self.vc = 0.0;
         self.integ = 0.0;
         self.u = if x.is_finite() { x } else { 0.0 };
