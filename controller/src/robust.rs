@@ -12,11 +12,13 @@
 //!
 //! Why this shape: the robot's inner loop `P(s) = e^{−sT_d}/(τs + 1)` carries the command to the
 //! position, so with `g = κ·k_c/k̂_c` the closed loop's characteristic equation is
-//! `e^{sT_d}·(τs + 1) = 1 − g·F(s)` (`F` the force low-pass). For `Re s ≥ 0` the left side has modulus
-//! ≥ 1 and the right side < 1 whenever `0 < g < 2`: **the loop is stable for any delay and any lag as long
-//! as the stiffness estimate is not more than `2κ`… times too small**. The estimator only has to be
-//! roughly right for stability, and exact for speed. With `κ = 1`, `F = 1` and an exact `k̂_c` the force
-//! simply follows the inner loop's own step response.
+//! `e^{sT_d}·(τs + 1) = F(s)·(1 − g)` (`F` the conditioning low-pass, applied to position and force
+//! alike). For `Re s ≥ 0` the left side has modulus ≥ 1 and the right side < 1 whenever `0 < g < 2`:
+//! **the proportional loop is stable for any delay and any lag as long as `k̂_c > κ·k_c/2`**. The
+//! estimator only has to be roughly right for stability, and right for speed. (The feed-forward and the
+//! small integral below sit outside this argument; the scenario tests B1–B9 and the delay sweep B7 are
+//! what covers them.) The proportional correction is also weighted by `e²/(e² + (gate·σ)²)` — `e` the
+//! force error, `σ` the sensor noise measured online — which only lowers `g`.
 //!
 //! Moving surfaces: the observed surface `x̃_c` goes through a second-order tracking observer whose
 //! velocity `v̂_c` is fed forward over the inner loop's lead time `T_lead` (delay + lag); the small integral
