@@ -492,7 +492,10 @@ impl RobustLaw {
         }
         // Braking: never faster than what can still stop at the target (not a limit event: it is how
         // an acceleration-limited command reaches a target without overshoot).
-        let v_brake = (2.0 * l.max_acceleration * dist.abs()).sqrt() + l.max_acceleration * dt;
+        // Discrete time: the largest speed from which steps of at most `a·dt` velocity change still
+        // stop within `dist`.
+        let half = 0.5 * l.max_acceleration * dt;
+        let v_brake = (half * half + 2.0 * l.max_acceleration * dist.abs()).sqrt() - half;
         v = v.clamp(-v_brake, v_brake);
         let dv = l.max_acceleration * dt;
         if (v - self.v).abs() > dv * (1.0 + 1e-9) {

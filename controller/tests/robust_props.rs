@@ -27,7 +27,12 @@ fn corrupt(v: f64, how: u8) -> f64 {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(200))]
+    // Seeded: the same cases on every run (the regressions file adds the ones found so far).
+    #![proptest_config(ProptestConfig {
+        cases: 200,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(0x5eed_f0ce),
+        ..ProptestConfig::default()
+    })]
 
     #[test]
     fn command_is_finite_bounded_and_rate_limited(
@@ -48,9 +53,12 @@ proptest! {
             let v = (out.x_cmd - last) / period;
             prop_assert!(v.abs() <= p.limits.max_velocity * (1.0 + 1e-9), "velocity {v} m/s");
             if x.is_finite() && f.is_finite() {
+                // The deviation limit is a position limit: where the command meets it, it stops there
+                // even if that takes more than the acceleration limit — and says so.
                 prop_assert!(
-                    (v - last_v).abs() <= p.limits.max_acceleration * period * (1.0 + 1e-6) + 1e-12,
-                    "acceleration {} m/s²", (v - last_v) / period
+                    (v - last_v).abs() <= p.limits.max_acceleration * period * (1.0 + 1e-6) + 1e-12
+                        || out.events.deviation_limit,
+                    "acceleration {} m/s² without a deviation-limit event", (v - last_v) / period
                 );
             } else {
                 // A held step stops the command (the loop does the same on a fault); it then moves
