@@ -382,6 +382,9 @@ pub(crate) fn scan_message<'a>(
         if c.starts_with(b"</") {
             c.i += 2;
             let end = c.name()?;
+            if c.at_end() {
+                return Err(ParseError::Truncated);
+            }
             if end != root {
                 return Err(ParseError::Syntax {
                     at: c.i - end.len(),
@@ -418,6 +421,9 @@ pub(crate) fn scan_message<'a>(
         v.child_text(text, at)?;
         c.i += 2;
         let end = c.name()?;
+        if c.at_end() {
+            return Err(ParseError::Truncated);
+        }
         if end != tag {
             return Err(ParseError::Syntax {
                 at: c.i - end.len(),
