@@ -416,7 +416,10 @@ impl fmt::Display for WriteError {
             Self::BufferTooSmall => f.write_str("output buffer too small for the message"),
             Self::NonFinite { slot } => write!(f, "value in slot {slot} is not finite"),
             Self::OutOfRange { slot } => {
-                write!(f, "value in slot {slot} is too large for fixed-point output")
+                write!(
+                    f,
+                    "value in slot {slot} is too large for fixed-point output"
+                )
             }
         }
     }
@@ -607,8 +610,7 @@ impl ParseState<'_, '_> {
 impl<'a> Visitor<'a> for ParseState<'_, '_> {
     fn root_attr(&mut self, name: &'a [u8], value: &'a [u8], _at: usize) -> Result<(), ParseError> {
         if name.eq_ignore_ascii_case(b"type") {
-            if self.schema.direction == Direction::Sen
-                && value != self.schema.type_value.as_bytes()
+            if self.schema.direction == Direction::Sen && value != self.schema.type_value.as_bytes()
             {
                 return Err(ParseError::WrongType);
             }
@@ -765,7 +767,7 @@ impl Out<'_> {
     fn fixed(&mut self, v: f64, decimals: u8, slot: usize) -> Result<(), WriteError> {
         let scale = POW10[decimals as usize];
         let scaled = (v.abs() * scale as f64).round();
-        if !(scaled < 9_007_199_254_740_992.0) {
+        if !scaled.is_finite() || scaled >= 9_007_199_254_740_992.0 {
             return Err(WriteError::OutOfRange { slot });
         }
         let n = scaled as u64;
@@ -816,7 +818,10 @@ mod tests {
             buf: &mut buf,
             n: 0,
         };
-        assert_eq!(o.fixed(1e300, 4, 3), Err(WriteError::OutOfRange { slot: 3 }));
+        assert_eq!(
+            o.fixed(1e300, 4, 3),
+            Err(WriteError::OutOfRange { slot: 3 })
+        );
         assert_eq!(o.n, 0, "nothing written");
     }
 
@@ -849,7 +854,10 @@ mod tests {
         assert_eq!(i.value(), 123);
         assert_eq!(i.digits(), b"000123");
         assert_eq!(Ipoc::new(18_446_744_073_709_551_615).value(), u64::MAX);
-        assert_eq!(Ipoc::parse(b"18446744073709551616"), Err(ParseError::BadIpoc));
+        assert_eq!(
+            Ipoc::parse(b"18446744073709551616"),
+            Err(ParseError::BadIpoc)
+        );
         assert_eq!(Ipoc::parse(b""), Err(ParseError::BadIpoc));
         assert_eq!(Ipoc::parse(b"-1"), Err(ParseError::BadIpoc));
         assert_eq!(Ipoc::new(0).digits(), b"0");

@@ -117,7 +117,12 @@ impl EthernetConfig {
                 ConfigElement::channel(&format!("RKorr.{a}"), ValueType::Double, i, Some(!relative))
             })
             .collect();
-        receive.push(ConfigElement::channel("Stop", ValueType::Bool, 7, Some(false)));
+        receive.push(ConfigElement::channel(
+            "Stop",
+            ValueType::Bool,
+            7,
+            Some(false),
+        ));
         Self {
             ip,
             port,
@@ -140,9 +145,10 @@ impl EthernetConfig {
             let p: Vec<&str> = path.iter().map(String::as_str).collect();
             match p.as_slice() {
                 ["ROOT", "CONFIG", "IP_NUMBER"] => {
-                    ip = Some(body.parse::<Ipv4Addr>().map_err(|_| {
-                        format!("IP_NUMBER {body:?} is not an IPv4 address")
-                    })?)
+                    ip = Some(
+                        body.parse::<Ipv4Addr>()
+                            .map_err(|_| format!("IP_NUMBER {body:?} is not an IPv4 address"))?,
+                    )
                 }
                 ["ROOT", "CONFIG", "PORT"] => {
                     port = Some(
@@ -159,9 +165,7 @@ impl EthernetConfig {
                     }
                 }
                 ["ROOT", "SEND", "ELEMENTS", "ELEMENT"] => send.push(element(attrs)?),
-                ["ROOT", "RECEIVE", "ELEMENTS", "ELEMENT"] => {
-                    receive.push(element(attrs)?)
-                }
+                ["ROOT", "RECEIVE", "ELEMENTS", "ELEMENT"] => receive.push(element(attrs)?),
                 _ => {}
             }
             Ok(())
@@ -186,9 +190,7 @@ impl EthernetConfig {
                 match e.indx {
                     Indx::Channel(i) if (1..=64).contains(&i) => {
                         if used[i as usize] {
-                            return Err(ConfigError(format!(
-                                "{section}: INDX {i} is used twice"
-                            )));
+                            return Err(ConfigError(format!("{section}: INDX {i} is used twice")));
                         }
                         used[i as usize] = true;
                     }
@@ -235,7 +237,9 @@ impl EthernetConfig {
                             .parse()
                             .ok()
                             .filter(|n| (1..=10).contains(n))
-                            .ok_or_else(|| ConfigError(format!("unknown internal tag {}", e.tag)))?;
+                            .ok_or_else(|| {
+                                ConfigError(format!("unknown internal tag {}", e.tag))
+                            })?;
                         for k in 1..=10 {
                             s.push_attr("Tech", &format!("C{n}{k}"), e.ty, false)?;
                         }

@@ -144,6 +144,10 @@ mod tests {
         assert_eq!(l.quantile(0.999), Duration::from_micros(999));
         assert_eq!(l.quantile(1.0), Duration::from_nanos(999_500));
         l.record(Duration::from_secs(1));
-        assert_eq!(l.quantile(1.0), Duration::from_secs(1), "overflow reports the max");
+        assert_eq!(
+            l.quantile(1.0),
+            Duration::from_secs(1),
+            "overflow reports the max"
+        );
     }
 }

@@ -4,12 +4,14 @@ use hal::{Correction, Vector3};
 
 use crate::diag::Counters;
 
-/// What the driver lets through, in SI, tool frame, per axis. Must lie inside the robot's POSCORR limits.
+/// What the driver lets through, in SI, tool frame. The envelope bounds the **norm** of the total
+/// translation and of the total rotation vector (so every axis, and the overall correction that
+/// POSCORRMON watches, stays inside); the rate limit bounds each component's change per reply.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Limits {
-    /// Largest |translation| per axis of the total correction, m.
+    /// Largest norm of the total translation, m.
     pub max_translation: f64,
-    /// Largest |rotation| per axis of the total correction, rad.
+    /// Largest norm of the total rotation vector, rad.
     pub max_rotation: f64,
     /// Largest change of a translation component from one reply to the next, m.
     pub max_translation_step: f64,
@@ -18,7 +20,8 @@ pub struct Limits {
 }
 
 impl Default for Limits {
-    /// 4.5 mm and 4.5° (inside the default POSCORR ±5 mm, 5°), 0.25 mm and 0.25° per cycle.
+    /// 4.5 mm and 4.5° (inside the default POSCORR ±5 mm, 5° and POSCORRMON 6 mm, 6°), 0.25 mm and
+    /// 0.25° per cycle.
     fn default() -> Self {
         Self {
             max_translation: 0.0045,
@@ -29,7 +32,8 @@ impl Default for Limits {
     }
 }
 
-/// The robot's POSCORR limits (the robot clamps silently there), in SI.
+/// A pair of robot-side limits in SI: POSCORR (clamps silently, per axis) or POSCORRMON (stops RSI
+/// when the overall correction exceeds it).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PoscorrLimits {
     /// Per-axis translation limit, m (default 5 mm).
@@ -47,10 +51,22 @@ impl Default for PoscorrLimits {
     }
 }
 
+impl PoscorrLimits {
+    /// POSCORRMON's defaults: 6 mm, 6°.
+    pub const MONITOR_DEFAULT: Self = Self {
+        translation: 0.006,
+        rotation: 6.0 * core::f64::consts::PI / 180.0,
+    };
+}
+
 impl Limits {
-    /// Check the limits are positive and inside POSCORR (rotation with a 10 % margin: per-axis limits
-    /// on a rotation vector map onto A, B, C only to first order).
-    pub fn validate(&self, robot: &PoscorrLimits) -> Result<(), String> {
+    /// Check the limits are positive and inside POSCORR and POSCORRMON (rotation with a 10 % margin:
+    /// a rotation vector maps onto A, B, C only to first order).
+    pub fn validate(&self, robot: &PoscorrLimits, monitor: &PoscorrLimits) -> Result<(), String> {
+        let robot = &PoscorrLimits {
+            translation: robot.translation.min(monitor.translation),
+            rotation: robot.rotation.min(monitor.rotation),
+        };
         for (name, v) in [
             ("max_translation", self.max_translation),
             ("max_rotation", self.max_rotation),
@@ -63,13 +79,13 @@ impl Limits {
         }
         if self.max_translation > robot.translation {
             return Err(format!(
-                "max_translation {} m exceeds the robot's POSCORR limit {} m",
+                "max_translation {} m exceeds the robot's POSCORR/POSCORRMON limit {} m",
                 self.max_translation, robot.translation
             ));
         }
         if self.max_rotation > 0.9 * robot.rotation {
             return Err(format!(
-                "max_rotation {} rad must stay within 90 % of the robot's POSCORR limit {} rad",
+                "max_rotation {} rad must stay within 90 % of the robot's POSCORR/POSCORRMON limit {} rad",
                 self.max_rotation, robot.rotation
             ));
         }
@@ -114,22 +130,22 @@ impl Shaper {
             c.rotation.y,
             c.rotation.z,
         ];
-        let mut out = [0.0; 6];
         let (mut env, mut rate) = (false, false);
-        for i in 0..6 {
-            let (lim, step) = if i < 3 {
-                (self.limits.max_translation, self.limits.max_translation_step)
+        let mut out = self.envelope(want, &mut env);
+        for (i, v) in out.iter_mut().enumerate() {
+            let step = if i < 3 {
+                self.limits.max_translation_step
             } else {
-                (self.limits.max_rotation, self.limits.max_rotation_step)
+                self.limits.max_rotation_step
             };
-            let lim = if self.enabled[i] { lim } else { 0.0 };
-            let mut v = want[i].clamp(-lim, lim);
-            env |= v != want[i];
             let r = v.clamp(self.last[i] - step, self.last[i] + step);
-            rate |= r != v;
-            v = r;
-            out[i] = v;
+            rate |= r != *v;
+            *v = r;
         }
+        // Rate-limiting between two points inside the envelope can leave it by a hair: clamp again.
+        let mut again = false;
+        out = self.envelope(out, &mut again);
+        env |= again;
         n.envelope_limited += u64::from(env);
         n.rate_limited += u64::from(rate);
         self.last = out;
@@ -137,9 +153,37 @@ impl Shaper {
     }
 }
 
+impl Shaper {
+    /// Zero the unconfigured components and scale translation and rotation into their norm limits.
+    fn envelope(&self, v: [f64; 6], limited: &mut bool) -> [f64; 6] {
+        let mut out = v;
+        for (i, o) in out.iter_mut().enumerate() {
+            if !self.enabled[i] && *o != 0.0 {
+                *o = 0.0;
+                *limited = true;
+            }
+        }
+        for (range, lim) in [
+            (0..3, self.limits.max_translation),
+            (3..6, self.limits.max_rotation),
+        ] {
+            let norm = out[range.clone()].iter().map(|x| x * x).sum::<f64>().sqrt();
+            if norm > lim {
+                let k = lim / norm;
+                out[range].iter_mut().for_each(|x| *x *= k);
+                *limited = true;
+            }
+        }
+        out
+    }
+}
+
 /// Split a shaped total into translation and rotation vectors.
 pub(crate) fn split(v: [f64; 6]) -> (Vector3<f64>, Vector3<f64>) {
-    (Vector3::new(v[0], v[1], v[2]), Vector3::new(v[3], v[4], v[5]))
+    (
+        Vector3::new(v[0], v[1], v[2]),
+        Vector3::new(v[3], v[4], v[5]),
+    )
 }
 
 #[cfg(test)]
@@ -179,17 +223,27 @@ mod tests {
         c.translation.x = 0.0001;
         let out = s.shape(&c, &mut n);
         assert_eq!(out[0], 0.0);
+        assert_eq!(n.envelope_limited, 1);
         assert_eq!(out[2], 0.0001);
     }
 
     #[test]
     fn limits_must_stay_inside_poscorr() {
         let robot = PoscorrLimits::default();
-        assert!(Limits::default().validate(&robot).is_ok());
+        let mon = PoscorrLimits {
+            translation: 0.006,
+            rotation: 6f64.to_radians(),
+        };
+        assert!(Limits::default().validate(&robot, &mon).is_ok());
         let wide = Limits {
             max_translation: 0.006,
             ..Limits::default()
         };
-        assert!(wide.validate(&robot).unwrap_err().contains("POSCORR"));
+        assert!(wide.validate(&robot, &mon).unwrap_err().contains("POSCORR"));
+        let tight_mon = PoscorrLimits {
+            translation: 0.004,
+            ..mon
+        };
+        assert!(Limits::default().validate(&robot, &tight_mon).is_err());
     }
 }

@@ -63,6 +63,8 @@ pub struct LinkConfig {
     pub limits: Limits,
     /// The robot's POSCORR limits; `limits` must lie inside.
     pub poscorr: PoscorrLimits,
+    /// The robot's POSCORRMON limits; `limits` must lie inside.
+    pub poscorrmon: PoscorrLimits,
     /// An IPOC further than this from the last one (either way) starts a new session; an older
     /// IPOC within it is a duplicate or reordered datagram and is dropped.
     pub session_jump: u64,
@@ -89,6 +91,7 @@ impl LinkConfig {
             mode: CorrectionMode::Absolute,
             limits: Limits::default(),
             poscorr: PoscorrLimits::default(),
+            poscorrmon: PoscorrLimits::MONITOR_DEFAULT,
             session_jump: 1000,
             precision: 4,
             late_after: Duration::from_millis(2),
@@ -98,7 +101,7 @@ impl LinkConfig {
     /// Check the values.
     pub fn validate(&self) -> Result<(), String> {
         self.ethernet.validate().map_err(|e| e.to_string())?;
-        self.limits.validate(&self.poscorr)?;
+        self.limits.validate(&self.poscorr, &self.poscorrmon)?;
         if self.period.is_zero() || self.watchdog_cycles == 0 {
             return Err("period and watchdog_cycles must be > 0".into());
         }
@@ -348,6 +351,11 @@ impl RsiLink {
         &self.cfg
     }
 
+    /// Change whose datagrams are accepted (e.g. once a simulated controller has bound its port).
+    pub fn set_robot_filter(&mut self, robot: RobotFilter) {
+        self.cfg.robot = robot;
+    }
+
     /// True after a stop was sent.
     pub fn is_stopped(&self) -> bool {
         self.stopped
@@ -566,9 +574,7 @@ impl RobotLink for RsiLink {
         let wire_total = wire::offset_to_wire(&t, &r);
         let out = match self.cfg.mode {
             CorrectionMode::Absolute => wire_total,
-            CorrectionMode::Relative => {
-                core::array::from_fn(|i| wire_total[i] - self.last_wire[i])
-            }
+            CorrectionMode::Relative => core::array::from_fn(|i| wire_total[i] - self.last_wire[i]),
         };
         self.last_wire = wire_total;
         if self.cfg.ethernet.onlysend {
@@ -581,7 +587,8 @@ impl RobotLink for RsiLink {
             }
         }
         if let Some(s) = self.sen_slots.stop {
-            self.tx_frame.set(s, if correction.stop { 1.0 } else { 0.0 });
+            self.tx_frame
+                .set(s, if correction.stop { 1.0 } else { 0.0 });
         }
         self.tx_frame.set_ipoc(p.ipoc);
         let n = self

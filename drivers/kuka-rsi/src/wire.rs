@@ -22,19 +22,34 @@ pub fn pose_from_wire(v: [f64; 6]) -> Pose {
 pub fn pose_to_wire(p: &Pose) -> [f64; 6] {
     let (c, b, a) = p.orientation.euler_angles();
     let x = p.position * MM_PER_M;
-    [x.x, x.y, x.z, a.to_degrees(), b.to_degrees(), c.to_degrees()]
+    [
+        x.x,
+        x.y,
+        x.z,
+        a.to_degrees(),
+        b.to_degrees(),
+        c.to_degrees(),
+    ]
 }
 
 /// A correction offset (translation m, rotation vector rad) → `[X, Y, Z, A, B, C]` in mm and degrees.
 pub fn offset_to_wire(translation: &Vector3<f64>, rotation: &Vector3<f64>) -> [f64; 6] {
     let (c, b, a) = UnitQuaternion::from_scaled_axis(*rotation).euler_angles();
     let x = translation * MM_PER_M;
-    [x.x, x.y, x.z, a.to_degrees(), b.to_degrees(), c.to_degrees()]
+    [
+        x.x,
+        x.y,
+        x.z,
+        a.to_degrees(),
+        b.to_degrees(),
+        c.to_degrees(),
+    ]
 }
 
 /// `[X, Y, Z, A, B, C]` in mm and degrees → a correction offset (translation m, rotation vector rad).
 pub fn offset_from_wire(v: [f64; 6]) -> (Vector3<f64>, Vector3<f64>) {
-    let q = UnitQuaternion::from_euler_angles(v[5].to_radians(), v[4].to_radians(), v[3].to_radians());
+    let q =
+        UnitQuaternion::from_euler_angles(v[5].to_radians(), v[4].to_radians(), v[3].to_radians());
     (Vector3::new(v[0], v[1], v[2]) / MM_PER_M, q.scaled_axis())
 }
 

@@ -247,10 +247,7 @@ impl<'a> Cursor<'a> {
             let at = self.i;
             let name = self.name()?;
             let name_range = (at, self.i);
-            if seen[..n]
-                .iter()
-                .any(|&(s, e)| &self.b[s..e] == name)
-            {
+            if seen[..n].iter().any(|&(s, e)| &self.b[s..e] == name) {
                 return Err(ParseError::DuplicateAttribute { at });
             }
             if n == seen.len() {
@@ -328,13 +325,11 @@ pub(crate) fn skip_declaration(c: &mut Cursor<'_>) -> Result<(), ParseError> {
 /// What the strict message scanner reports, in document order.
 pub(crate) trait Visitor<'a> {
     /// An attribute of the root element.
-    fn root_attr(&mut self, name: &'a [u8], value: &'a [u8], at: usize)
-    -> Result<(), ParseError>;
+    fn root_attr(&mut self, name: &'a [u8], value: &'a [u8], at: usize) -> Result<(), ParseError>;
     /// A child element starts.
     fn child(&mut self, tag: &'a [u8]) -> Result<(), ParseError>;
     /// An attribute of the current child.
-    fn child_attr(&mut self, name: &'a [u8], value: &'a [u8], at: usize)
-    -> Result<(), ParseError>;
+    fn child_attr(&mut self, name: &'a [u8], value: &'a [u8], at: usize) -> Result<(), ParseError>;
     /// The (trimmed) text of the current child; only called for `<tag>text</tag>`.
     fn child_text(&mut self, text: &'a [u8], at: usize) -> Result<(), ParseError>;
 }

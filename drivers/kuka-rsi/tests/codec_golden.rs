@@ -67,7 +67,11 @@ fn config_golden() {
         EthernetConfig::forcecell("192.168.1.10".parse().unwrap(), 49152, false),
         "the spec's file is the one forcecell generates"
     );
-    assert_eq!(EthernetConfig::parse(&c.to_xml()).unwrap(), c, "to_xml round-trips");
+    assert_eq!(
+        EthernetConfig::parse(&c.to_xml()).unwrap(),
+        c,
+        "to_xml round-trips"
+    );
 }
 
 #[test]
@@ -79,7 +83,10 @@ fn rob_golden_compact() {
         [445.0, 0.0, 890.0, 180.0, 0.0, 180.0]
     );
     assert_eq!(
-        f.get6(s.six("AIPos", ["A1", "A2", "A3", "A4", "A5", "A6"]).unwrap()),
+        f.get6(
+            s.six("AIPos", ["A1", "A2", "A3", "A4", "A5", "A6"])
+                .unwrap()
+        ),
         [0.0, -90.0, 90.0, 0.0, 90.0, 0.0]
     );
     assert_eq!(f.get(s.slot("Delay", "D").unwrap()), 0.0);
@@ -101,11 +108,13 @@ fn rob_golden_write_is_byte_exact() {
     );
     let axes = [0.0, -90.0, 90.0, 0.0, 90.0, 0.0];
     f.set6(
-        s.six("AIPos", ["A1", "A2", "A3", "A4", "A5", "A6"]).unwrap(),
+        s.six("AIPos", ["A1", "A2", "A3", "A4", "A5", "A6"])
+            .unwrap(),
         axes,
     );
     f.set6(
-        s.six("ASPos", ["A1", "A2", "A3", "A4", "A5", "A6"]).unwrap(),
+        s.six("ASPos", ["A1", "A2", "A3", "A4", "A5", "A6"])
+            .unwrap(),
         axes,
     );
     f.set(s.slot("Delay", "D").unwrap(), 0.0);
@@ -159,10 +168,9 @@ fn unknown_elements_and_attributes_are_ignored() {
 fn rejects_what_the_spec_says_to_reject() {
     let cases: Vec<(String, fn(&ParseError) -> bool)> = vec![
         (String::new(), |e| *e == ParseError::Empty),
-        (
-            format!("<!DOCTYPE Rob []>{ROB}"),
-            |e| matches!(e, ParseError::Markup { .. }),
-        ),
+        (format!("<!DOCTYPE Rob []>{ROB}"), |e| {
+            matches!(e, ParseError::Markup { .. })
+        }),
         (
             ROB.replace("<Delay D=\"0\"/>", "<Delay D=\"&amp;\"/>"),
             |e| matches!(e, ParseError::Entity { .. }),
@@ -179,53 +187,48 @@ fn rejects_what_the_spec_says_to_reject() {
             ROB.replace("<Delay D=\"0\"/>", "<Delay D=\"0\" D=\"1\"/>"),
             |e| matches!(e, ParseError::DuplicateAttribute { .. }),
         ),
-        (
-            ROB.replace("X=\"445.0000\"", "X=\"445.0000\u{e9}\""),
-            |e| matches!(e, ParseError::NonAscii { .. }),
-        ),
-        (
-            ROB.replacen("X=\"445.0000\"", "X=\"\"", 1),
-            |e| matches!(e, ParseError::BadNumber { .. }),
-        ),
-        (
-            ROB.replacen("X=\"445.0000\"", "X=\"NaN\"", 1),
-            |e| matches!(e, ParseError::BadNumber { .. }),
-        ),
-        (
-            ROB.replacen("X=\"445.0000\"", "X=\"inf\"", 1),
-            |e| matches!(e, ParseError::BadNumber { .. }),
-        ),
-        (
-            ROB.replacen("X=\"445.0000\"", "X=\"4.45e2\"", 1),
-            |e| matches!(e, ParseError::BadNumber { .. }),
-        ),
-        (
-            ROB.replace("<IPOC>123645634563</IPOC>", ""),
-            |e| *e == ParseError::MissingIpoc,
-        ),
-        (
-            ROB.replace("123645634563", "12x"),
-            |e| *e == ParseError::BadIpoc,
-        ),
-        (ROB.replace("123645634563", ""), |e| *e == ParseError::BadIpoc),
-        (
-            ROB.replace("<Delay D=\"0\"/>", ""),
-            |e| *e == ParseError::MissingElement { element: 4 },
-        ),
+        (ROB.replace("X=\"445.0000\"", "X=\"445.0000\u{e9}\""), |e| {
+            matches!(e, ParseError::NonAscii { .. })
+        }),
+        (ROB.replacen("X=\"445.0000\"", "X=\"\"", 1), |e| {
+            matches!(e, ParseError::BadNumber { .. })
+        }),
+        (ROB.replacen("X=\"445.0000\"", "X=\"NaN\"", 1), |e| {
+            matches!(e, ParseError::BadNumber { .. })
+        }),
+        (ROB.replacen("X=\"445.0000\"", "X=\"inf\"", 1), |e| {
+            matches!(e, ParseError::BadNumber { .. })
+        }),
+        (ROB.replacen("X=\"445.0000\"", "X=\"4.45e2\"", 1), |e| {
+            matches!(e, ParseError::BadNumber { .. })
+        }),
+        (ROB.replace("<IPOC>123645634563</IPOC>", ""), |e| {
+            *e == ParseError::MissingIpoc
+        }),
+        (ROB.replace("123645634563", "12x"), |e| {
+            *e == ParseError::BadIpoc
+        }),
+        (ROB.replace("123645634563", ""), |e| {
+            *e == ParseError::BadIpoc
+        }),
+        (ROB.replace("<Delay D=\"0\"/>", ""), |e| {
+            *e == ParseError::MissingElement { element: 4 }
+        }),
         (
             ROB.replace("<Delay D=\"0\"/>", "<Delay D=\"0\"/><Delay D=\"0\"/>"),
             |e| *e == ParseError::DuplicateElement { element: 4 },
         ),
-        (ROB[..ROB.len() - 3].to_owned(), |e| *e == ParseError::Truncated),
+        (ROB[..ROB.len() - 3].to_owned(), |e| {
+            *e == ParseError::Truncated
+        }),
         (ROB[..200].to_owned(), |e| *e == ParseError::Truncated),
         (format!("{ROB}<Rob/>"), |e| {
             matches!(e, ParseError::Syntax { .. })
         }),
         (SEN.to_owned(), |e| *e == ParseError::WrongRoot),
-        (
-            ROB.replace("<RIst X", "<RIst\u{1}X"),
-            |e| matches!(e, ParseError::NonAscii { .. }),
-        ),
+        (ROB.replace("<RIst X", "<RIst\u{1}X"), |e| {
+            matches!(e, ParseError::NonAscii { .. })
+        }),
     ];
     for (input, ok) in cases {
         match parse_rob(input.as_bytes()) {
@@ -240,7 +243,10 @@ fn sen_with_the_wrong_sentype_or_no_type_is_rejected() {
     let s = sen();
     let mut f = Frame::new();
     let wrong = SEN.replace("ImFree", "Other");
-    assert_eq!(s.parse(wrong.as_bytes(), &mut f), Err(ParseError::WrongType));
+    assert_eq!(
+        s.parse(wrong.as_bytes(), &mut f),
+        Err(ParseError::WrongType)
+    );
     let none = SEN.replace(" Type=\"ImFree\"", "");
     assert_eq!(s.parse(none.as_bytes(), &mut f), Err(ParseError::WrongType));
 }
@@ -262,7 +268,10 @@ fn ipoc_is_echoed_verbatim_and_above_2_pow_32() {
     let mut buf = [0u8; 512];
     let n = s.write(&out, &mut buf).unwrap();
     let text = core::str::from_utf8(&buf[..n]).unwrap();
-    assert!(text.ends_with("<IPOC>00004294967297</IPOC></Sen>"), "{text}");
+    assert!(
+        text.ends_with("<IPOC>00004294967297</IPOC></Sen>"),
+        "{text}"
+    );
 }
 
 #[test]
@@ -289,7 +298,8 @@ fn writer_never_emits_exponent_nan_or_inf() {
         assert_eq!(values.len(), 6, "{text}");
         for v in values {
             assert!(
-                v.bytes().all(|b| b.is_ascii_digit() || b == b'.' || b == b'-'),
+                v.bytes()
+                    .all(|b| b.is_ascii_digit() || b == b'.' || b == b'-'),
                 "{v:?} is not plain fixed-point in {text}"
             );
         }
@@ -313,10 +323,7 @@ fn config_driven_user_channels_and_text_elements() {
         .push(ConfigElement::channel("Mode", ValueType::Long, 2, None));
     let s = c.rob_schema(3).unwrap();
     let mut f = Frame::new();
-    let input = ROB.replace(
-        "<IPOC>",
-        "<Force Fz=\"-12.5\"/><Mode>3</Mode><IPOC>",
-    );
+    let input = ROB.replace("<IPOC>", "<Force Fz=\"-12.5\"/><Mode>3</Mode><IPOC>");
     s.parse(input.as_bytes(), &mut f).unwrap();
     assert_eq!(f.get(s.slot("Force", "Fz").unwrap()), -12.5);
     assert_eq!(f.get(s.slot("Mode", "").unwrap()), 3.0);
@@ -330,7 +337,12 @@ fn config_driven_user_channels_and_text_elements() {
 #[test]
 fn bad_configs_are_refused_with_a_reason() {
     let dup = CONFIG.replace("INDX=\"7\"", "INDX=\"6\"");
-    assert!(EthernetConfig::parse(&dup).unwrap_err().0.contains("INDX 6"));
+    assert!(
+        EthernetConfig::parse(&dup)
+            .unwrap_err()
+            .0
+            .contains("INDX 6")
+    );
     let unknown = CONFIG.replace("DEF_Delay", "DEF_Bogus");
     assert!(
         EthernetConfig::parse(&unknown)
@@ -339,9 +351,19 @@ fn bad_configs_are_refused_with_a_reason() {
             .contains("DEF_Bogus")
     );
     let no_port = CONFIG.replace("<PORT>49152</PORT>", "");
-    assert!(EthernetConfig::parse(&no_port).unwrap_err().0.contains("PORT"));
+    assert!(
+        EthernetConfig::parse(&no_port)
+            .unwrap_err()
+            .0
+            .contains("PORT")
+    );
     let bad_type = CONFIG.replace("TYPE=\"BOOL\"", "TYPE=\"FLOAT\"");
-    assert!(EthernetConfig::parse(&bad_type).unwrap_err().0.contains("FLOAT"));
+    assert!(
+        EthernetConfig::parse(&bad_type)
+            .unwrap_err()
+            .0
+            .contains("FLOAT")
+    );
     let unclosed = CONFIG.replace("</ROOT>", "");
     assert!(EthernetConfig::parse(unclosed.as_str()).is_err());
     let commented = format!(

@@ -7,8 +7,12 @@ fn cfg() -> EthernetConfig {
     let mut c = EthernetConfig::forcecell([127, 0, 0, 1].into(), 49152, false);
     c.send
         .push(ConfigElement::internal("DEF_ESPos", ValueType::Double));
-    c.send
-        .push(ConfigElement::channel("Force.Fz", ValueType::Double, 1, None));
+    c.send.push(ConfigElement::channel(
+        "Force.Fz",
+        ValueType::Double,
+        1,
+        None,
+    ));
     c.send
         .push(ConfigElement::channel("Count", ValueType::Long, 2, None));
     c
