@@ -166,7 +166,8 @@ fn unknown_elements_and_attributes_are_ignored() {
 
 #[test]
 fn rejects_what_the_spec_says_to_reject() {
-    let cases: Vec<(String, fn(&ParseError) -> bool)> = vec![
+    type Check = fn(&ParseError) -> bool;
+    let cases: Vec<(String, Check)> = vec![
         (String::new(), |e| *e == ParseError::Empty),
         (format!("<!DOCTYPE Rob []>{ROB}"), |e| {
             matches!(e, ParseError::Markup { .. })
