@@ -12,4 +12,4 @@ pub use inner::{InnerLoop, InnerLoopModel};
 pub use krc::{Krc, KrcConfig, KrcEnd, KrcReport, Mechanism, RigidArm, Timing};
 pub use plant::{ContactPlant, Event, Schedule};
 pub use sensor_model::{SensorModel, SensorParams, Window};
-pub use world::{InProcRobot, InProcSensor, SharedWorld, World};
+pub use world::{InProcRobot, InProcSensor, SharedWorld, Truth, World};

@@ -26,6 +26,22 @@ pub struct World {
     k: u64,
     last_command: f64,
     measurements: u64,
+    truth: Vec<Truth>,
+}
+
+/// The true state of the cell at one cycle, logged by [`World::advance`] for recording and metrics.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Truth {
+    /// Time, s.
+    pub t: f64,
+    /// Tool position along the normal, m.
+    pub x: f64,
+    /// Contact force, N.
+    pub f: f64,
+    /// Stiffness, N/m.
+    pub k_c: f64,
+    /// Surface position, m.
+    pub x_c: f64,
 }
 
 /// A world shared between the peers of one simulation.
@@ -47,6 +63,7 @@ impl World {
             k: 0,
             last_command: x0,
             measurements: 0,
+            truth: Vec::new(),
         }
     }
 
@@ -158,6 +175,24 @@ impl World {
         }
     }
 
+    /// The true state now.
+    pub fn truth(&self) -> Truth {
+        Truth {
+            t: self.time(),
+            x: self.position(),
+            f: self.true_force(),
+            k_c: self.stiffness(),
+            x_c: self.surface(),
+        }
+    }
+
+    /// The true state at every cycle so far (index = cycle index), followed by the state now.
+    pub fn truth_log(&self) -> Vec<Truth> {
+        let mut v = self.truth.clone();
+        v.push(self.truth());
+        v
+    }
+
     /// Apply the normal component of `correction` (absolute offset, m) — or hold the last one when
     /// `None` or non-finite — and advance the physics one period.
     pub fn advance(&mut self, correction: Option<&Correction>) {
@@ -166,6 +201,7 @@ impl World {
         {
             self.last_command = c.translation.z;
         }
+        self.truth.push(self.truth());
         self.inner.advance(self.last_command);
         self.k += 1;
     }
