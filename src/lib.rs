@@ -5,5 +5,6 @@
 pub mod metrics;
 pub mod plot;
 pub mod record;
+pub mod rsi;
 pub mod runner;
 pub mod scenario;

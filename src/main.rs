@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
-use forcecell::runner::{RunResult, RunSpec, run_inproc};
+use forcecell::runner::{RunResult, RunSpec};
 use forcecell::scenario::Scenario;
 use forcecell::{plot, record};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -27,6 +27,8 @@ struct Cli {
 enum Command {
     /// Simulate a cell: run a scenario, print a summary, write DIR/NAME.csv and DIR/NAME.png.
     Sim(SimArgs),
+    /// Write the robot-side KUKA RSI files (Ethernet config XML, KRL template) for this configuration.
+    RsiConfig(forcecell::rsi::RsiConfigArgs),
 }
 
 #[derive(Args)]
@@ -49,12 +51,20 @@ struct SimArgs {
     /// Exit with status 1 when a scenario target is missed.
     #[arg(long)]
     check: bool,
+    #[command(flatten)]
+    robot: forcecell::rsi::RsiArgs,
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Sim(a) => sim(a),
+        Command::RsiConfig(a) => forcecell::rsi::rsi_config(&a).map(|files| {
+            for f in files {
+                println!("wrote {}", f.display());
+            }
+            ExitCode::SUCCESS
+        }),
     };
     match result {
         Ok(code) => code,
@@ -88,8 +98,11 @@ fn sim(a: SimArgs) -> Result<ExitCode> {
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create output directory {}", a.out.display()))?;
     let mut bar = DelayedBar::new(Duration::from_millis(300));
-    let run = run_inproc(&spec, &mut |frac| bar.update(frac))?;
+    let (run, wire) = forcecell::rsi::run(&spec, &a.robot, &mut |frac| bar.update(frac))?;
     bar.finish();
+    if let Some(w) = &wire {
+        w.print();
+    }
     report(&spec, &run, &a.out, a.check)
 }
 
