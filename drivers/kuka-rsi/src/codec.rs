@@ -308,6 +308,8 @@ impl Schema {
             schema: self,
             frame,
             cur: Cur::Unknown,
+            next_element: 0,
+            next_field: 0,
             seen: 0,
             ipoc_seen: false,
             type_seen: false,
@@ -585,6 +587,9 @@ struct ParseState<'s, 'f> {
     schema: &'s Schema,
     frame: &'f mut Frame,
     cur: Cur,
+    /// Where the next element / field most likely is (messages come in config order).
+    next_element: usize,
+    next_field: usize,
     seen: u128,
     ipoc_seen: bool,
     type_seen: bool,
@@ -627,17 +632,19 @@ impl<'a> Visitor<'a> for ParseState<'_, '_> {
             self.cur = Cur::Ipoc;
             return Ok(());
         }
-        self.cur = match self
-            .schema
-            .elements
-            .iter()
-            .position(|e| e.tag.as_bytes() == tag)
-        {
+        let els = &self.schema.elements;
+        let found = match els.get(self.next_element) {
+            Some(e) if e.tag.as_bytes() == tag => Some(self.next_element),
+            _ => els.iter().position(|e| e.tag.as_bytes() == tag),
+        };
+        self.next_field = 0;
+        self.cur = match found {
             Some(i) => {
                 if self.seen & (1u128 << i) != 0 {
                     return Err(ParseError::DuplicateElement { element: i as u8 });
                 }
                 self.seen |= 1u128 << i;
+                self.next_element = i + 1;
                 Cur::Element(i)
             }
             None => Cur::Unknown,
@@ -650,10 +657,15 @@ impl<'a> Visitor<'a> for ParseState<'_, '_> {
             return Ok(());
         };
         let schema = self.schema;
-        if let Content::Attributes(fields) = &schema.elements[i].content
-            && let Some(f) = fields.iter().find(|f| f.name.as_bytes() == name)
-        {
-            self.store(f, value, at)?;
+        if let Content::Attributes(fields) = &schema.elements[i].content {
+            let found = match fields.get(self.next_field) {
+                Some(f) if f.name.as_bytes() == name => Some(self.next_field),
+                _ => fields.iter().position(|f| f.name.as_bytes() == name),
+            };
+            if let Some(k) = found {
+                self.next_field = k + 1;
+                self.store(&fields[k], value, at)?;
+            }
         }
         Ok(())
     }
@@ -677,23 +689,46 @@ impl<'a> Visitor<'a> for ParseState<'_, '_> {
     }
 }
 
+/// Exact powers of ten as f64 (10^0 ..= 10^22 are all exactly representable).
+const POW10F: [f64; 23] = [
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+];
+
 /// `[+-]digits[.digits]` or `[+-].digits`, finite. No exponent, no `inf`, no `nan`.
+///
+/// Fast path (Clinger): up to 19 digits whose value is below 2^53 with at most 22 decimals is one
+/// exact integer divided by one exact power of ten — correctly rounded, like `str::parse`, which
+/// handles everything else.
 pub(crate) fn parse_decimal(s: &[u8]) -> Option<f64> {
-    let body = match s.first()? {
-        b'+' | b'-' => &s[1..],
-        _ => s,
+    let (neg, body) = match s.first()? {
+        b'-' => (true, &s[1..]),
+        b'+' => (false, &s[1..]),
+        _ => (false, s),
     };
-    let mut digits = 0;
-    let mut dots = 0;
+    let mut mant: u64 = 0;
+    let mut digits = 0u32;
+    let mut frac = 0usize;
+    let mut dot = false;
     for &c in body {
         match c {
-            b'0'..=b'9' => digits += 1,
-            b'.' => dots += 1,
+            b'0'..=b'9' => {
+                if digits < 19 {
+                    mant = mant * 10 + u64::from(c - b'0');
+                }
+                digits += 1;
+                frac += usize::from(dot);
+            }
+            b'.' if !dot => dot = true,
             _ => return None,
         }
     }
-    if digits == 0 || dots > 1 {
+    if digits == 0 {
         return None;
+    }
+    if digits <= 19 && mant < (1u64 << 53) && frac < POW10F.len() {
+        let v = mant as f64 / POW10F[frac];
+        return Some(if neg { -v } else { v });
     }
     let v: f64 = core::str::from_utf8(s).ok()?.parse().ok()?;
     v.is_finite().then_some(v)
@@ -701,15 +736,22 @@ pub(crate) fn parse_decimal(s: &[u8]) -> Option<f64> {
 
 /// `[+-]digits` within i64.
 pub(crate) fn parse_integer(s: &[u8]) -> Option<f64> {
-    let body = match s.first()? {
-        b'+' | b'-' => &s[1..],
-        _ => s,
+    let (neg, body) = match s.first()? {
+        b'-' => (true, &s[1..]),
+        b'+' => (false, &s[1..]),
+        _ => (false, s),
     };
-    if body.is_empty() || !body.iter().all(u8::is_ascii_digit) {
+    if body.is_empty() || body.len() > 19 {
         return None;
     }
-    let v: i64 = core::str::from_utf8(s).ok()?.parse().ok()?;
-    Some(v as f64)
+    let mut v: i64 = 0;
+    for &c in body {
+        if !c.is_ascii_digit() {
+            return None;
+        }
+        v = v.checked_mul(10)?.checked_add(i64::from(c - b'0'))?;
+    }
+    Some(if neg { -v } else { v } as f64)
 }
 
 fn parse_bool(s: &[u8]) -> Option<f64> {

@@ -125,6 +125,11 @@ impl hal::Error for ParseError {
     }
 }
 
+/// Printable ASCII, tab, CR or LF.
+fn is_text_byte(c: u8) -> bool {
+    (0x20..0x7f).contains(&c) | (c == b'\t') | (c == b'\r') | (c == b'\n')
+}
+
 pub(crate) fn is_ws(b: u8) -> bool {
     matches!(b, b' ' | b'\t' | b'\r' | b'\n')
 }
@@ -225,7 +230,8 @@ impl<'a> Cursor<'a> {
         &mut self,
         mut f: impl FnMut(&'a [u8], &'a [u8], usize) -> Result<(), ParseError>,
     ) -> Result<bool, ParseError> {
-        let mut seen: [(usize, usize); 32] = [(0, 0); 32];
+        let mut seen: [(u32, u32); 32] = [(0, 0); 32];
+        let mut sigs = 0u64;
         let mut n = 0;
         loop {
             let had_ws = self.peek().is_some_and(is_ws);
@@ -246,8 +252,11 @@ impl<'a> Cursor<'a> {
             }
             let at = self.i;
             let name = self.name()?;
-            let name_range = (at, self.i);
-            if seen[..n].iter().any(|&(s, e)| &self.b[s..e] == name) {
+            let name_range = (at as u32, self.i as u32);
+            if seen[..n]
+                .iter()
+                .any(|&(s, e)| &self.b[s as usize..e as usize] == name)
+            {
                 return Err(ParseError::DuplicateAttribute { at });
             }
             if n == seen.len() {
@@ -301,17 +310,6 @@ pub(crate) fn trim(b: &[u8], mut s: usize, mut e: usize) -> (&[u8], usize) {
     (&b[s..e], s)
 }
 
-/// Reject bytes that are not printable ASCII, tab, CR or LF.
-pub(crate) fn check_ascii(b: &[u8]) -> Result<(), ParseError> {
-    match b
-        .iter()
-        .position(|&c| !(c == b'\t' || c == b'\r' || c == b'\n' || (0x20..0x7f).contains(&c)))
-    {
-        Some(at) => Err(ParseError::NonAscii { at }),
-        None => Ok(()),
-    }
-}
-
 /// Skip an optional `<?xml …?>` declaration and the whitespace around it.
 pub(crate) fn skip_declaration(c: &mut Cursor<'_>) -> Result<(), ParseError> {
     c.skip_ws();
@@ -343,9 +341,19 @@ pub(crate) fn scan_message<'a>(
     if b.is_empty() {
         return Err(ParseError::Empty);
     }
-    check_ascii(b)?;
-    if let Some(at) = b.iter().position(|&c| c == b'&') {
-        return Err(ParseError::Entity { at });
+    // One branch-free (vectorisable) pass; the slow loop only runs to report where.
+    let suspicious = b
+        .iter()
+        .fold(false, |acc, &c| acc | (c == b'&') | !is_text_byte(c));
+    if suspicious {
+        for (at, &c) in b.iter().enumerate() {
+            if c == b'&' {
+                return Err(ParseError::Entity { at });
+            }
+            if !is_text_byte(c) {
+                return Err(ParseError::NonAscii { at });
+            }
+        }
     }
     let mut c = Cursor::new(b);
     skip_declaration(&mut c)?;
