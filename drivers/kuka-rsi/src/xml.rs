@@ -253,12 +253,16 @@ impl<'a> Cursor<'a> {
             let at = self.i;
             let name = self.name()?;
             let name_range = (at as u32, self.i as u32);
-            if seen[..n]
-                .iter()
-                .any(|&(s, e)| &self.b[s as usize..e as usize] == name)
+            // A cheap signature (length, last byte) screens the pairwise comparison.
+            let sig = 1u64 << ((name.len() * 7 + usize::from(name[name.len() - 1])) % 64);
+            if sigs & sig != 0
+                && seen[..n]
+                    .iter()
+                    .any(|&(s, e)| &self.b[s as usize..e as usize] == name)
             {
                 return Err(ParseError::DuplicateAttribute { at });
             }
+            sigs |= sig;
             if n == seen.len() {
                 return Err(ParseError::TooManyAttributes { at });
             }
