@@ -69,6 +69,7 @@ pub struct Field {
     pub slot: Option<usize>,
     /// HOLDON of the config (what the robot does with this value on a late reply).
     pub holdon: bool,
+    key: u64,
 }
 
 /// What an element carries.
@@ -87,6 +88,7 @@ pub struct ElementSpec {
     pub tag: String,
     /// Its values.
     pub content: Content,
+    key: u64,
 }
 
 impl ElementSpec {
@@ -213,6 +215,7 @@ impl Schema {
             ty,
             slot,
             holdon,
+            key: short_key(name.as_bytes()),
         })
     }
 
@@ -235,6 +238,7 @@ impl Schema {
                 self.elements.push(ElementSpec {
                     tag: tag.to_owned(),
                     content: Content::Attributes(Vec::new()),
+                    key: short_key(tag.as_bytes()),
                 });
                 self.elements.len() - 1
             }
@@ -268,6 +272,7 @@ impl Schema {
         self.elements.push(ElementSpec {
             tag: tag.to_owned(),
             content: Content::Text(field),
+            key: short_key(tag.as_bytes()),
         });
         Ok(())
     }
@@ -577,6 +582,17 @@ impl Frame {
     }
 }
 
+/// Names of up to 8 bytes packed into one integer (names never contain NUL, so zero padding is
+/// unambiguous); 0 for longer names, which are compared byte by byte.
+fn short_key(name: &[u8]) -> u64 {
+    if name.is_empty() || name.len() > 8 {
+        return 0;
+    }
+    name.iter()
+        .rev()
+        .fold(0u64, |k, &b| (k << 8) | u64::from(b))
+}
+
 enum Cur {
     Element(usize),
     Ipoc,
@@ -633,9 +649,11 @@ impl<'a> Visitor<'a> for ParseState<'_, '_> {
             return Ok(());
         }
         let els = &self.schema.elements;
+        let key = short_key(tag);
+        let is = |e: &ElementSpec| e.key == key && (key != 0 || e.tag.as_bytes() == tag);
         let found = match els.get(self.next_element) {
-            Some(e) if e.tag.as_bytes() == tag => Some(self.next_element),
-            _ => els.iter().position(|e| e.tag.as_bytes() == tag),
+            Some(e) if is(e) => Some(self.next_element),
+            _ => els.iter().position(is),
         };
         self.next_field = 0;
         self.cur = match found {
@@ -658,9 +676,11 @@ impl<'a> Visitor<'a> for ParseState<'_, '_> {
         };
         let schema = self.schema;
         if let Content::Attributes(fields) = &schema.elements[i].content {
+            let key = short_key(name);
+            let is = |f: &Field| f.key == key && (key != 0 || f.name.as_bytes() == name);
             let found = match fields.get(self.next_field) {
-                Some(f) if f.name.as_bytes() == name => Some(self.next_field),
-                _ => fields.iter().position(|f| f.name.as_bytes() == name),
+                Some(f) if is(f) => Some(self.next_field),
+                _ => fields.iter().position(is),
             };
             if let Some(k) = found {
                 self.next_field = k + 1;
