@@ -633,3 +633,102 @@ fn reply_before_any_cycle_and_twice_is_an_error() {
     assert_eq!(e.kind(), ErrorKind::Other);
     assert_eq!(h.join().unwrap().good, 1);
 }
+
+#[test]
+fn duplicates_reordering_and_loss_never_get_an_older_ipoc_answered() {
+    let eth = ethernet(false);
+    let (mut link, krc) = pair(
+        &eth,
+        |_| {},
+        |k| {
+            k.cycles = Some(200);
+            k.timeout = 1000;
+            k.seed = 11;
+            k.timing = Timing::Lockstep {
+                deadline: Duration::from_millis(20),
+            };
+            k.faults.duplicate = 0.2;
+            k.faults.reorder = 0.1;
+            k.faults.drop_rob = 0.05;
+            k.faults.drop_sen = 0.05;
+        },
+    );
+    let h = spawn(krc);
+    let (cycles, _) = serve(&mut link, |_, _| Some(Correction::along_z(0.0002)));
+    let r = h.join().unwrap();
+    assert_eq!(r.end, KrcEnd::Completed);
+    assert_eq!(r.good + r.late, 200);
+    assert!(r.late > 0, "faults were injected");
+    // A datagram delayed past its own cycle but still the newest the driver has seen is answered
+    // (the driver cannot know better) and the controller counts that reply as late; older ones never are.
+    assert!(r.ipoc_mismatch <= r.late);
+    let c = link.diagnostics().counters;
+    assert!(c.stale > 10, "{c:?}");
+    assert_eq!(c.answered, cycles.len() as u64);
+    assert!(cycles.windows(2).all(|w| w[1].seq > w[0].seq));
+    assert_eq!(c.sessions, 1);
+}
+
+#[test]
+fn realtime_at_12_ms() {
+    let eth = ethernet(false);
+    let (mut link, krc) = pair(
+        &eth,
+        |l| l.period = Duration::from_millis(12),
+        |k| {
+            k.cycles = Some(40);
+            k.timing = Timing::Realtime;
+            k.period = Duration::from_millis(12);
+            k.ipoc_step = 12;
+            k.timeout = 1000;
+        },
+    );
+    let h = spawn(krc);
+    let (cycles, _) = serve(&mut link, |_, _| Some(Correction::default()));
+    let r = h.join().unwrap();
+    assert_eq!(r.end, KrcEnd::Completed);
+    assert_eq!(r.cycles, 40);
+    assert_eq!(r.good + r.late, 40);
+    assert!(cycles.windows(2).all(|w| (w[1].seq - w[0].seq) % 12 == 0));
+    assert!(cycles.iter().all(|c| c.period == 0.012));
+    let last = cycles.last().unwrap();
+    assert!((last.t - (last.seq - cycles[0].seq) as f64 * 0.001).abs() < 1e-12);
+}
+
+#[test]
+fn poscorr_clamps_and_poscorrmon_stops() {
+    let eth = ethernet(false);
+    let pc = UdpSocket::bind(SocketAddr::from((LOCAL, 0))).unwrap();
+    let mut kc = krc_config(&eth, pc.local_addr().unwrap());
+    kc.timing = Timing::Lockstep {
+        deadline: Duration::from_millis(500),
+    };
+    let h = spawn(Krc::new(kc).unwrap());
+    let rob = eth.rob_schema(4).unwrap();
+    let sen = eth.sen_schema(4).unwrap();
+    let rkorr = sen.six("RKorr", ["X", "Y", "Z", "A", "B", "C"]).unwrap();
+    let mut buf = vec![0u8; 65536];
+    let mut frame = Frame::new();
+    // 7 mm along Z alone is clamped to 5 mm; then 5.9 mm on X and Z (overall 7.1 mm > 6 mm) trips POSCORRMON.
+    for k in 0..2 {
+        let (n, from) = pc.recv_from(&mut buf).unwrap();
+        rob.parse(&buf[..n], &mut frame).unwrap();
+        let mut reply = Frame::new();
+        reply.set6(
+            rkorr,
+            if k == 0 {
+                [0.0, 0.0, 7.0, 0.0, 0.0, 0.0]
+            } else {
+                [5.9, 0.0, 5.9, 0.0, 0.0, 0.0]
+            },
+        );
+        reply.set_ipoc(*frame.ipoc());
+        let m = sen.write(&reply, &mut buf).unwrap();
+        pc.send_to(&buf[..m], from).unwrap();
+    }
+    let r = h.join().unwrap();
+    assert_eq!(r.end, KrcEnd::PoscorrMon);
+    assert_eq!(r.clamped, 2);
+    assert_eq!(r.log[0].correction[2], 5.0);
+    assert_eq!(r.log[1].correction[..3], [5.0, 0.0, 5.0]);
+}
