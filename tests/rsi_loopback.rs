@@ -363,7 +363,7 @@ fn a_burst_after_a_stall_is_survived() {
         |k| {
             k.cycles = Some(20);
             k.timing = Timing::Lockstep {
-                deadline: Duration::from_millis(200),
+                deadline: Duration::from_millis(500),
             };
             k.faults.stall = Some((5, 3));
         },
@@ -494,8 +494,10 @@ fn absolute_and_relative_modes_never_jump_under_packet_loss() {
             "relative={relative}: jump of {step} mm"
         );
         let last = r.log.last().unwrap().correction[2];
+        // Relative mode never re-sends a lost increment, so the total may fall short (the force loop
+        // closes that gap in a cell); it must never overshoot.
         assert!(
-            last > 2.0 && last <= 3.0 + 1e-3,
+            last > 1.5 && last <= 3.0 + 1e-3,
             "relative={relative}: ended at {last} mm"
         );
         if !relative {
