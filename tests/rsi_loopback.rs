@@ -359,7 +359,7 @@ fn a_burst_after_a_stall_is_survived() {
     let eth = ethernet(false);
     let (mut link, krc) = pair(
         &eth,
-        |_| {},
+        |l| l.watchdog_cycles = 1000, // the 1.5 s stall must not look like a lost link
         |k| {
             k.cycles = Some(20);
             k.timing = Timing::Lockstep {
