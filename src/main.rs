@@ -29,6 +29,17 @@ enum Command {
     Sim(SimArgs),
     /// Write the robot-side KUKA RSI files (Ethernet config XML, KRL template) for this configuration.
     RsiConfig(forcecell::rsi::RsiConfigArgs),
+    /// Plot a recorded trace (CSV written by `sim` or `run`) to PNG and print its metrics.
+    Plot(PlotArgs),
+}
+
+#[derive(Args)]
+struct PlotArgs {
+    /// The trace, CSV.
+    csv: PathBuf,
+    /// The PNG to write (default: the CSV's path with .png).
+    #[arg(long)]
+    out: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -65,6 +76,7 @@ fn main() -> ExitCode {
             }
             ExitCode::SUCCESS
         }),
+        Command::Plot(a) => plot_trace(a),
     };
     match result {
         Ok(code) => code,
@@ -104,6 +116,34 @@ fn sim(a: SimArgs) -> Result<ExitCode> {
         w.print();
     }
     report(&spec, &run, &a.out, a.check)
+}
+
+fn plot_trace(a: PlotArgs) -> Result<ExitCode> {
+    let text = std::fs::read_to_string(&a.csv)
+        .with_context(|| format!("cannot read {}", a.csv.display()))?;
+    let rows = record::read_csv(&text).with_context(|| format!("{}", a.csv.display()))?;
+    if rows.is_empty() {
+        anyhow::bail!("{}: the trace has no rows", a.csv.display());
+    }
+    let m = forcecell::metrics::Metrics::compute(&rows, 0.0, f64::INFINITY);
+    println!(
+        "{} rows, {:.3} s: peak {:.2} N, settle {} s, steady-state error {:.4} N, RMS {:.4} N, {} contact losses",
+        rows.len(),
+        rows.last().map_or(0.0, |r| r.t),
+        m.peak_force,
+        m.settle_time,
+        m.ss_error,
+        m.rms_error,
+        m.contact_losses
+    );
+    let png = a.out.unwrap_or_else(|| a.csv.with_extension("png"));
+    let title = a
+        .csv
+        .file_stem()
+        .map_or("trace".into(), |s| s.to_string_lossy().into_owned());
+    plot::write_png(&png, &title, &rows)?;
+    println!("wrote {}", png.display());
+    Ok(ExitCode::SUCCESS)
 }
 
 fn list() -> Result<()> {

@@ -155,3 +155,21 @@ max = 0.001        # unreachable on purpose: the tool touches the surface
     );
     assert_eq!(o.status.code(), Some(1));
 }
+
+#[test]
+fn plot_replots_a_recording_and_refuses_garbage() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = forcecell(&["sim", "-s", "paper-fig10", "--out", "r"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = forcecell(
+        &["plot", "r/paper-fig10.csv", "--out", "again.png"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("2000 rows"));
+    let png = std::fs::read(dir.path().join("again.png")).unwrap();
+    assert_eq!(&png[..4], b"\x89PNG");
+    std::fs::write(dir.path().join("junk.csv"), "hello,world\n1,2\n").unwrap();
+    let o = forcecell(&["plot", "junk.csv"], dir.path());
+    assert_clean_failure(&o, "not a forcecell trace");
+}
