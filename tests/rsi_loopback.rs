@@ -734,3 +734,43 @@ fn poscorr_clamps_and_poscorrmon_stops() {
     assert_eq!(r.log[0].correction[2], 5.0);
     assert_eq!(r.log[1].correction[..3], [5.0, 0.0, 5.0]);
 }
+
+#[test]
+fn any_source_locks_onto_the_first_robot_until_the_link_is_lost() {
+    let eth = ethernet(false);
+    let mut lc = link_config(&eth);
+    lc.watchdog_cycles = 5; // 20 ms
+    let mut link = RsiLink::bind(lc).unwrap();
+    let to = link.local_addr().unwrap();
+    let rob = eth.rob_schema(4).unwrap();
+    let a = UdpSocket::bind(SocketAddr::from((LOCAL, 0))).unwrap();
+    let b = UdpSocket::bind(SocketAddr::from((LOCAL, 0))).unwrap();
+    let send = |s: &UdpSocket, ipoc: u64| {
+        let mut f = Frame::new();
+        f.set_ipoc(Ipoc::new(ipoc));
+        let mut buf = [0u8; 2048];
+        let n = rob.write(&f, &mut buf).unwrap();
+        s.send_to(&buf[..n], to).unwrap();
+    };
+    send(&a, 100);
+    let c = link.next_cycle().unwrap();
+    assert!(c.new_session && c.seq == 100);
+    link.reply(&Correction::default()).unwrap();
+    send(&b, 104);
+    send(&a, 104);
+    let c = link.next_cycle().unwrap();
+    assert_eq!(c.seq, 104);
+    assert_eq!(link.diagnostics().counters.foreign, 1);
+    link.reply(&Correction::default()).unwrap();
+    // A falls silent: the link is lost, and B may start the next session.
+    assert_eq!(link.next_cycle().unwrap_err().kind(), ErrorKind::LinkLost);
+    send(&b, 5000);
+    let c = link.next_cycle().unwrap();
+    assert!(c.new_session && c.seq == 5000);
+    link.reply(&Correction::default()).unwrap();
+    let mut buf = [0u8; 2048];
+    b.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    let (_, from) = b.recv_from(&mut buf).unwrap();
+    assert_eq!(from, to, "B gets its reply");
+    assert_eq!(link.diagnostics().counters.sessions, 2);
+}
