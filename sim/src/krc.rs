@@ -467,6 +467,10 @@ impl Run {
                 Ok(g) => g,
                 Err(e) => return KrcEnd::Io(e.to_string()),
             };
+            if !good && k.abort.load(Ordering::Relaxed) {
+                // Aborted while waiting: the PC side is finished, this cycle is not judged.
+                return KrcEnd::Aborted;
+            }
             if cfg.ethernet.onlysend {
                 // The robot only sends: nothing is judged, nothing is late, nothing is applied.
                 self.report.cycles += 1;
