@@ -672,7 +672,7 @@ fn duplicates_reordering_and_loss_never_get_an_older_ipoc_answered() {
 }
 
 #[test]
-fn realtime_at_12_ms() {
+fn realtime_at_12_ms_with_send_jitter() {
     let eth = ethernet(false);
     let (mut link, krc) = pair(
         &eth,
@@ -683,6 +683,7 @@ fn realtime_at_12_ms() {
             k.period = Duration::from_millis(12);
             k.ipoc_step = 12;
             k.timeout = 1000;
+            k.faults.jitter = Duration::from_millis(3);
         },
     );
     let h = spawn(krc);
