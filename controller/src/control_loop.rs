@@ -37,7 +37,10 @@ impl LoopConfig {
     /// Checks the values.
     pub fn validate(&self) -> Result<(), String> {
         if self.force_sign != 1.0 && self.force_sign != -1.0 {
-            return Err(format!("force_sign must be 1 or -1, got {}", self.force_sign));
+            return Err(format!(
+                "force_sign must be 1 or -1, got {}",
+                self.force_sign
+            ));
         }
         if !(self.max_step.is_finite() && self.max_step > 0.0) {
             return Err(format!("max_step must be > 0 m, got {}", self.max_step));
@@ -217,7 +220,10 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             Ok(_) => (None, Some(Fault::NonFiniteSample)),
             Err(e) => {
                 let kind = e.kind();
-                if matches!(kind, ErrorKind::LinkLost | ErrorKind::BusOff | ErrorKind::Config) {
+                if matches!(
+                    kind,
+                    ErrorKind::LinkLost | ErrorKind::BusOff | ErrorKind::Config
+                ) {
                     fatal_sensor = Some(e);
                 }
                 (None, Some(Fault::Sensor(kind)))
@@ -379,7 +385,11 @@ mod tests {
         let second = lp.cycle().unwrap();
         assert_eq!(second.fault, Some(Fault::Sensor(ErrorKind::Timeout)));
         assert_eq!(lp.stats().sensor_faults, 1);
-        assert_eq!(lp.law(), &law_before, "the law must not step on a held cycle");
+        assert_eq!(
+            lp.law(),
+            &law_before,
+            "the law must not step on a held cycle"
+        );
         let r = replies.lock().unwrap();
         assert_eq!(r.len(), 2);
         assert_eq!(r[0], r[1], "a held cycle repeats the last command");
@@ -456,16 +466,17 @@ mod tests {
         sensor.expect_read().returning(|| Err(ErrorKind::BusOff));
         robot.expect_reply().times(1).returning(|_| Ok(()));
         let mut lp = ControlLoop::new(robot, sensor, fixed_law(0.002), LoopConfig::default());
-        assert!(matches!(lp.cycle(), Err(LoopError::Sensor(ErrorKind::BusOff))));
+        assert!(matches!(
+            lp.cycle(),
+            Err(LoopError::Sensor(ErrorKind::BusOff))
+        ));
     }
 
     #[test]
     fn large_steps_are_limited_and_reported() {
         let mut robot = MockRobot::new();
         let mut sensor = MockSensor::new();
-        robot
-            .expect_next_cycle()
-            .returning(|| Ok(cycle_at(1, 0.0)));
+        robot.expect_next_cycle().returning(|| Ok(cycle_at(1, 0.0)));
         // A huge force error drives the fixed law hard towards x_r far away.
         sensor.expect_read().returning(|| Ok(sample(-1.0e7)));
         robot

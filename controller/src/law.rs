@@ -257,7 +257,12 @@ impl ForceLaw for ImpedanceLaw {
 
 /// Steady-state force error `f_r − f` of the fixed-reference impedance law against a spring (eq. 9):
 /// `k_d/(k_d+k_c)·[f_r + k_c(x_c − x_r)]`. Valid while the tool stays in contact.
-pub fn fixed_reference_steady_state_error(p: &ImpedanceParams, k_c: f64, x_c: f64, x_r: f64) -> f64 {
+pub fn fixed_reference_steady_state_error(
+    p: &ImpedanceParams,
+    k_c: f64,
+    x_c: f64,
+    x_r: f64,
+) -> f64 {
     p.k_d / (p.k_d + k_c) * (p.f_r + k_c * (x_c - x_r))
 }
 

@@ -239,7 +239,8 @@ impl Correction {
 
     /// True when every component is finite.
     pub fn is_finite(&self) -> bool {
-        self.translation.iter().all(|v| v.is_finite()) && self.rotation.iter().all(|v| v.is_finite())
+        self.translation.iter().all(|v| v.is_finite())
+            && self.rotation.iter().all(|v| v.is_finite())
     }
 }
 
