@@ -166,6 +166,12 @@ impl std::error::Error for CalibrationError {}
 /// Largest plausible calibration coefficient magnitude.
 const MAX_COEFFICIENT: f32 = 1e9;
 
+/// True for a coefficient a real calibration can hold: zero or a normal number with |c| ≤ 1e9. A
+/// byte-swapped small float is subnormal, a corrupted one often NaN or huge.
+pub fn plausible_coefficient(c: f32) -> bool {
+    (c == 0.0 || c.is_normal()) && c.abs() <= MAX_COEFFICIENT
+}
+
 /// A checked calibration: counts to SI in one matrix product.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Converter {
@@ -185,7 +191,7 @@ impl Calibration {
         for (row, (out, coeffs)) in m.iter_mut().zip(&self.matrix).enumerate() {
             let scale = if row < 3 { f_scale } else { t_scale };
             for (col, (o, &c)) in out.iter_mut().zip(coeffs).enumerate() {
-                if !(c == 0.0 || c.is_normal()) || c.abs() > MAX_COEFFICIENT {
+                if !plausible_coefficient(c) {
                     return Err(CalibrationError::Coefficient { row, col, value: c });
                 }
                 *o = f64::from(c) * scale;

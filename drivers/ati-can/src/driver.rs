@@ -18,7 +18,9 @@ use core::time::Duration;
 
 use hal::{Sample, Wrench};
 
-use crate::calibration::{Calibration, Converter, ForceUnit, LEGACY_COUNTS_PER_UNIT, TorqueUnit};
+use crate::calibration::{
+    Calibration, Converter, ForceUnit, LEGACY_COUNTS_PER_UNIT, TorqueUnit, plausible_coefficient,
+};
 use crate::codec::{Answer, Base, CodecError, Firmware, Gauges, Request, Status, interleave};
 use crate::error::{AtiError, BiasError, StartupProblem};
 use crate::transport::{BusError, BusEvent, CanTransport, Clock};
@@ -480,6 +482,17 @@ impl<T: CanTransport> Driver<T> {
         self.view().sample_at(self.clock.now())
     }
 
+    /// The newest good sample whatever the health (for diagnostics and tests; control code uses
+    /// [`read`](Self::read), which withholds it in a fault state).
+    pub fn last_sample(&self) -> Option<Sample> {
+        let now = self.clock.now();
+        self.latest.map(|l| Sample {
+            wrench: l.wrench,
+            seq: l.seq,
+            age: now.saturating_sub(l.stamp),
+        })
+    }
+
     /// Run start-up to the end: steps until it completes or one full pass fails (then that pass's
     /// problem is returned). Bounded by about `attempts × deadline` per start-up request.
     pub fn start(&mut self) -> Result<DeviceInfo, AtiError> {
@@ -658,6 +671,9 @@ impl<T: CanTransport> Driver<T> {
         self.generation += 1;
         self.transport.send(&frame)?;
         self.counters.requests += 1;
+        if req == Request::Poll {
+            self.polls += 1;
+        }
         let sent = self.clock.now();
         let deadline = sent + self.cfg.deadline(req);
         let layout = req.answer_layout();
@@ -736,8 +752,6 @@ impl<T: CanTransport> Driver<T> {
     }
 
     fn poll(&mut self) -> Result<Outcome, AtiError> {
-        self.polls += 1;
-        let seq = self.polls;
         let answer = match self.exchange(Request::Poll)? {
             Reply::BusOff => return Ok(Outcome::BusOff),
             Reply::Abandoned => {
@@ -747,6 +761,7 @@ impl<T: CanTransport> Driver<T> {
             Reply::Answer(a) => a,
         };
         let stamp = self.clock.now();
+        let seq = self.polls;
         let (
             Some(Answer::PollFirst {
                 status,
@@ -899,6 +914,11 @@ impl<T: CanTransport> Driver<T> {
                         coeffs[2 * part] = coefficients[0];
                         coeffs[2 * part + 1] = coefficients[1];
                     }
+                }
+                if !coeffs.iter().all(|&c| plausible_coefficient(c)) {
+                    // Corrupted or byte-swapped: ask for the row again.
+                    self.counters.malformed += 1;
+                    return Ok(self.startup_no_answer(step));
                 }
                 self.partial.matrix[usize::from(row)] = coeffs;
                 if row < 5 {
