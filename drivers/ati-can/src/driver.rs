@@ -645,6 +645,8 @@ impl<T: CanTransport> Driver<T> {
                 }
             }
             match self.transport.recv(wait)? {
+                // A transport may wake early (rounding, signals): only the clock says the wait is over.
+                None if self.clock.now() < until => {}
                 None => return Ok(()),
                 Some(BusEvent::Error(e)) => self.on_bus_error(e),
                 Some(BusEvent::Frame(f)) => match self.cfg.base.opcode_of(&f) {
@@ -687,6 +689,8 @@ impl<T: CanTransport> Driver<T> {
                 None
             };
             let frame = match event {
+                // Woke early: wait on until the deadline.
+                None if self.clock.now() < deadline => continue,
                 None => {
                     self.counters.timeouts += 1;
                     return Ok(self.abandon(sent, req));

@@ -5,8 +5,8 @@ use core::time::Duration;
 use std::io;
 
 use socketcan::{
-    CanDataFrame, CanFilter, CanFrame, CanRemoteFrame, CanSocket, EmbeddedFrame, ExtendedId,
-    Frame as _, Socket, SocketOptions, StandardId,
+    CanDataFrame, CanErrorFrame, CanFilter, CanFrame, CanRemoteFrame, CanSocket, EmbeddedFrame,
+    ExtendedId, Frame as _, Socket, SocketOptions, StandardId,
 };
 
 use crate::codec::Base;
@@ -40,6 +40,17 @@ impl SocketCanTransport {
             socket,
             clock: Clock::real(),
         })
+    }
+
+    /// Write a controller error report (`CAN_ERR_FLAG` frame) with these error class bits. A real
+    /// controller raises these itself; on a virtual interface this is how a test injects bus-off and
+    /// restart, which every socket on the interface with an error filter then receives.
+    pub fn inject_error(&self, error: BusError) -> Result<(), TransportError> {
+        let frame = CanErrorFrame::new_error(error.raw, &[]).map_err(|e| {
+            TransportError::Io(io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))
+        })?;
+        self.socket.write_frame(&frame)?;
+        Ok(())
     }
 
     fn convert(frame: &CanFrame) -> Option<BusEvent> {
@@ -86,6 +97,9 @@ impl CanTransport for SocketCanTransport {
     }
 
     fn recv(&mut self, timeout: Duration) -> Result<Option<BusEvent>, TransportError> {
+        // poll(2) takes whole milliseconds: round up so a wait never ends before `timeout`.
+        let ms = timeout.as_nanos().div_ceil(1_000_000);
+        let timeout = Duration::from_millis(u64::try_from(ms).unwrap_or(u64::MAX));
         match self.socket.read_frame_timeout(timeout) {
             Ok(f) => Ok(Self::convert(&f)),
             Err(e)

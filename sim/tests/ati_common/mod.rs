@@ -478,6 +478,7 @@ pub fn start_up_refuses_a_wrong_slot_echo_and_a_silent_board(bus: &dyn Bus) {
     );
     assert_eq!(e.kind(), ErrorKind::Config);
     assert_eq!(rig.counters().echo_mismatches, 3);
+    drop(rig);
 
     let mut rig = bus.rig(bus.config(), NodeConfig::default());
     rig.node.lock().set_silent(true);
