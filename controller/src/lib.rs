@@ -3,10 +3,12 @@
 //! * [`law`] — the paper's adaptive position-based impedance law (and the fixed-reference law it improves
 //!   on) as a pure `step` over an injected `dt`;
 //! * [`control_loop`] — the loop that wires any [`hal::RobotLink`] and [`hal::ForceSensor`] to a law,
-//!   gating bad input so it never reaches the command.
+//!   gating bad input so it never reaches the command;
+//! * [`gravity`] — tool weight and sensor bias: least-squares identification and run-time compensation.
 #![cfg_attr(not(test), warn(missing_docs))]
 
 pub mod control_loop;
+pub mod gravity;
 pub mod law;
 
 pub use control_loop::{ControlLoop, CycleReport, Fault, LoopConfig, LoopError, LoopStats};
