@@ -296,7 +296,6 @@ mod tests {
     use hal::mock::{MockRobot, MockSensor};
     use hal::{Pose, Sample, Vector3, Wrench};
     use mockall::Sequence;
-    use mockall::predicate::*;
     use std::time::Duration;
 
     fn cycle_at(seq: u64, x: f64) -> Cycle {

@@ -154,6 +154,18 @@ pub trait ForceLaw {
     fn set_point(&self) -> f64;
 }
 
+impl<L: ForceLaw + ?Sized> ForceLaw for Box<L> {
+    fn start(&mut self, x: f64) {
+        (**self).start(x)
+    }
+    fn step(&mut self, x: f64, f: f64, dt: f64) -> Output {
+        (**self).step(x, f, dt)
+    }
+    fn set_point(&self) -> f64 {
+        (**self).set_point()
+    }
+}
+
 /// The impedance filter with either a fixed reference or the paper's adaptive reference.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ImpedanceLaw {

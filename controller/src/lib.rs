@@ -7,10 +7,12 @@
 //! * [`gravity`] — tool weight and sensor bias: least-squares identification and run-time compensation.
 #![cfg_attr(not(test), warn(missing_docs))]
 
+pub mod config;
 pub mod control_loop;
 pub mod gravity;
 pub mod law;
 
+pub use config::{LawConfig, Overrides, Tuning};
 pub use control_loop::{ControlLoop, CycleReport, Fault, LoopConfig, LoopError, LoopStats};
 pub use law::{
     AdaptiveParams, ForceLaw, ImpedanceLaw, ImpedanceParams, Output, Reference,

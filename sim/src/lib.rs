@@ -1,5 +1,14 @@
-//! The other side of every wire: contact plant, robot inner-loop models, sensor models, simulated peers.
+//! The other side of every wire: the contact plant (physical truth), the robot's inner position loop,
+//! a sensor model, and the simulated peers that speak to forcecell's drivers.
+#![cfg_attr(not(test), warn(missing_docs))]
 
 pub mod ati_node;
+pub mod inner;
+pub mod plant;
+pub mod sensor_model;
+pub mod world;
 
-pub fn placeholder() {}
+pub use inner::{InnerLoop, InnerLoopModel};
+pub use plant::{ContactPlant, Event, Schedule};
+pub use sensor_model::{SensorModel, SensorParams, Window};
+pub use world::{InProcRobot, InProcSensor, SharedWorld, Truth, World};

@@ -6,7 +6,12 @@ use ati_can::{Answer, Base, CodecError, Frame, Gauges, Request};
 use proptest::prelude::*;
 
 fn any_frame() -> impl Strategy<Value = Frame> {
-    (0u32..0x2000_0000, any::<bool>(), any::<bool>(), proptest::collection::vec(any::<u8>(), 0..=8))
+    (
+        0u32..0x2000_0000,
+        any::<bool>(),
+        any::<bool>(),
+        proptest::collection::vec(any::<u8>(), 0..=8),
+    )
         .prop_map(|(id, ext, rtr, data)| {
             if rtr {
                 Frame::remote(if ext { id } else { id & 0x7FF }, ext, data.len() as u8).unwrap()

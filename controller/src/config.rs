@@ -1,0 +1,163 @@
+//! Tunings: which law, with which parameters, and the loop's limits — the part of a cell configuration
+//! that belongs to the controller. Deserialised from TOML (`tunings/*.toml`, or a user's file).
+
+use serde::{Deserialize, Serialize};
+
+use crate::control_loop::LoopConfig;
+use crate::law::{AdaptiveParams, ForceLaw, ImpedanceLaw, ImpedanceParams, Reference};
+
+/// Which law runs, with its parameters.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum LawConfig {
+    /// The paper's adaptive impedance law, exactly (eqs. 8 and 23).
+    Paper {
+        /// Impedance filter.
+        impedance: ImpedanceParams,
+        /// Estimator gains and initial estimates.
+        adaptive: AdaptiveParams,
+    },
+    /// The impedance filter with a fixed reference `x_r` (no estimation).
+    Impedance {
+        /// Impedance filter.
+        impedance: ImpedanceParams,
+        /// Reference position, m. Scenarios usually set it.
+        #[serde(default)]
+        x_r: f64,
+    },
+}
+
+/// A named tuning: a law and the loop's limits.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Tuning {
+    /// Short name (`paper`, `robust`, …).
+    pub name: String,
+    /// One line for humans.
+    #[serde(default)]
+    pub description: String,
+    /// The law.
+    pub law: LawConfig,
+    /// Limits of the loop.
+    #[serde(default, rename = "loop")]
+    pub loop_cfg: LoopConfig,
+}
+
+/// Values a scenario may override in any tuning.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Overrides {
+    /// Force set-point, N.
+    pub f_r: Option<f64>,
+    /// Fixed reference of the `impedance` law, m.
+    pub x_r: Option<f64>,
+}
+
+impl LawConfig {
+    /// The impedance parameters of any law.
+    pub fn impedance(&self) -> &ImpedanceParams {
+        match self {
+            Self::Paper { impedance, .. } | Self::Impedance { impedance, .. } => impedance,
+        }
+    }
+
+    /// Apply scenario overrides.
+    pub fn apply(&mut self, o: &Overrides) {
+        match self {
+            Self::Paper { impedance, .. } => {
+                if let Some(f) = o.f_r {
+                    impedance.f_r = f;
+                }
+            }
+            Self::Impedance { impedance, x_r } => {
+                if let Some(f) = o.f_r {
+                    impedance.f_r = f;
+                }
+                if let Some(x) = o.x_r {
+                    *x_r = x;
+                }
+            }
+        }
+    }
+
+    /// Build the law, validating every parameter.
+    pub fn build(&self) -> Result<Box<dyn ForceLaw + Send>, String> {
+        Ok(match *self {
+            Self::Paper {
+                impedance,
+                adaptive,
+            } => Box::new(ImpedanceLaw::new(
+                impedance,
+                Reference::PaperAdaptive(adaptive),
+            )?),
+            Self::Impedance { impedance, x_r } => {
+                Box::new(ImpedanceLaw::new(impedance, Reference::Fixed { x_r })?)
+            }
+        })
+    }
+}
+
+impl Tuning {
+    /// Validate the law's parameters and the loop's limits.
+    pub fn validate(&self) -> Result<(), String> {
+        self.loop_cfg.validate()?;
+        self.law.build().map(|_| ())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paper_tuning_parses_from_toml() {
+        let t: Tuning = toml::from_str(
+            r#"
+            name = "paper"
+            [law]
+            kind = "paper"
+            impedance = { f_r = 5.0, m_d = 8.0, b_d = 80.0, k_d = 50000.0 }
+            adaptive = { r1 = 5.0, r2 = 10.0, kc0 = 50000.0, xc0 = 0.009 }
+            "#,
+        )
+        .unwrap();
+        assert_eq!(
+            t.law,
+            LawConfig::Paper {
+                impedance: ImpedanceParams::PAPER,
+                adaptive: AdaptiveParams::PAPER
+            }
+        );
+        assert_eq!(t.loop_cfg, LoopConfig::default());
+        t.validate().unwrap();
+    }
+
+    #[test]
+    fn unknown_fields_and_bad_values_are_refused() {
+        let e = toml::from_str::<Tuning>(
+            r#"
+            name = "x"
+            [law]
+            kind = "paper"
+            impedance = { f_r = 5.0, m_d = 8.0, b_d = 80.0, k_d = 50000.0, typo = 1 }
+            adaptive = { r1 = 5.0, r2 = 10.0, kc0 = 50000.0, xc0 = 0.009 }
+            "#,
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("typo"), "{e}");
+        let mut t = Tuning {
+            name: "x".into(),
+            description: String::new(),
+            law: LawConfig::Impedance {
+                impedance: ImpedanceParams::PAPER,
+                x_r: 0.0,
+            },
+            loop_cfg: LoopConfig::default(),
+        };
+        t.law.apply(&Overrides {
+            f_r: Some(-1.0),
+            x_r: None,
+        });
+        assert!(t.validate().unwrap_err().contains("f_r"));
+    }
+}

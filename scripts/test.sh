@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# forcecell's one test command. Sets itself up on a fresh Debian machine (root + apt-get), then runs
+# formatting, lints, every unit and integration test, and the real-vcan tests. CI runs exactly this.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+step() { printf '\n==> %s\n' "$*"; }
+
+step "toolchain"
+command -v cargo >/dev/null || { echo "error: cargo not found: install Rust (https://rustup.rs)" >&2; exit 1; }
+if command -v rustup >/dev/null; then
+    rustup component list --installed 2>/dev/null | grep -q '^rustfmt' || rustup component add rustfmt
+    rustup component list --installed 2>/dev/null | grep -q '^clippy' || rustup component add clippy
+fi
+cargo --version
+
+step "cargo fmt --check"
+cargo fmt --all --check
+
+step "cargo clippy --all-targets -- -D warnings"
+cargo clippy --workspace --all-targets --release -- -D warnings
+
+step "cargo test (unit, integration, loopback UDP, in-memory CAN; release build: closed-loop simulations are long)"
+cargo test --workspace --release

@@ -1,0 +1,325 @@
+//! One simulated cell: contact plant + inner position loop + sensor model on one clock, and the
+//! in-process backends that implement the HAL traits on it (no wire).
+//!
+//! The wire peers (simulated robot controller, simulated sensor nodes) share a [`World`] through
+//! [`SharedWorld`] the same way.
+
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Duration;
+
+use hal::{
+    Correction, Cycle, ErrorKind, ForceSensor, Pose, RobotLink, Sample, UnitQuaternion, Vector3,
+    Wrench,
+};
+
+use crate::inner::{InnerLoop, InnerLoopModel};
+use crate::plant::ContactPlant;
+use crate::sensor_model::{SensorModel, SensorParams};
+
+/// The simulated cell's state. Time advances only through [`World::advance`].
+#[derive(Clone, Debug)]
+pub struct World {
+    plant: ContactPlant,
+    inner: InnerLoop,
+    sensor: SensorModel,
+    programmed: Pose,
+    k: u64,
+    last_command: f64,
+    measurements: u64,
+    truth: Vec<Truth>,
+}
+
+/// The true state of the cell at one cycle, logged by [`World::advance`] for recording and metrics.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Truth {
+    /// Time, s.
+    pub t: f64,
+    /// Tool position along the normal, m.
+    pub x: f64,
+    /// Contact force, N.
+    pub f: f64,
+    /// Stiffness, N/m.
+    pub k_c: f64,
+    /// Surface position, m.
+    pub x_c: f64,
+}
+
+/// A world shared between the peers of one simulation.
+pub type SharedWorld = Arc<Mutex<World>>;
+
+/// Lock a shared world; a poisoned lock (a peer panicked) still yields the state.
+pub fn lock(w: &SharedWorld) -> MutexGuard<'_, World> {
+    w.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+impl World {
+    /// A cell at rest with the tool at normal position `x0` (m).
+    pub fn new(plant: ContactPlant, model: InnerLoopModel, sensor: SensorParams, x0: f64) -> Self {
+        Self {
+            plant,
+            inner: InnerLoop::new(model, x0),
+            sensor: SensorModel::new(sensor),
+            programmed: Self::default_programmed_pose(),
+            k: 0,
+            last_command: x0,
+            measurements: 0,
+            truth: Vec::new(),
+        }
+    }
+
+    /// The programmed (uncorrected) tool pose the simulation uses: 0.5 m out, 0.3 m up, tool z pointing
+    /// down onto the workpiece, so the normal axis is base −z.
+    pub fn default_programmed_pose() -> Pose {
+        Pose {
+            position: Vector3::new(0.5, 0.0, 0.3),
+            orientation: UnitQuaternion::from_euler_angles(core::f64::consts::PI, 0.0, 0.0),
+        }
+    }
+
+    /// Share it.
+    pub fn shared(self) -> SharedWorld {
+        Arc::new(Mutex::new(self))
+    }
+
+    /// Simulated time, s.
+    pub fn time(&self) -> f64 {
+        self.k as f64 * self.inner.model().period
+    }
+
+    /// Cycle index.
+    pub fn cycle_index(&self) -> u64 {
+        self.k
+    }
+
+    /// Control period, s.
+    pub fn period(&self) -> f64 {
+        self.inner.model().period
+    }
+
+    /// The plant.
+    pub fn plant(&self) -> &ContactPlant {
+        &self.plant
+    }
+
+    /// The sensor model.
+    pub fn sensor_model(&self) -> &SensorModel {
+        &self.sensor
+    }
+
+    /// True tool position along the normal, m.
+    pub fn position(&self) -> f64 {
+        self.inner.position()
+    }
+
+    /// The last command applied, m.
+    pub fn last_command(&self) -> f64 {
+        self.last_command
+    }
+
+    /// True contact force now, N.
+    pub fn true_force(&self) -> f64 {
+        self.plant
+            .force(self.time(), self.inner.position(), self.inner.velocity())
+    }
+
+    /// True surface position now, m.
+    pub fn surface(&self) -> f64 {
+        self.plant.x_c.at(self.time())
+    }
+
+    /// True stiffness now, N/m.
+    pub fn stiffness(&self) -> f64 {
+        self.plant.k_c.at(self.time())
+    }
+
+    /// True wrench in the sensor (= tool) frame. Convention of the simulated sensor: a compressive contact
+    /// force reads **positive** `F_z`.
+    pub fn true_wrench(&self) -> Wrench {
+        Wrench::from_array([0.0, 0.0, self.true_force(), 0.0, 0.0, 0.0])
+    }
+
+    /// Measure through the sensor model: `None` in a dropout.
+    pub fn measure(&mut self) -> Option<Wrench> {
+        let t = self.time();
+        let f = self
+            .sensor
+            .measure(t, self.true_wrench().force.into())
+            .ok()?;
+        self.measurements += 1;
+        Some(Wrench {
+            force: Vector3::from(f),
+            torque: Vector3::zeros(),
+        })
+    }
+
+    /// Number of successful measurements so far.
+    pub fn measurements(&self) -> u64 {
+        self.measurements
+    }
+
+    /// The measured state as the robot reports it for the current cycle.
+    pub fn cycle(&self) -> Cycle {
+        let p = self.programmed;
+        let actual = Pose {
+            position: p.position + p.orientation * Vector3::new(0.0, 0.0, self.inner.position()),
+            orientation: p.orientation,
+        };
+        Cycle {
+            seq: self.k,
+            t: self.time(),
+            period: self.period(),
+            actual,
+            programmed: p,
+            late_replies: 0,
+            new_session: false,
+        }
+    }
+
+    /// The true state now.
+    pub fn truth(&self) -> Truth {
+        Truth {
+            t: self.time(),
+            x: self.position(),
+            f: self.true_force(),
+            k_c: self.stiffness(),
+            x_c: self.surface(),
+        }
+    }
+
+    /// The true state at every cycle so far (index = cycle index), followed by the state now.
+    pub fn truth_log(&self) -> Vec<Truth> {
+        let mut v = self.truth.clone();
+        v.push(self.truth());
+        v
+    }
+
+    /// Apply the normal component of `correction` (absolute offset, m) — or hold the last one when
+    /// `None` or non-finite — and advance the physics one period.
+    pub fn advance(&mut self, correction: Option<&Correction>) {
+        if let Some(c) = correction
+            && c.translation.z.is_finite()
+        {
+            self.last_command = c.translation.z;
+        }
+        self.truth.push(self.truth());
+        self.inner.advance(self.last_command);
+        self.k += 1;
+    }
+}
+
+/// The robot side of a world, in process: every `next_cycle` is the world's next period.
+pub struct InProcRobot {
+    world: SharedWorld,
+    started: bool,
+    answered: bool,
+}
+
+impl InProcRobot {
+    /// A robot on `world`.
+    pub fn new(world: SharedWorld) -> Self {
+        Self {
+            world,
+            started: false,
+            answered: false,
+        }
+    }
+}
+
+impl RobotLink for InProcRobot {
+    type Error = ErrorKind;
+
+    fn next_cycle(&mut self) -> Result<Cycle, ErrorKind> {
+        let mut w = lock(&self.world);
+        if self.started && !self.answered {
+            // Nobody answered: the robot holds the last correction (HOLDON = 1) and moves on.
+            w.advance(None);
+        }
+        self.started = true;
+        self.answered = false;
+        Ok(w.cycle())
+    }
+
+    fn reply(&mut self, correction: &Correction) -> Result<(), ErrorKind> {
+        if !self.started || self.answered {
+            return Err(ErrorKind::Other);
+        }
+        self.answered = true;
+        lock(&self.world).advance(Some(correction));
+        Ok(())
+    }
+}
+
+/// The sensor side of a world, in process: every `read` measures the world now.
+pub struct InProcSensor {
+    world: SharedWorld,
+    seq: u64,
+}
+
+impl InProcSensor {
+    /// A sensor on `world`.
+    pub fn new(world: SharedWorld) -> Self {
+        Self { world, seq: 0 }
+    }
+}
+
+impl ForceSensor for InProcSensor {
+    type Error = ErrorKind;
+
+    fn read(&mut self) -> Result<Sample, ErrorKind> {
+        let w = lock(&self.world).measure().ok_or(ErrorKind::Timeout)?;
+        self.seq += 1;
+        Ok(Sample {
+            wrench: w,
+            seq: self.seq,
+            age: Duration::ZERO,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn robot_cycle_reports_the_normal_offset_and_applies_the_reply() {
+        let world = World::new(
+            ContactPlant::spring(70_000.0, 0.01),
+            InnerLoopModel::P0,
+            SensorParams::default(),
+            0.002,
+        )
+        .shared();
+        let mut robot = InProcRobot::new(world.clone());
+        let c = robot.next_cycle().unwrap();
+        assert!((c.tool_offset().z - 0.002).abs() < 1e-12);
+        assert_eq!(robot.reply(&Correction::along_z(0.0101)), Ok(()));
+        assert_eq!(
+            robot.reply(&Correction::along_z(0.0101)),
+            Err(ErrorKind::Other),
+            "one reply per cycle"
+        );
+        let c = robot.next_cycle().unwrap();
+        assert!((c.tool_offset().z - 0.0101).abs() < 1e-12);
+        let mut sensor = InProcSensor::new(world);
+        let s = sensor.read().unwrap();
+        assert!((s.wrench.force.z - 7.0).abs() < 1e-6, "{:?}", s.wrench);
+    }
+
+    #[test]
+    fn unanswered_cycle_holds_and_time_moves_on() {
+        let world = World::new(
+            ContactPlant::spring(70_000.0, 0.01),
+            InnerLoopModel::P0,
+            SensorParams::default(),
+            0.0,
+        )
+        .shared();
+        let mut robot = InProcRobot::new(world.clone());
+        robot.next_cycle().unwrap();
+        robot.reply(&Correction::along_z(0.001)).unwrap();
+        robot.next_cycle().unwrap();
+        let c = robot.next_cycle().unwrap();
+        assert_eq!(c.seq, 2);
+        assert!((c.tool_offset().z - 0.001).abs() < 1e-12);
+    }
+}

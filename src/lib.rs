@@ -1,0 +1,9 @@
+//! The forcecell application library: scenarios, the runner that wires backends to the controller,
+//! recording, metrics and plots. The `forcecell` binary is a thin CLI over it.
+#![cfg_attr(not(test), warn(missing_docs))]
+
+pub mod metrics;
+pub mod plot;
+pub mod record;
+pub mod runner;
+pub mod scenario;

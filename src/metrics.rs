@@ -1,0 +1,263 @@
+//! Metrics of a run, computed from the true contact force of the trace over a time window.
+//!
+//! Definitions (window `[from, until]`, band ±2 % of `f_r`):
+//! * `first_contact` — first time the true force is above zero (whole run), s;
+//! * `peak_force` — largest true force in the window, N;
+//! * `overshoot_pct` — `(peak − f_r)/f_r·100`, at least 0, counted from first contact;
+//! * `settle_time` — from the later of window start and first contact to the last exit from the band
+//!   (infinite when the last sample is outside), s;
+//! * `ss_error` — steady-state error `|mean(f − f_r)|` over the last 0.1 s of the window, N;
+//! * `ss_ripple` — largest `|f − f_r|` over the same 0.1 s (what is left of a transient), N;
+//! * `rms_error`, `max_error` — over the window from first contact on, N;
+//! * `contact_losses` — drops of the true force to zero after first contact; `contact_loss_time` — the
+//!   longest of them, s;
+//! * `true_force_std` — standard deviation of the true force in the window, N;
+//! * `kc_hat`, `xc_hat` — estimates at the window's end; `kc_rel_error` — `|k̂_c − k_c|/k_c` there.
+
+use crate::record::Row;
+
+/// Names accepted by [`Metrics::get`] and by scenario targets.
+pub const METRIC_NAMES: &[&str] = &[
+    "first_contact",
+    "peak_force",
+    "overshoot_pct",
+    "settle_time",
+    "ss_error",
+    "ss_ripple",
+    "rms_error",
+    "max_error",
+    "contact_losses",
+    "contact_loss_time",
+    "true_force_std",
+    "kc_hat",
+    "xc_hat",
+    "kc_rel_error",
+    "faults",
+];
+
+/// Metrics over one window `[from, until)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Metrics {
+    /// s, NaN when never in contact.
+    pub first_contact: f64,
+    /// N.
+    pub peak_force: f64,
+    /// %.
+    pub overshoot_pct: f64,
+    /// s (infinite: never settled).
+    pub settle_time: f64,
+    /// N.
+    pub ss_error: f64,
+    /// N.
+    pub ss_ripple: f64,
+    /// N.
+    pub rms_error: f64,
+    /// N.
+    pub max_error: f64,
+    /// Count.
+    pub contact_losses: f64,
+    /// s.
+    pub contact_loss_time: f64,
+    /// N.
+    pub true_force_std: f64,
+    /// N/m.
+    pub kc_hat: f64,
+    /// m.
+    pub xc_hat: f64,
+    /// Relative.
+    pub kc_rel_error: f64,
+    /// Steps with a fault.
+    pub faults: f64,
+}
+
+impl Metrics {
+    /// Compute over `[from, until]` (`until = ∞` for the end). Uses `f_true` when the trace has it,
+    /// else the measured force.
+    pub fn compute(rows: &[Row], from: f64, until: f64) -> Self {
+        let force = |r: &Row| if r.f_true.is_finite() { r.f_true } else { r.f };
+        let first_contact = rows
+            .iter()
+            .find(|r| force(r) > 0.0)
+            .map_or(f64::NAN, |r| r.t);
+        let win: Vec<&Row> = rows.iter().filter(|r| r.t >= from && r.t < until).collect();
+        let mut m = Metrics {
+            first_contact,
+            peak_force: f64::NAN,
+            overshoot_pct: f64::NAN,
+            settle_time: f64::NAN,
+            ss_error: f64::NAN,
+            ss_ripple: f64::NAN,
+            rms_error: f64::NAN,
+            max_error: f64::NAN,
+            contact_losses: 0.0,
+            contact_loss_time: 0.0,
+            true_force_std: f64::NAN,
+            kc_hat: f64::NAN,
+            xc_hat: f64::NAN,
+            kc_rel_error: f64::NAN,
+            faults: win.iter().filter(|r| r.fault != 0).count() as f64,
+        };
+        let Some(last) = win.last() else {
+            return m;
+        };
+        m.kc_hat = last.kc_hat;
+        m.xc_hat = last.xc_hat;
+        m.kc_rel_error = ((last.kc_hat - last.k_c) / last.k_c).abs();
+        let n = win.len() as f64;
+        let mean = win.iter().map(|r| force(r)).sum::<f64>() / n;
+        m.true_force_std = (win.iter().map(|r| (force(r) - mean).powi(2)).sum::<f64>() / n).sqrt();
+        m.peak_force = win
+            .iter()
+            .map(|r| force(r))
+            .fold(f64::NEG_INFINITY, f64::max);
+        let f_r = last.f_r;
+        let t_end = last.t;
+        let tail: Vec<f64> = win
+            .iter()
+            .filter(|r| r.t > t_end - 0.1 + 1e-9)
+            .map(|r| force(r) - r.f_r)
+            .collect();
+        m.ss_error = (tail.iter().sum::<f64>() / tail.len() as f64).abs();
+        m.ss_ripple = tail.iter().map(|e| e.abs()).fold(0.0, f64::max);
+        if first_contact.is_nan() {
+            m.overshoot_pct = 0.0;
+            m.settle_time = f64::INFINITY;
+            return m;
+        }
+        let contact: Vec<&Row> = win
+            .iter()
+            .copied()
+            .filter(|r| r.t >= first_contact)
+            .collect();
+        if contact.is_empty() {
+            return m;
+        }
+        let t0 = contact[0].t;
+        let peak = contact
+            .iter()
+            .map(|r| force(r))
+            .fold(f64::NEG_INFINITY, f64::max);
+        m.overshoot_pct = ((peak - f_r) / f_r * 100.0).max(0.0);
+        let errs: Vec<f64> = contact.iter().map(|r| force(r) - r.f_r).collect();
+        m.rms_error = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
+        m.max_error = errs.iter().map(|e| e.abs()).fold(0.0, f64::max);
+        let band = 0.02 * f_r.abs();
+        m.settle_time = match contact
+            .iter()
+            .rposition(|r| (force(r) - r.f_r).abs() > band)
+        {
+            None => 0.0,
+            Some(i) if i + 1 == contact.len() => f64::INFINITY,
+            Some(i) => contact[i + 1].t - t0,
+        };
+        let mut loss_start: Option<f64> = None;
+        for r in &contact {
+            let touching = force(r) > 0.0;
+            match (touching, loss_start) {
+                (false, None) => {
+                    loss_start = Some(r.t);
+                    m.contact_losses += 1.0;
+                }
+                (true, Some(s)) => {
+                    m.contact_loss_time = m.contact_loss_time.max(r.t - s);
+                    loss_start = None;
+                }
+                _ => {}
+            }
+        }
+        if let Some(s) = loss_start {
+            m.contact_loss_time = m.contact_loss_time.max(t_end - s);
+        }
+        m
+    }
+
+    /// A metric by name (see [`METRIC_NAMES`]).
+    pub fn get(&self, name: &str) -> Option<f64> {
+        Some(match name {
+            "first_contact" => self.first_contact,
+            "peak_force" => self.peak_force,
+            "overshoot_pct" => self.overshoot_pct,
+            "settle_time" => self.settle_time,
+            "ss_error" => self.ss_error,
+            "ss_ripple" => self.ss_ripple,
+            "rms_error" => self.rms_error,
+            "max_error" => self.max_error,
+            "contact_losses" => self.contact_losses,
+            "contact_loss_time" => self.contact_loss_time,
+            "true_force_std" => self.true_force_std,
+            "kc_hat" => self.kc_hat,
+            "xc_hat" => self.xc_hat,
+            "kc_rel_error" => self.kc_rel_error,
+            "faults" => self.faults,
+            _ => return None,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn trace(forces: &[f64]) -> Vec<Row> {
+        forces
+            .iter()
+            .enumerate()
+            .map(|(k, &f)| Row {
+                t: k as f64 * 0.01,
+                f,
+                f_true: f,
+                f_r: 5.0,
+                k_c: 70_000.0,
+                kc_hat: 63_000.0,
+                ..Row::default()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn settle_overshoot_losses() {
+        let m = Metrics::compute(
+            &trace(&[0.0, 0.0, 8.0, 4.0, 0.0, 0.0, 5.2, 5.01, 5.0, 5.0]),
+            0.0,
+            f64::INFINITY,
+        );
+        assert_eq!(m.first_contact, 0.02);
+        assert_eq!(m.peak_force, 8.0);
+        assert!((m.overshoot_pct - 60.0).abs() < 1e-9);
+        // Last sample outside ±0.1 N is 5.2 at t = 0.06; settled from t = 0.07, 0.05 s after contact.
+        assert!((m.settle_time - 0.05).abs() < 1e-9, "{}", m.settle_time);
+        assert_eq!(m.contact_losses, 1.0);
+        assert!((m.contact_loss_time - 0.02).abs() < 1e-9);
+        assert!((m.kc_rel_error - 0.1).abs() < 1e-9);
+        // From t = 0.07 the window holds 5.01, 5.0, 5.0.
+        let tail = Metrics::compute(
+            &trace(&[0.0, 0.0, 8.0, 4.0, 0.0, 0.0, 5.2, 5.01, 5.0, 5.0]),
+            0.07,
+            f64::INFINITY,
+        );
+        assert!(
+            (tail.ss_error - 0.01 / 3.0).abs() < 1e-9,
+            "{}",
+            tail.ss_error
+        );
+        assert!((tail.ss_ripple - 0.01).abs() < 1e-9);
+    }
+
+    #[test]
+    fn unsettled_and_no_contact() {
+        let m = Metrics::compute(&trace(&[0.0, 6.0, 4.0, 6.0]), 0.0, f64::INFINITY);
+        assert!(m.settle_time.is_infinite());
+        let m = Metrics::compute(&trace(&[0.0, 0.0]), 0.0, f64::INFINITY);
+        assert!(m.first_contact.is_nan());
+        assert!(m.settle_time.is_infinite());
+    }
+
+    #[test]
+    fn every_name_resolves() {
+        let m = Metrics::compute(&trace(&[1.0]), 0.0, 1.0);
+        for n in METRIC_NAMES {
+            assert!(m.get(n).is_some(), "{n}");
+        }
+        assert!(m.get("nope").is_none());
+    }
+}

@@ -1,0 +1,217 @@
+//! Runs a scenario: builds the simulated world, wires a robot link and a force sensor to the control loop,
+//! records every step and computes the metrics.
+
+use std::time::{Duration, Instant};
+
+use anyhow::{Result, anyhow};
+use controller::{ControlLoop, ForceLaw, LoopError, LoopStats, Tuning};
+use hal::{ForceSensor, RobotLink};
+use sim::{InProcRobot, InProcSensor, InnerLoopModel, SharedWorld, World};
+
+use crate::metrics::Metrics;
+use crate::record::{Row, fault_code};
+use crate::scenario::{PlantSpec, Scenario, Target, load_tuning};
+
+/// A scenario with its plant and tuning resolved.
+#[derive(Clone, Debug)]
+pub struct RunSpec {
+    /// The scenario.
+    pub scenario: Scenario,
+    /// Label of the plant (for file names and tables).
+    pub plant_label: String,
+    /// The inner loop.
+    pub plant: InnerLoopModel,
+    /// The tuning, with the scenario's overrides applied.
+    pub tuning: Tuning,
+}
+
+impl RunSpec {
+    /// Resolve a scenario with optional plant and tuning overrides (CLI `--plant`, `--tuning`).
+    pub fn new(scenario: Scenario, plant: Option<&str>, tuning: Option<&str>) -> Result<Self> {
+        let spec = match plant {
+            Some(p) => PlantSpec::Name(p.to_string()),
+            None => scenario.plant.clone(),
+        };
+        let model = spec.model()?;
+        let mut tuning = load_tuning(tuning.unwrap_or(&scenario.tuning))?;
+        tuning.law.apply(&scenario.controller);
+        tuning
+            .validate()
+            .map_err(|e| anyhow!("tuning {} with the scenario's overrides: {e}", tuning.name))?;
+        Ok(Self {
+            plant_label: spec.label(),
+            plant: model,
+            tuning,
+            scenario,
+        })
+    }
+
+    /// Number of control steps.
+    pub fn steps(&self) -> u64 {
+        (self.scenario.duration / self.plant.period)
+            .round()
+            .max(1.0) as u64
+    }
+
+    /// A fresh simulated world for this run.
+    pub fn world(&self) -> SharedWorld {
+        World::new(
+            self.scenario.environment.plant(),
+            self.plant,
+            self.scenario.sensor.clone(),
+            self.scenario.start_position(),
+        )
+        .shared()
+    }
+
+    /// `NAME` or `NAME-PLANT-TUNING` when either differs from the scenario's defaults.
+    pub fn file_stem(&self) -> String {
+        let s = &self.scenario;
+        if self.plant_label == s.plant.label() && self.tuning.name == s.tuning {
+            s.name.clone()
+        } else {
+            format!("{}-{}-{}", s.name, self.plant_label, self.tuning.name)
+        }
+    }
+}
+
+/// What a run produced.
+#[derive(Clone, Debug)]
+pub struct RunResult {
+    /// One row per step.
+    pub rows: Vec<Row>,
+    /// Loop counters.
+    pub stats: LoopStats,
+    /// Metrics over the whole run.
+    pub metrics: Metrics,
+    /// Wall-clock time the run took.
+    pub wall: Duration,
+    /// Why the loop ended early, if it did.
+    pub ended_early: Option<String>,
+}
+
+/// A scenario target checked against a run.
+#[derive(Clone, Debug)]
+pub struct Verdict {
+    /// The target.
+    pub target: Target,
+    /// The metric's value.
+    pub value: f64,
+    /// Whether it is met.
+    pub pass: bool,
+}
+
+impl RunResult {
+    /// Check every target of the scenario.
+    pub fn verdicts(&self, targets: &[Target]) -> Vec<Verdict> {
+        targets
+            .iter()
+            .map(|t| {
+                let m = Metrics::compute(
+                    &self.rows,
+                    t.after.unwrap_or(0.0),
+                    t.until.unwrap_or(f64::INFINITY),
+                );
+                let value = m.get(&t.metric).unwrap_or(f64::NAN);
+                let pass = !value.is_nan()
+                    && t.max.is_none_or(|mx| value <= mx)
+                    && t.min.is_none_or(|mn| value >= mn);
+                Verdict {
+                    target: t.clone(),
+                    value,
+                    pass,
+                }
+            })
+            .collect()
+    }
+}
+
+/// Run with any robot link and sensor, against `world` (which the backends must be driving).
+/// `progress` is called with the fraction done, now and then.
+pub fn run_with<R, S>(
+    spec: &RunSpec,
+    world: &SharedWorld,
+    robot: R,
+    sensor: S,
+    progress: &mut dyn FnMut(f64),
+) -> Result<RunResult>
+where
+    R: RobotLink,
+    S: ForceSensor,
+    R::Error: Send + Sync + 'static,
+    S::Error: Send + Sync + 'static,
+{
+    let law = spec.tuning.law.build().map_err(|e| anyhow!(e))?;
+    let f_r = law.set_point();
+    let mut lp = ControlLoop::new(robot, sensor, law, spec.tuning.loop_cfg);
+    let steps = spec.steps();
+    let mut rows = Vec::with_capacity(steps as usize);
+    let started = Instant::now();
+    let mut ended_early = None;
+    let every = (steps / 200).max(1);
+    for k in 0..steps {
+        match lp.cycle() {
+            Ok(r) => rows.push(Row {
+                t: r.cycle.t,
+                f: r.f.unwrap_or(f64::NAN),
+                f_true: f64::NAN,
+                f_r,
+                x: r.x,
+                x_cmd: r.command.translation.z,
+                x_r: r.out.x_r,
+                kc_hat: r.out.kc_hat,
+                xc_hat: r.out.xc_hat,
+                k_c: f64::NAN,
+                x_c: f64::NAN,
+                fault: fault_code(r.fault),
+            }),
+            Err(e) => {
+                ended_early = Some(describe(&e));
+                break;
+            }
+        }
+        if k % every == 0 {
+            progress(k as f64 / steps as f64);
+        }
+    }
+    progress(1.0);
+    let wall = started.elapsed();
+    let stats = lp.stats();
+    drop(lp);
+    let truth = sim::world::lock(world).truth_log();
+    let period = spec.plant.period;
+    for r in &mut rows {
+        let k = (r.t / period).round();
+        if k >= 0.0
+            && let Some(tr) = truth.get(k as usize)
+        {
+            r.f_true = tr.f;
+            r.k_c = tr.k_c;
+            r.x_c = tr.x_c;
+        }
+    }
+    let metrics = Metrics::compute(&rows, 0.0, f64::INFINITY);
+    Ok(RunResult {
+        rows,
+        stats,
+        metrics,
+        wall,
+        ended_early,
+    })
+}
+
+fn describe<RE: std::fmt::Display, SE: std::fmt::Display>(e: &LoopError<RE, SE>) -> String {
+    e.to_string()
+}
+
+/// Run with the in-process robot and sensor (no wire).
+pub fn run_inproc(spec: &RunSpec, progress: &mut dyn FnMut(f64)) -> Result<RunResult> {
+    let world = spec.world();
+    run_with(
+        spec,
+        &world,
+        InProcRobot::new(world.clone()),
+        InProcSensor::new(world.clone()),
+        progress,
+    )
+}

@@ -1,0 +1,323 @@
+//! Scenarios: a simulated cell (workpiece, robot inner loop, sensor), a duration, a default tuning and the
+//! targets it is judged by. TOML files under `scenarios/` are built in; any other file can be named by path.
+
+use std::path::Path;
+
+use anyhow::{Context, Result, anyhow, bail};
+use controller::{Overrides, Tuning};
+use serde::{Deserialize, Serialize};
+use sim::{ContactPlant, Event, InnerLoopModel, Schedule, SensorParams};
+
+mod builtin {
+    include!(concat!(env!("OUT_DIR"), "/builtin.rs"));
+}
+
+/// The robot's inner loop: a name (`p0`, `p1`, `p2`) or explicit values.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum PlantSpec {
+    /// `p0`, `p1` or `p2`.
+    Name(String),
+    /// Explicit period, lag and delay.
+    Model(InnerLoopModel),
+}
+
+impl Default for PlantSpec {
+    fn default() -> Self {
+        Self::Name("p0".into())
+    }
+}
+
+impl PlantSpec {
+    /// The model, or an error naming the valid choices.
+    pub fn model(&self) -> Result<InnerLoopModel> {
+        let m = match self {
+            Self::Name(n) => InnerLoopModel::by_name(n)
+                .ok_or_else(|| anyhow!("unknown plant {n:?}: choose p0, p1 or p2"))?,
+            Self::Model(m) => *m,
+        };
+        m.validate().map_err(|e| anyhow!("plant: {e}"))?;
+        Ok(m)
+    }
+
+    /// A short label.
+    pub fn label(&self) -> String {
+        match self {
+            Self::Name(n) => n.to_ascii_lowercase(),
+            Self::Model(m) => format!(
+                "T{}ms-tau{}ms-d{}",
+                m.period * 1e3,
+                m.tau * 1e3,
+                m.delay_cycles
+            ),
+        }
+    }
+}
+
+/// The workpiece.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Environment {
+    /// Stiffness at t = 0, N/m.
+    pub k_c: f64,
+    /// Surface position at t = 0, m (along the tool normal, from the programmed path).
+    pub x_c: f64,
+    /// Damping, N·s/m.
+    #[serde(default)]
+    pub c_e: f64,
+    /// Changes of the stiffness.
+    #[serde(default)]
+    pub k_c_events: Vec<Event>,
+    /// Changes of the surface position.
+    #[serde(default)]
+    pub x_c_events: Vec<Event>,
+}
+
+impl Environment {
+    /// The contact plant.
+    pub fn plant(&self) -> ContactPlant {
+        ContactPlant {
+            k_c: Schedule {
+                base: self.k_c,
+                events: self.k_c_events.clone(),
+            },
+            x_c: Schedule {
+                base: self.x_c,
+                events: self.x_c_events.clone(),
+            },
+            c_e: self.c_e,
+        }
+    }
+}
+
+/// A metric limit the scenario is judged by.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Target {
+    /// Metric name (see [`crate::metrics::Metrics::get`]).
+    pub metric: String,
+    /// Upper limit.
+    #[serde(default)]
+    pub max: Option<f64>,
+    /// Lower limit.
+    #[serde(default)]
+    pub min: Option<f64>,
+    /// Evaluate from this time on, s.
+    #[serde(default)]
+    pub after: Option<f64>,
+    /// Evaluate up to this time, s.
+    #[serde(default)]
+    pub until: Option<f64>,
+}
+
+/// A scenario as written in TOML.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Name; output files are called after it.
+    pub name: String,
+    /// One line for humans.
+    #[serde(default)]
+    pub description: String,
+    /// Simulated time, s.
+    pub duration: f64,
+    /// The robot's inner loop.
+    #[serde(default)]
+    pub plant: PlantSpec,
+    /// Default tuning (built-in name or file path).
+    #[serde(default = "default_tuning")]
+    pub tuning: String,
+    /// Start position along the normal, m; default 1 mm short of the surface.
+    #[serde(default)]
+    pub x0: Option<f64>,
+    /// The workpiece.
+    pub environment: Environment,
+    /// The force sensor's imperfections.
+    #[serde(default)]
+    pub sensor: SensorParams,
+    /// Overrides of the tuning's values.
+    #[serde(default)]
+    pub controller: Overrides,
+    /// Targets.
+    #[serde(default)]
+    pub targets: Vec<Target>,
+}
+
+fn default_tuning() -> String {
+    "paper".into()
+}
+
+/// The longest simulated run accepted, s.
+pub const MAX_DURATION: f64 = 3600.0;
+
+impl Scenario {
+    /// Parse and validate TOML text; `origin` names the source in errors.
+    pub fn from_toml(text: &str, origin: &str) -> Result<Self> {
+        let s: Self =
+            toml::from_str(text).map_err(|e| anyhow!("{origin}: {}", one_line(&e.to_string())))?;
+        s.validate()
+            .with_context(|| format!("{origin}: invalid scenario"))?;
+        Ok(s)
+    }
+
+    /// Load a built-in scenario by name, or a TOML file by path (anything ending in `.toml` or
+    /// containing a path separator).
+    pub fn load(spec: &str) -> Result<Self> {
+        if spec.ends_with(".toml") || spec.contains('/') {
+            let text = std::fs::read_to_string(Path::new(spec))
+                .with_context(|| format!("cannot read scenario file {spec}"))?;
+            return Self::from_toml(&text, spec);
+        }
+        let (_, text) = builtin::SCENARIOS
+            .iter()
+            .find(|(n, _)| *n == spec)
+            .ok_or_else(|| {
+                anyhow!(
+                    "unknown scenario {spec:?}; built-in: {} (or give a .toml file)",
+                    builtin_names().join(", ")
+                )
+            })?;
+        Self::from_toml(text, spec)
+    }
+
+    /// Every built-in scenario, parsed.
+    pub fn builtins() -> Result<Vec<Self>> {
+        builtin::SCENARIOS
+            .iter()
+            .map(|(n, t)| Self::from_toml(t, n))
+            .collect()
+    }
+
+    /// Checks the values.
+    pub fn validate(&self) -> Result<()> {
+        if self.name.is_empty()
+            || !self
+                .name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+        {
+            bail!(
+                "name {:?} must be non-empty letters, digits, '-' or '_' (it names the output files)",
+                self.name
+            );
+        }
+        if !(self.duration.is_finite() && self.duration > 0.0 && self.duration <= MAX_DURATION) {
+            bail!(
+                "duration must be in (0, {MAX_DURATION}] s, got {}",
+                self.duration
+            );
+        }
+        self.plant.model()?;
+        let plant = self.environment.plant();
+        plant.validate().map_err(|e| anyhow!("environment: {e}"))?;
+        self.sensor.validate().map_err(|e| anyhow!("sensor: {e}"))?;
+        if let Some(x0) = self.x0
+            && !(x0.is_finite() && x0.abs() < 1.0)
+        {
+            bail!("x0 must be a finite position within ±1 m, got {x0}");
+        }
+        for t in &self.targets {
+            if t.max.is_none() && t.min.is_none() {
+                bail!("target {:?} has neither max nor min", t.metric);
+            }
+            if !crate::metrics::METRIC_NAMES.contains(&t.metric.as_str()) {
+                bail!(
+                    "target metric {:?} is unknown; known: {}",
+                    t.metric,
+                    crate::metrics::METRIC_NAMES.join(", ")
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// Start position, m.
+    pub fn start_position(&self) -> f64 {
+        self.x0.unwrap_or(self.environment.x_c - 0.001)
+    }
+}
+
+/// Names of the built-in scenarios.
+pub fn builtin_names() -> Vec<&'static str> {
+    builtin::SCENARIOS.iter().map(|(n, _)| *n).collect()
+}
+
+/// Load a built-in tuning by name or a TOML file by path, and validate it.
+pub fn load_tuning(spec: &str) -> Result<Tuning> {
+    let (origin, text) = if spec.ends_with(".toml") || spec.contains('/') {
+        let text = std::fs::read_to_string(spec)
+            .with_context(|| format!("cannot read tuning file {spec}"))?;
+        (spec.to_string(), text)
+    } else {
+        let (_, t) = builtin::TUNINGS
+            .iter()
+            .find(|(n, _)| *n == spec)
+            .ok_or_else(|| {
+                anyhow!(
+                    "unknown tuning {spec:?}; built-in: {} (or give a .toml file)",
+                    builtin_tuning_names().join(", ")
+                )
+            })?;
+        (spec.to_string(), t.to_string())
+    };
+    let t: Tuning =
+        toml::from_str(&text).map_err(|e| anyhow!("{origin}: {}", one_line(&e.to_string())))?;
+    t.validate()
+        .map_err(|e| anyhow!("{origin}: invalid tuning: {e}"))?;
+    Ok(t)
+}
+
+/// Names of the built-in tunings.
+pub fn builtin_tuning_names() -> Vec<&'static str> {
+    builtin::TUNINGS.iter().map(|(n, _)| *n).collect()
+}
+
+/// toml's errors span several lines with a source excerpt; keep the message and the position.
+fn one_line(s: &str) -> String {
+    let mut lines = s.lines().filter(|l| !l.trim().is_empty());
+    let head = lines.next().unwrap_or_default().trim().to_string();
+    let tail: Vec<_> = lines
+        .filter(|l| !l.trim_start().starts_with('|') && !l.contains(" | "))
+        .map(str::trim)
+        .collect();
+    if tail.is_empty() {
+        head
+    } else {
+        format!("{head}: {}", tail.join(" "))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_builtin_scenario_and_tuning_parses() {
+        assert!(builtin_names().contains(&"paper-fig9"));
+        for s in Scenario::builtins().unwrap() {
+            load_tuning(&s.tuning).unwrap();
+        }
+        for n in builtin_tuning_names() {
+            load_tuning(n).unwrap();
+        }
+    }
+
+    #[test]
+    fn errors_are_one_line_and_name_the_problem() {
+        let e = Scenario::load("no-such-scenario").unwrap_err().to_string();
+        assert!(e.contains("paper-fig9"), "{e}");
+        let e = Scenario::from_toml("name = \"x\"\nduration = 1.0\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("environment") && !e.contains('\n'), "{e}");
+        let bad = "name = \"x\"\nduration = -1.0\n[environment]\nk_c = 1.0\nx_c = 0.0\n";
+        let e = format!("{:#}", Scenario::from_toml(bad, "t.toml").unwrap_err());
+        assert!(e.contains("duration"), "{e}");
+        let bad =
+            "name = \"x\"\nduration = 1.0\nplant = \"p9\"\n[environment]\nk_c = 1.0\nx_c = 0.0\n";
+        let e = format!("{:#}", Scenario::from_toml(bad, "t.toml").unwrap_err());
+        assert!(e.contains("p9") && e.contains("p2"), "{e}");
+        let e = format!("{:#}", load_tuning("nope").unwrap_err());
+        assert!(e.contains("paper"), "{e}");
+    }
+}

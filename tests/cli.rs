@@ -1,0 +1,175 @@
+//! The `forcecell` binary as a user runs it: files written, clear one-line errors, no panics.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn forcecell(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_forcecell"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("run forcecell")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A failure must be one `error:` line with a non-zero status, never a panic.
+fn assert_clean_failure(o: &Output, needle: &str) {
+    let err = stderr(o);
+    assert!(!o.status.success(), "expected failure, got success: {err}");
+    assert!(!err.contains("panicked"), "panic: {err}");
+    assert!(err.contains(needle), "stderr lacks {needle:?}: {err}");
+    let lines = err.lines().filter(|l| !l.trim().is_empty()).count();
+    assert!(lines <= 3, "error should be short: {err}");
+}
+
+#[test]
+fn sim_writes_csv_and_png_for_both_paper_figures() {
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["paper-fig9", "paper-fig10"] {
+        let o = forcecell(&["sim", "--scenario", name, "--out", "res"], dir.path());
+        assert!(o.status.success(), "{}", stderr(&o));
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            stdout.contains("settling") && stdout.contains("final k̂_c"),
+            "{stdout}"
+        );
+        let csv = std::fs::read_to_string(dir.path().join(format!("res/{name}.csv"))).unwrap();
+        let header = csv.lines().next().unwrap();
+        for col in ["t", "f", "f_r", "x", "x_cmd", "x_r", "kc_hat", "xc_hat"] {
+            assert!(
+                header.split(',').any(|c| c == col),
+                "column {col} missing: {header}"
+            );
+        }
+        assert_eq!(csv.lines().count(), 2001, "header + one row per 1 ms step");
+        let png = std::fs::read(dir.path().join(format!("res/{name}.png"))).unwrap();
+        assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+        assert!(
+            png.len() > 20_000,
+            "a plot with content, got {} bytes",
+            png.len()
+        );
+    }
+}
+
+#[test]
+fn default_run_says_where_the_files_went() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = forcecell(&["sim"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let wrote = stdout
+        .lines()
+        .find(|l| l.starts_with("wrote "))
+        .expect("a 'wrote' line");
+    for part in wrote.trim_start_matches("wrote ").split(" and ") {
+        assert!(dir.path().join(part.trim()).is_file(), "{part} not written");
+    }
+}
+
+#[test]
+fn list_names_the_scenarios_and_tunings() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = forcecell(&["sim", "--list"], dir.path());
+    assert!(o.status.success());
+    let s = String::from_utf8_lossy(&o.stdout);
+    for n in [
+        "paper-fig9",
+        "paper-fig10",
+        "paper-impedance",
+        "paper",
+        "impedance",
+    ] {
+        assert!(s.contains(n), "{n} missing from --list: {s}");
+    }
+}
+
+#[test]
+fn unknown_scenario_bad_file_and_bad_options_fail_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = forcecell(&["sim", "--scenario", "nope"], dir.path());
+    assert_clean_failure(&o, "unknown scenario");
+
+    let o = forcecell(&["sim", "--scenario", "missing.toml"], dir.path());
+    assert_clean_failure(&o, "missing.toml");
+
+    std::fs::write(
+        dir.path().join("broken.toml"),
+        "name = \"b\"\nduration = [\n",
+    )
+    .unwrap();
+    let o = forcecell(&["sim", "--scenario", "broken.toml"], dir.path());
+    assert_clean_failure(&o, "broken.toml");
+
+    std::fs::write(
+        dir.path().join("neg.toml"),
+        "name = \"neg\"\nduration = 1.0\n[environment]\nk_c = -5.0\nx_c = 0.01\n",
+    )
+    .unwrap();
+    let o = forcecell(&["sim", "--scenario", "neg.toml"], dir.path());
+    assert_clean_failure(&o, "k_c");
+
+    std::fs::write(
+        dir.path().join("nan.toml"),
+        "name = \"nan\"\nduration = nan\n[environment]\nk_c = 5.0\nx_c = 0.01\n",
+    )
+    .unwrap();
+    let o = forcecell(&["sim", "--scenario", "nan.toml"], dir.path());
+    assert_clean_failure(&o, "duration");
+
+    let o = forcecell(&["sim", "--plant", "p9"], dir.path());
+    assert_clean_failure(&o, "p9");
+
+    let o = forcecell(&["sim", "--tuning", "nope"], dir.path());
+    assert_clean_failure(&o, "unknown tuning");
+}
+
+#[test]
+fn a_scenario_file_runs_and_check_reports_missed_targets() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("mine.toml"),
+        r#"
+name = "mine"
+duration = 0.5
+plant = "p0"
+tuning = "paper"
+[environment]
+k_c = 70000.0
+x_c = 0.010
+[[targets]]
+metric = "peak_force"
+max = 0.001        # unreachable on purpose: the tool touches the surface
+"#,
+    )
+    .unwrap();
+    let o = forcecell(&["sim", "-s", "mine.toml", "--out", "o"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("FAIL"));
+    let o = forcecell(
+        &["sim", "-s", "mine.toml", "--out", "o", "--check"],
+        dir.path(),
+    );
+    assert_eq!(o.status.code(), Some(1));
+}
+
+#[test]
+fn plot_replots_a_recording_and_refuses_garbage() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = forcecell(&["sim", "-s", "paper-fig10", "--out", "r"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = forcecell(
+        &["plot", "r/paper-fig10.csv", "--out", "again.png"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("2000 rows"));
+    let png = std::fs::read(dir.path().join("again.png")).unwrap();
+    assert_eq!(&png[..4], b"\x89PNG");
+    std::fs::write(dir.path().join("junk.csv"), "hello,world\n1,2\n").unwrap();
+    let o = forcecell(&["plot", "junk.csv"], dir.path());
+    assert_clean_failure(&o, "not a forcecell trace");
+}
