@@ -41,13 +41,22 @@ if ((${#missing[@]})); then
 fi
 
 # ---- build on the host -----------------------------------------------------------------------
-echo "vcan-tests: building the test binary"
-bin=$(cargo test -p forcecell-sim --test ati_vcan --no-run --message-format=json 2>/dev/null |
-  grep -o '"executable":"[^"]*/ati_vcan-[0-9a-f]*"' | tail -n 1 | sed 's/^"executable":"//; s/"$//') || true
-if [ -z "$bin" ] || [ ! -x "$bin" ]; then
-  cargo test -p forcecell-sim --test ati_vcan --no-run >&2 || true
-  die "could not build the ati_vcan test binary (see the errors above)"
-fi
+# The driver-vs-node scenarios and can-utils interop (sim/tests/ati_vcan.rs) and the CLI's ATI commands
+# (tests/ati_cli_vcan.rs). Their vcan tests are #[ignore]d in a plain `cargo test`.
+echo "vcan-tests: building the test binaries"
+build_test() { # package test-name -> path of the test executable
+  cargo test -p "$1" --test "$2" --no-run --message-format=json 2>/dev/null |
+    grep -o "\"executable\":\"[^\"]*/$2-[0-9a-f]*\"" | tail -n 1 | sed 's/^"executable":"//; s/"$//'
+}
+bins=()
+for spec in forcecell-sim:ati_vcan forcecell:ati_cli_vcan; do
+  bin=$(build_test "${spec%%:*}" "${spec#*:}") || true
+  if [ -z "$bin" ] || [ ! -x "$bin" ]; then
+    cargo test -p "${spec%%:*}" --test "${spec#*:}" --no-run >&2 || true
+    die "could not build the ${spec#*:} test binary (see the errors above)"
+  fi
+  bins+=("$bin")
+done
 test_args=(--ignored --test-threads=1)
 
 # ---- native ----------------------------------------------------------------------------------
@@ -61,8 +70,13 @@ native_ready() {
 if [ "$mode" != uml ] && native_ready; then
   echo "vcan-tests: running natively on vcan0"
   ip link set vcan0 up 2>/dev/null || true
-  FORCECELL_VCAN=vcan0 "$bin" "${test_args[@]}"
-  exit $?
+  failed=0
+  for bin in "${bins[@]}"; do
+    FORCECELL_VCAN=vcan0 "$bin" "${test_args[@]}" || failed=1
+  done
+  [ "$failed" = 0 ] || die "vcan tests failed (natively on vcan0)"
+  echo "vcan-tests: all vcan tests passed natively on vcan0"
+  exit 0
 fi
 [ "$mode" = native ] && die "FORCECELL_VCAN_MODE=native but this kernel has no usable vcan0 (modprobe vcan failed)"
 
@@ -90,8 +104,11 @@ done
 ip link set lo up
 ip link add dev vcan0 type vcan && ip link set vcan0 up || fail "guest: cannot create vcan0"
 cd "$root"
-FORCECELL_VCAN=vcan0 RUST_BACKTRACE=1 "$bin" ${test_args[*]} >"$output_file" 2>&1
-echo \$? >"$status_file"
+status=0
+for bin in ${bins[*]}; do
+  FORCECELL_VCAN=vcan0 RUST_BACKTRACE=1 "\$bin" ${test_args[*]} >>"$output_file" 2>&1 || status=1
+done
+echo \$status >"$status_file"
 sync
 halt -f
 EOF

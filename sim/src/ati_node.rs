@@ -19,18 +19,57 @@ use ati_can::{
 };
 use hal::Wrench;
 use rand::SeedableRng;
+
+use crate::world::SharedWorld;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
-/// Where the node's true wrench (N, N·m, sensor frame) comes from, at node time `t`.
+/// Where the node's wrench (N, N·m, sensor frame) comes from, at node time `t`.
 pub trait WrenchSource: Send {
-    /// The wrench acting on the sensor now.
-    fn true_wrench(&mut self, t: Duration) -> Wrench;
+    /// The wrench acting on the sensor now, or `None` when the board should not answer this poll
+    /// (a sensor dropout).
+    fn wrench(&mut self, t: Duration) -> Option<Wrench>;
 }
 
 impl<F: FnMut(Duration) -> Wrench + Send> WrenchSource for F {
-    fn true_wrench(&mut self, t: Duration) -> Wrench {
-        self(t)
+    fn wrench(&mut self, t: Duration) -> Option<Wrench> {
+        Some(self(t))
+    }
+}
+
+/// A [`World`](crate::World) as the node's wrench source.
+pub struct WorldSource {
+    world: SharedWorld,
+    measured: bool,
+}
+
+impl WorldSource {
+    /// The world's sensor model reading (the scenario's noise, bias, drift and dropouts), which the node
+    /// then quantises through its calibration.
+    pub fn measured(world: SharedWorld) -> Self {
+        Self {
+            world,
+            measured: true,
+        }
+    }
+
+    /// The plant's true wrench ([`World::true_wrench`](crate::World::true_wrench)), untouched.
+    pub fn truth(world: SharedWorld) -> Self {
+        Self {
+            world,
+            measured: false,
+        }
+    }
+}
+
+impl WrenchSource for WorldSource {
+    fn wrench(&mut self, _t: Duration) -> Option<Wrench> {
+        let mut w = crate::world::lock(&self.world);
+        if self.measured {
+            w.measure()
+        } else {
+            Some(w.true_wrench())
+        }
     }
 }
 
@@ -272,7 +311,9 @@ impl AtiNode {
         match req {
             Request::Poll => {
                 self.polls += 1;
-                let w = self.source.true_wrench(now);
+                let Some(w) = self.source.wrench(now) else {
+                    return vec![];
+                };
                 let g = self.gauges_for(&w, now);
                 let (first, second) = split(&g);
                 vec![
