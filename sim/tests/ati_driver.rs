@@ -99,3 +99,120 @@ fn bias_is_averaged_on_raw_gauges_and_refused_when_unsafe() {
 fn bus_off_stops_polling_until_restart() {
     ati_common::bus_off_stops_polling_until_restart(&Mem);
 }
+
+// ---- the two ForceSensor faces of the driver ------------------------------------------------------
+
+use std::time::{Duration, Instant};
+
+use ati_can::{AtiError, AtiSensor, BiasConfig, Driver, Health, Lockstep};
+use hal::{Error as _, ErrorKind, ForceSensor, Wrench};
+use sim::ati_node::{AtiNode, SharedNode};
+
+fn fixed_node(w: Wrench) -> SharedNode {
+    SharedNode::new(AtiNode::new(NodeConfig::default(), move |_t: Duration| w).unwrap())
+}
+
+/// Wait (bounded, generously) until `f` holds; panics with `what` otherwise. Not a timing assertion:
+/// the bound only keeps a broken build from hanging.
+fn eventually(what: &str, mut f: impl FnMut() -> bool) {
+    let t0 = Instant::now();
+    while !f() {
+        assert!(t0.elapsed() < Duration::from_secs(30), "never: {what}");
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+#[test]
+fn background_sensor_reads_the_newest_sample_and_tares_through_the_poller() {
+    let w = Wrench::from_array([0.5, -1.0, 20.0, 0.01, 0.02, 0.03]);
+    let bus = MemBus::new();
+    let node = fixed_node(w);
+    bus.attach(node.clone());
+    let driver = Driver::new(bus.port(), Config::default()).unwrap();
+    let mut sensor = AtiSensor::spawn(driver, 200.0).unwrap();
+    eventually("health Ok", || sensor.health() == Health::Ok);
+    let s = sensor.read().unwrap();
+    assert!((s.wrench.force.z - 20.0).abs() < 0.02, "{s:?}");
+    let info = sensor.info().unwrap();
+    assert_eq!(info.slot, 0);
+    let first = s.seq;
+    eventually("a newer sample", || {
+        sensor.read().is_ok_and(|s| s.seq > first)
+    });
+
+    let bias = sensor
+        .tare(
+            BiasConfig {
+                window: 20,
+                max_spread: 2,
+            },
+            Duration::from_secs(30),
+        )
+        .unwrap();
+    assert_eq!(sensor.bias(), bias);
+    eventually("a biased sample", || {
+        sensor.read().is_ok_and(|s| s.wrench.force.norm() < 0.02)
+    });
+
+    // A critical status reaches `read` as a DeviceFault, never as a sample.
+    node.lock().set_status(1 << 4);
+    eventually("device error", || {
+        matches!(sensor.health(), Health::DeviceError(_))
+    });
+    assert_eq!(sensor.read().unwrap_err().kind(), ErrorKind::DeviceFault);
+    sensor.stop();
+}
+
+#[test]
+fn background_sensor_refuses_impossible_rates_and_virtual_clocks() {
+    let bus = MemBus::new();
+    let slow = Config {
+        bitrate: 250_000,
+        ..Config::default()
+    };
+    let e = AtiSensor::spawn(Driver::new(bus.port(), slow).unwrap(), 1000.0).unwrap_err();
+    assert_eq!(e.kind(), ErrorKind::Config);
+    assert!(e.to_string().contains("raise the bit rate"), "{e}");
+    assert!(AtiSensor::spawn(Driver::new(bus.port(), Config::default()).unwrap(), 0.0).is_err());
+    let virt = MemBus::with_virtual_clock();
+    let e =
+        AtiSensor::spawn(Driver::new(virt.port(), Config::default()).unwrap(), 100.0).unwrap_err();
+    assert!(e.to_string().contains("Lockstep"), "{e}");
+}
+
+#[test]
+fn lockstep_read_is_one_exchange_with_the_world_as_it_is_now() {
+    let bus = MemBus::with_virtual_clock();
+    let fz = std::sync::Arc::new(std::sync::Mutex::new(1.0));
+    let source = {
+        let fz = fz.clone();
+        move |_t: Duration| Wrench::from_array([0.0, 0.0, *fz.lock().unwrap(), 0.0, 0.0, 0.0])
+    };
+    let node = SharedNode::new(AtiNode::new(NodeConfig::default(), source).unwrap());
+    bus.attach(node.clone());
+    let mut driver = Driver::new(bus.port(), Config::default()).unwrap();
+    driver.start().unwrap();
+    let mut sensor = Lockstep(driver);
+    for k in 1..=5u64 {
+        *fz.lock().unwrap() = 3.0 * k as f64;
+        let s = sensor.read().unwrap();
+        assert_eq!(s.seq, k);
+        assert!((s.wrench.force.z - 3.0 * k as f64).abs() < 0.02, "{s:?}");
+        assert_eq!(
+            s.age,
+            Duration::ZERO,
+            "answered in the caller's thread, no bus time passed"
+        );
+    }
+    assert_eq!(sensor.driver().counters().requests, 11 + 5);
+    // A board that stops answering: the old sample ages, then the driver reports a timeout.
+    node.lock().set_silent(true);
+    let mut errors = Vec::new();
+    for _ in 0..12 {
+        if let Err(e) = sensor.read() {
+            errors.push(e.kind());
+        }
+    }
+    assert!(errors.contains(&ErrorKind::Timeout), "{errors:?}");
+    assert!(matches!(sensor.read(), Err(AtiError::Timeout)));
+}

@@ -682,12 +682,10 @@ impl<T: CanTransport> Driver<T> {
         let mut got: [Option<Answer>; 3] = [None; 3];
         let mut n = 0;
         loop {
-            let now = self.clock.now();
-            let event = if now < deadline {
-                self.transport.recv(deadline - now)?
-            } else {
-                None
-            };
+            // Past the deadline the wait is zero: what already sits in the queue still counts (a
+            // descheduled driver must not call an answer it has received a timeout).
+            let wait = deadline.saturating_sub(self.clock.now());
+            let event = self.transport.recv(wait)?;
             let frame = match event {
                 // Woke early: wait on until the deadline.
                 None if self.clock.now() < deadline => continue,

@@ -179,6 +179,16 @@ impl AtiSensor {
     }
 }
 
+impl core::fmt::Debug for AtiSensor {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let s = self.snapshot();
+        f.debug_struct("AtiSensor")
+            .field("health", &s.view.health_at(self.clock.now()))
+            .field("counters", &s.counters)
+            .finish_non_exhaustive()
+    }
+}
+
 impl Drop for AtiSensor {
     fn drop(&mut self) {
         self.halt();
