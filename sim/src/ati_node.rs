@@ -641,6 +641,35 @@ mod tests {
     }
 
     #[test]
+    fn world_sources_read_the_contact_plant() {
+        use crate::{ContactPlant, InnerLoopModel, SensorParams, World};
+        // 0.1 mm into a 70 kN/m surface: 7 N.
+        let world = World::new(
+            ContactPlant::spring(70_000.0, 0.01),
+            InnerLoopModel::P0,
+            SensorParams::default(),
+            0.0101,
+        )
+        .shared();
+        let conv = NodeConfig::default().slots[0].converter().unwrap();
+        for source in [
+            WorldSource::truth(world.clone()),
+            WorldSource::measured(world.clone()),
+        ] {
+            let mut node = AtiNode::new(NodeConfig::default(), source).unwrap();
+            let frames = collect(&mut node, Request::Poll);
+            let (Ok(Answer::PollFirst { gauges: a, .. }), Ok(Answer::PollSecond { gauges: b })) = (
+                Answer::decode(&frames[0].1, Base::DEFAULT),
+                Answer::decode(&frames[1].1, Base::DEFAULT),
+            ) else {
+                panic!("{frames:?}");
+            };
+            let fz = conv.wrench(&interleave(a, b), &[0.0; 6]).force.z;
+            assert!((fz - 7.0).abs() < 0.02, "{fz}");
+        }
+    }
+
+    #[test]
     fn ignores_what_is_not_a_request() {
         let mut node = node_with(Wrench::default());
         let mut n = 0;

@@ -288,6 +288,11 @@ impl Request {
         }
     }
 
+    /// The data length of the request frame (0 or 1).
+    pub fn data_len(self) -> u8 {
+        u8::from(self.argument().is_some())
+    }
+
     /// The frames of the answer as `(opcode, data length)`, in wire order; empty when the board does
     /// not answer.
     pub fn answer_layout(self) -> &'static [(u8, u8)] {
@@ -696,6 +701,7 @@ mod tests {
         for (req, wire) in cases {
             let f = req.encode(B).unwrap();
             assert_eq!(f.to_string(), wire);
+            assert_eq!(f.dlc(), req.data_len());
             assert_eq!(Request::decode(&f, B), Ok(req));
         }
         let other = Base::new(0x7F).unwrap();

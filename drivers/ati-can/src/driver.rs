@@ -76,15 +76,7 @@ fn frame_bits(dlc: u8) -> u64 {
 impl Config {
     /// Time on the wire of `req` and its answer, with worst-case bit stuffing (×1.2).
     pub fn wire_time(&self, req: Request) -> Duration {
-        let dlc = match req {
-            Request::MatrixRow(_)
-            | Request::SelectSlot(_)
-            | Request::AdcVoltage(_)
-            | Request::SetBase(_)
-            | Request::SetBitrate(_) => 1,
-            _ => 0,
-        };
-        let bits = frame_bits(dlc)
+        let bits = frame_bits(req.data_len())
             + req
                 .answer_layout()
                 .iter()
