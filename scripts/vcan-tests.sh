@@ -44,15 +44,16 @@ fi
 # The driver-vs-node scenarios and can-utils interop (sim/tests/ati_vcan.rs) and the CLI's ATI commands
 # (tests/ati_cli_vcan.rs). Their vcan tests are #[ignore]d in a plain `cargo test`.
 echo "vcan-tests: building the test binaries"
+# Release profile: scripts/test.sh has just built it, so this reuses its artifacts.
 build_test() { # package test-name -> path of the test executable
-  cargo test -p "$1" --test "$2" --no-run --message-format=json 2>/dev/null |
+  cargo test --release -p "$1" --test "$2" --no-run --message-format=json 2>/dev/null |
     grep -o "\"executable\":\"[^\"]*/$2-[0-9a-f]*\"" | tail -n 1 | sed 's/^"executable":"//; s/"$//'
 }
 bins=()
 for spec in forcecell-sim:ati_vcan forcecell:ati_cli_vcan; do
   bin=$(build_test "${spec%%:*}" "${spec#*:}") || true
   if [ -z "$bin" ] || [ ! -x "$bin" ]; then
-    cargo test -p "${spec%%:*}" --test "${spec#*:}" --no-run >&2 || true
+    cargo test --release -p "${spec%%:*}" --test "${spec#*:}" --no-run >&2 || true
     die "could not build the ${spec#*:} test binary (see the errors above)"
   fi
   bins+=("$bin")
