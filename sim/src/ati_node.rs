@@ -260,6 +260,11 @@ impl AtiNode {
         self.faults.extend(core::iter::repeat_n(fault, n));
     }
 
+    /// Faults injected but not applied yet.
+    pub fn pending_faults(&self) -> usize {
+        self.faults.len()
+    }
+
     /// Stop answering anything (a disconnected board) or resume.
     pub fn set_silent(&mut self, silent: bool) {
         self.silent = silent;

@@ -132,8 +132,14 @@ pub struct Calibration {
 /// Why a calibration cannot be used.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum CalibrationError {
-    /// Counts per unit of zero.
-    ZeroCounts,
+    /// Counts per unit of zero or above [`MAX_COUNTS_PER_UNIT`] (a byte-swapped 1 000 000 reads
+    /// 1 078 071 040).
+    Counts {
+        /// Counts per force unit.
+        per_force: u32,
+        /// Counts per torque unit.
+        per_torque: u32,
+    },
     /// A matrix coefficient that is not finite, subnormal or implausibly large (|c| > 1e9): a corrupted
     /// or byte-swapped matrix.
     Coefficient {
@@ -151,7 +157,13 @@ pub enum CalibrationError {
 impl fmt::Display for CalibrationError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Self::ZeroCounts => f.write_str("counts per unit is zero"),
+            Self::Counts {
+                per_force,
+                per_torque,
+            } => write!(
+                f,
+                "counts per unit {per_force} (force), {per_torque} (torque) outside 1..={MAX_COUNTS_PER_UNIT} (corrupted or byte-swapped?)"
+            ),
             Self::Coefficient { row, col, value } => write!(
                 f,
                 "calibration matrix coefficient [{row}][{col}] = {value:e} is not plausible (corrupted or byte-swapped?)"
@@ -163,6 +175,9 @@ impl fmt::Display for CalibrationError {
 
 impl std::error::Error for CalibrationError {}
 
+/// Largest plausible counts per unit (ATI boards report 1 000 000 or thereabouts).
+pub const MAX_COUNTS_PER_UNIT: u32 = 100_000_000;
+
 /// Largest plausible calibration coefficient magnitude.
 const MAX_COEFFICIENT: f32 = 1e9;
 
@@ -170,6 +185,11 @@ const MAX_COEFFICIENT: f32 = 1e9;
 /// byte-swapped small float is subnormal, a corrupted one often NaN or huge.
 pub fn plausible_coefficient(c: f32) -> bool {
     (c == 0.0 || c.is_normal()) && c.abs() <= MAX_COEFFICIENT
+}
+
+/// True for counts per unit a board can report: 1..=[`MAX_COUNTS_PER_UNIT`].
+pub fn plausible_counts(c: u32) -> bool {
+    (1..=MAX_COUNTS_PER_UNIT).contains(&c)
 }
 
 /// A checked calibration: counts to SI in one matrix product.
@@ -182,8 +202,11 @@ pub struct Converter {
 impl Calibration {
     /// Check the values and build the converter.
     pub fn converter(&self) -> Result<Converter, CalibrationError> {
-        if self.counts_per_force == 0 || self.counts_per_torque == 0 {
-            return Err(CalibrationError::ZeroCounts);
+        if !(plausible_counts(self.counts_per_force) && plausible_counts(self.counts_per_torque)) {
+            return Err(CalibrationError::Counts {
+                per_force: self.counts_per_force,
+                per_torque: self.counts_per_torque,
+            });
         }
         let f_scale = self.force_unit.newtons() / f64::from(self.counts_per_force);
         let t_scale = self.torque_unit.newton_metres() / f64::from(self.counts_per_torque);
@@ -301,7 +324,15 @@ mod tests {
             force_unit: ForceUnit::N,
             torque_unit: TorqueUnit::Nm,
         };
-        assert_eq!(cal.converter(), Err(CalibrationError::ZeroCounts));
+        assert!(matches!(
+            cal.converter(),
+            Err(CalibrationError::Counts { .. })
+        ));
+        cal.counts_per_force = 1_000_000u32.swap_bytes();
+        assert!(matches!(
+            cal.converter(),
+            Err(CalibrationError::Counts { .. })
+        ));
         cal.counts_per_force = 1;
         cal.matrix[3][4] = f32::NAN;
         assert!(matches!(

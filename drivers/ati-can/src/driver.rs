@@ -20,6 +20,7 @@ use hal::{Sample, Wrench};
 
 use crate::calibration::{
     Calibration, Converter, ForceUnit, LEGACY_COUNTS_PER_UNIT, TorqueUnit, plausible_coefficient,
+    plausible_counts,
 };
 use crate::codec::{Answer, Base, CodecError, Firmware, Gauges, Request, Status, interleave};
 use crate::error::{AtiError, BiasError, StartupProblem};
@@ -920,6 +921,17 @@ impl<T: CanTransport> Driver<T> {
                 } else {
                     self.advance(Step::Counts)
                 }
+            }
+            (
+                Step::Counts,
+                Some(Answer::Counts {
+                    per_force,
+                    per_torque,
+                }),
+            ) if !(plausible_counts(per_force) && plausible_counts(per_torque)) => {
+                // Corrupted or byte-swapped: ask again.
+                self.counters.malformed += 1;
+                self.startup_no_answer(step)
             }
             (
                 Step::Counts,
