@@ -35,17 +35,24 @@ enum Command {
     Sensor(SensorArgs),
 }
 
+/// Which sensor on which CAN interface (shared by `sim-sensor` and `sensor`).
 #[derive(Args)]
-struct SimSensorArgs {
+struct CanSensorArgs {
     /// Sensor family (only `ati`: ATI NETCANOEM over CAN).
     #[arg(value_parser = ["ati"])]
     kind: String,
-    /// CAN interface, e.g. vcan0.
+    /// CAN interface, e.g. can0 or vcan0.
     #[arg(long)]
     can: String,
     /// Base identifier (ids BASE<<4 | opcode).
     #[arg(long, default_value = "0x20", value_parser = forcecell::ati::parse_base)]
     base: ati_can::Base,
+}
+
+#[derive(Args)]
+struct SimSensorArgs {
+    #[command(flatten)]
+    bus: CanSensorArgs,
     /// Constant Fz the node reports, N.
     #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
     fz: f64,
@@ -59,15 +66,8 @@ struct SimSensorArgs {
 
 #[derive(Args)]
 struct SensorArgs {
-    /// Sensor family (only `ati`: ATI NETCANOEM over CAN).
-    #[arg(value_parser = ["ati"])]
-    kind: String,
-    /// CAN interface, e.g. can0 or vcan0.
-    #[arg(long)]
-    can: String,
-    /// Base identifier.
-    #[arg(long, default_value = "0x20", value_parser = forcecell::ati::parse_base)]
-    base: ati_can::Base,
+    #[command(flatten)]
+    bus: CanSensorArgs,
     /// Bus bit rate, bit/s (sets the per-request deadline).
     #[arg(long, default_value_t = 1_000_000)]
     bitrate: u32,
@@ -146,8 +146,8 @@ fn main() -> ExitCode {
         Command::Sim(a) => sim(a),
         Command::Plot(a) => plot_trace(a),
         Command::SimSensor(a) => forcecell::ati::sim_sensor(
-            &a.can,
-            a.base,
+            &a.bus.can,
+            a.bus.base,
             hal::Wrench::from_array([0.0, 0.0, a.fz, 0.0, 0.0, 0.0]),
             a.noise,
             a.seconds,
@@ -209,7 +209,7 @@ fn sim(a: SimArgs) -> Result<ExitCode> {
 
 fn sensor(a: SensorArgs) -> Result<ExitCode> {
     let cfg = ati_can::Config {
-        base: a.base,
+        base: a.bus.base,
         bitrate: a.bitrate,
         slot: a.slot,
         turnaround: Duration::from_micros(a.turnaround_us),
@@ -222,7 +222,7 @@ fn sensor(a: SensorArgs) -> Result<ExitCode> {
             forcecell::ati::SensorAction::Read { count, rate, tare }
         }
     };
-    forcecell::ati::sensor(&a.can, cfg, action)?;
+    forcecell::ati::sensor(&a.bus.can, cfg, action)?;
     Ok(ExitCode::SUCCESS)
 }
 
