@@ -2,6 +2,7 @@
 //! recording, metrics and plots. The `forcecell` binary is a thin CLI over it.
 #![cfg_attr(not(test), warn(missing_docs))]
 
+pub mod ati;
 pub mod metrics;
 pub mod plot;
 pub mod record;

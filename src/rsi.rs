@@ -3,21 +3,23 @@
 
 use std::net::{Ipv4Addr, SocketAddr};
 use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread;
 use std::time::Duration;
 
 use anyhow::{Context, Result, anyhow, bail};
 use clap::{Args, ValueEnum};
 use controller::LoopConfig;
-use hal::{Correction, Cycle, RobotLink};
+use hal::{Correction, Cycle, ForceSensor, RobotLink};
 use kuka_rsi::{
     CorrectionMode, Diagnostics, EthernetConfig, Limits, LinkConfig, LinkError, PoscorrLimits,
     RobotFilter, RobotSetup, RsiLink,
 };
 use sim::krc::{Krc, KrcConfig, KrcEnd, KrcReport, Timing};
-use sim::{InProcSensor, InnerLoopModel, SharedWorld};
+use sim::{InProcRobot, InProcSensor, InnerLoopModel, SharedWorld};
 
-use crate::runner::{RunResult, RunSpec, run_inproc, run_with};
+use crate::runner::{RunResult, RunSpec, run_with};
 
 /// Which robot backend `forcecell sim` drives.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -103,96 +105,221 @@ fn period_of(model: &InnerLoopModel) -> Duration {
     Duration::from_secs_f64(model.period)
 }
 
-/// Run a scenario with the chosen robot backend.
+/// The robot half of a simulated cell, ready to run: the world it drives and, over RSI, the bound
+/// driver and the simulated controller already sending (or waiting for an external client). The
+/// sensor half is chosen separately and handed to [`RobotSide::run`].
+pub struct RobotSide {
+    spec: RunSpec,
+    world: SharedWorld,
+    kind: Kind,
+}
+
+enum Kind {
+    Inproc,
+    Simulated {
+        link: Box<RsiLink>,
+        krc: thread::JoinHandle<KrcReport>,
+        abort: Arc<AtomicBool>,
+    },
+    External {
+        link: Box<RsiLink>,
+    },
+}
+
+impl RobotSide {
+    /// The in-process robot on a fresh world (no wire).
+    pub fn inproc(spec: &RunSpec) -> Self {
+        Self {
+            world: spec.world(),
+            spec: spec.clone(),
+            kind: Kind::Inproc,
+        }
+    }
+
+    /// The robot the options ask for.
+    pub fn start(spec: &RunSpec, args: &RsiArgs) -> Result<Self> {
+        if let Some(addr) = args.external_robot {
+            return Self::external(spec, addr);
+        }
+        match args.robot {
+            RobotBackend::Inproc if args.realtime => {
+                bail!("--realtime needs the RSI robot backend (--robot rsi)")
+            }
+            RobotBackend::Inproc => Ok(Self::inproc(spec)),
+            RobotBackend::Rsi => Self::simulated(spec, args.realtime),
+        }
+    }
+
+    /// The scenario as this robot runs it (an external robot sets the period and the inner loop).
+    pub fn spec(&self) -> &RunSpec {
+        &self.spec
+    }
+
+    /// The world the robot moves; a sensor backend measures it.
+    pub fn world(&self) -> &SharedWorld {
+        &self.world
+    }
+
+    fn simulated(spec: &RunSpec, realtime: bool) -> Result<Self> {
+        let world = spec.world();
+        let local = SocketAddr::from((Ipv4Addr::LOCALHOST, 0));
+        let ethernet = EthernetConfig::forcecell(Ipv4Addr::LOCALHOST, 0, false);
+        let (limits, poscorr, poscorrmon) = cell_limits(&spec.tuning.loop_cfg);
+        let mut lc = LinkConfig::new(ethernet.clone(), RobotFilter::Any);
+        lc.bind = Some(local);
+        lc.period = period_of(&spec.plant);
+        lc.limits = limits;
+        lc.poscorr = poscorr;
+        lc.poscorrmon = poscorrmon;
+        lc.first_contact_timeout = Some(Duration::from_secs(10));
+        // 1 s: lockstep pauses whenever the loop does.
+        lc.watchdog_cycles = ((1.0 / spec.plant.period).ceil() as u32).max(25);
+        let mut link = RsiLink::bind(lc).context("RSI driver")?;
+        let mut kc = KrcConfig::new(ethernet, link.local_addr()?);
+        kc.period = period_of(&spec.plant);
+        kc.ipoc_step = ((spec.plant.period * 1000.0).round() as u64).max(1);
+        kc.timing = if realtime {
+            Timing::Realtime
+        } else {
+            Timing::Lockstep {
+                deadline: Duration::from_millis(500),
+            }
+        };
+        // Lockstep: exactly one datagram per step. Real time: the robot keeps its clock whatever the
+        // loop misses, so it runs until the loop is done and aborts it.
+        kc.cycles = (!realtime).then(|| spec.steps());
+        kc.poscorr = poscorr;
+        kc.poscorrmon = poscorrmon;
+        let mut krc = Krc::new(kc).context("simulated KUKA controller")?;
+        link.set_robot_filter(RobotFilter::Exact(krc.local_addr()?));
+        let abort = krc.abort_handle();
+        let mut mech: SharedWorld = world.clone();
+        let krc = thread::Builder::new()
+            .name("sim-krc".into())
+            .spawn(move || krc.run(&mut mech))?;
+        Ok(Self {
+            spec: spec.clone(),
+            world,
+            kind: Kind::Simulated {
+                link: Box::new(link),
+                krc,
+                abort,
+            },
+        })
+    }
+
+    fn external(spec: &RunSpec, addr: SocketAddr) -> Result<Self> {
+        let mut spec = spec.clone();
+        // The client is the clock and the inner loop: the world just follows what it reports.
+        spec.plant = InnerLoopModel {
+            period: 0.004,
+            tau: 0.0,
+            delay_cycles: 0,
+        };
+        spec.plant_label = "external".into();
+        let world = spec.world();
+        let ip = match addr.ip() {
+            std::net::IpAddr::V4(ip) => ip,
+            std::net::IpAddr::V6(_) => bail!("RSI is IPv4: give an IPv4 ADDR:PORT"),
+        };
+        let ethernet = EthernetConfig::forcecell(ip, addr.port(), false);
+        let (limits, poscorr, poscorrmon) = cell_limits(&spec.tuning.loop_cfg);
+        let mut lc = LinkConfig::new(ethernet, RobotFilter::Any);
+        lc.limits = limits;
+        lc.poscorr = poscorr;
+        lc.poscorrmon = poscorrmon;
+        let link = RsiLink::bind(lc).context("RSI driver")?;
+        println!(
+            "listening for an RSI client on {} (SENTYPE ImFree; `forcecell rsi-config` writes its files)",
+            link.local_addr()?
+        );
+        Ok(Self {
+            spec,
+            world,
+            kind: Kind::External {
+                link: Box::new(link),
+            },
+        })
+    }
+
+    /// Run the scenario with this robot and `sensor` (which must measure [`RobotSide::world`]).
+    pub fn run<S>(
+        self,
+        sensor: S,
+        progress: &mut dyn FnMut(f64),
+    ) -> Result<(RunResult, Option<WireSummary>)>
+    where
+        S: ForceSensor,
+        S::Error: Send + Sync + 'static,
+    {
+        let Self { spec, world, kind } = self;
+        match kind {
+            Kind::Inproc => {
+                let robot = InProcRobot::new(world.clone());
+                Ok((run_with(&spec, &world, robot, sensor, progress)?, None))
+            }
+            Kind::Simulated {
+                mut link,
+                krc,
+                abort,
+            } => {
+                let result = run_with(&spec, &world, &mut *link, sensor, progress);
+                abort.store(true, Ordering::Relaxed);
+                let report = krc
+                    .join()
+                    .map_err(|_| anyhow!("the simulated controller panicked"))?;
+                let run = result?;
+                if !matches!(report.end, KrcEnd::Completed | KrcEnd::Aborted) {
+                    eprintln!("note: the simulated controller ended with {:?}", report.end);
+                }
+                Ok((
+                    run,
+                    Some(WireSummary {
+                        diagnostics: link.diagnostics().clone(),
+                        krc: Some(report),
+                    }),
+                ))
+            }
+            Kind::External { mut link } => {
+                let robot = ExternalRobot {
+                    link: &mut link,
+                    world: world.clone(),
+                };
+                let run = run_with(&spec, &world, robot, sensor, progress)?;
+                Ok((
+                    run,
+                    Some(WireSummary {
+                        diagnostics: link.diagnostics().clone(),
+                        krc: None,
+                    }),
+                ))
+            }
+        }
+    }
+
+    /// Run with the world's own sensor model read in process (no sensor wire).
+    pub fn run_inproc_sensor(
+        self,
+        progress: &mut dyn FnMut(f64),
+    ) -> Result<(RunResult, Option<WireSummary>)> {
+        let sensor = InProcSensor::new(self.world.clone());
+        self.run(sensor, progress)
+    }
+}
+
+/// Run a scenario with the chosen robot backend and the in-process sensor.
 pub fn run(
     spec: &RunSpec,
     args: &RsiArgs,
     progress: &mut dyn FnMut(f64),
 ) -> Result<(RunResult, Option<WireSummary>)> {
-    if let Some(addr) = args.external_robot {
-        return run_external(spec, addr, progress).map(|(r, w)| (r, Some(w)));
-    }
-    match args.robot {
-        RobotBackend::Inproc => {
-            if args.realtime {
-                bail!("--realtime needs the RSI robot backend (--robot rsi)");
-            }
-            Ok((run_inproc(spec, progress)?, None))
-        }
-        RobotBackend::Rsi => {
-            run_simulated(spec, args.realtime, progress).map(|(r, w)| (r, Some(w)))
-        }
-    }
-}
-
-fn run_simulated(
-    spec: &RunSpec,
-    realtime: bool,
-    progress: &mut dyn FnMut(f64),
-) -> Result<(RunResult, WireSummary)> {
-    let world = spec.world();
-    let local = SocketAddr::from((Ipv4Addr::LOCALHOST, 0));
-    let ethernet = EthernetConfig::forcecell(Ipv4Addr::LOCALHOST, 0, false);
-    let (limits, poscorr, poscorrmon) = cell_limits(&spec.tuning.loop_cfg);
-    let mut lc = LinkConfig::new(ethernet.clone(), RobotFilter::Any);
-    lc.bind = Some(local);
-    lc.period = period_of(&spec.plant);
-    lc.limits = limits;
-    lc.poscorr = poscorr;
-    lc.poscorrmon = poscorrmon;
-    lc.first_contact_timeout = Some(Duration::from_secs(10));
-    lc.watchdog_cycles = ((1.0 / spec.plant.period).ceil() as u32).max(25); // 1 s: lockstep is bursty
-    let mut link = RsiLink::bind(lc).context("RSI driver")?;
-    let mut kc = KrcConfig::new(ethernet, link.local_addr()?);
-    kc.period = period_of(&spec.plant);
-    kc.ipoc_step = ((spec.plant.period * 1000.0).round() as u64).max(1);
-    kc.timing = if realtime {
-        Timing::Realtime
-    } else {
-        Timing::Lockstep {
-            deadline: Duration::from_millis(500),
-        }
-    };
-    // Lockstep: exactly one datagram per step. Real time: the robot keeps its clock whatever the
-    // loop misses, so it runs until the loop is done and aborts it.
-    kc.cycles = (!realtime).then(|| spec.steps());
-    kc.poscorr = poscorr;
-    kc.poscorrmon = poscorrmon;
-    let mut krc = Krc::new(kc).context("simulated KUKA controller")?;
-    link.set_robot_filter(RobotFilter::Exact(krc.local_addr()?));
-    let abort = krc.abort_handle();
-    let mut mech: SharedWorld = world.clone();
-    let handle = thread::Builder::new()
-        .name("sim-krc".into())
-        .spawn(move || krc.run(&mut mech))?;
-    let result = run_with(
-        spec,
-        &world,
-        &mut link,
-        InProcSensor::new(world.clone()),
-        progress,
-    );
-    abort.store(true, std::sync::atomic::Ordering::Relaxed);
-    let report = handle
-        .join()
-        .map_err(|_| anyhow!("the simulated controller panicked"))?;
-    let run = result?;
-    if !matches!(report.end, KrcEnd::Completed | KrcEnd::Aborted) {
-        eprintln!("note: the simulated controller ended with {:?}", report.end);
-    }
-    Ok((
-        run,
-        WireSummary {
-            diagnostics: link.diagnostics().clone(),
-            krc: Some(report),
-        },
-    ))
+    RobotSide::start(spec, args)?.run_inproc_sensor(progress)
 }
 
 /// An external RSI client drives a world whose robot follows the reported pose exactly: each cycle
 /// the normal offset the client reports becomes the world's position, and the simulated sensor
 /// measures there.
-pub struct ExternalRobot<'a> {
+struct ExternalRobot<'a> {
     link: &'a mut RsiLink,
     world: SharedWorld,
 }
@@ -212,55 +339,6 @@ impl RobotLink for ExternalRobot<'_> {
     fn reply(&mut self, correction: &Correction) -> Result<(), LinkError> {
         self.link.reply(correction)
     }
-}
-
-fn run_external(
-    spec: &RunSpec,
-    addr: SocketAddr,
-    progress: &mut dyn FnMut(f64),
-) -> Result<(RunResult, WireSummary)> {
-    let mut spec = spec.clone();
-    // The client is the clock and the inner loop: the world just follows what it reports.
-    spec.plant = InnerLoopModel {
-        period: 0.004,
-        tau: 0.0,
-        delay_cycles: 0,
-    };
-    spec.plant_label = "external".into();
-    let world = spec.world();
-    let ip = match addr.ip() {
-        std::net::IpAddr::V4(ip) => ip,
-        std::net::IpAddr::V6(_) => bail!("RSI is IPv4: give an IPv4 ADDR:PORT"),
-    };
-    let ethernet = EthernetConfig::forcecell(ip, addr.port(), false);
-    let (limits, poscorr, poscorrmon) = cell_limits(&spec.tuning.loop_cfg);
-    let mut lc = LinkConfig::new(ethernet, RobotFilter::Any);
-    lc.limits = limits;
-    lc.poscorr = poscorr;
-    lc.poscorrmon = poscorrmon;
-    let mut link = RsiLink::bind(lc).context("RSI driver")?;
-    println!(
-        "listening for an RSI client on {} (SENTYPE ImFree; `forcecell rsi-config` writes its files)",
-        link.local_addr()?
-    );
-    let robot = ExternalRobot {
-        link: &mut link,
-        world: world.clone(),
-    };
-    let run = run_with(
-        &spec,
-        &world,
-        robot,
-        InProcSensor::new(world.clone()),
-        progress,
-    )?;
-    Ok((
-        run,
-        WireSummary {
-            diagnostics: link.diagnostics().clone(),
-            krc: None,
-        },
-    ))
 }
 
 /// Correction mode on the command line.

@@ -3,11 +3,13 @@
 //! * [`law`] — the paper's adaptive position-based impedance law (and the fixed-reference law it improves
 //!   on) as a pure `step` over an injected `dt`;
 //! * [`control_loop`] — the loop that wires any [`hal::RobotLink`] and [`hal::ForceSensor`] to a law,
-//!   gating bad input so it never reaches the command.
+//!   gating bad input so it never reaches the command;
+//! * [`gravity`] — tool weight and sensor bias: least-squares identification and run-time compensation.
 #![cfg_attr(not(test), warn(missing_docs))]
 
 pub mod config;
 pub mod control_loop;
+pub mod gravity;
 pub mod law;
 
 pub use config::{LawConfig, Overrides, Tuning};

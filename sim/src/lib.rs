@@ -2,6 +2,7 @@
 //! a sensor model, and the simulated peers that speak to forcecell's drivers.
 #![cfg_attr(not(test), warn(missing_docs))]
 
+pub mod ati_node;
 pub mod inner;
 pub mod krc;
 pub mod plant;
