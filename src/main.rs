@@ -208,6 +208,7 @@ fn sim(a: SimArgs) -> Result<ExitCode> {
             (_, Some(iface)) => format!("ATI driver ↔ simulated node on {iface}"),
         }
     );
+    println!("robot: {}", a.robot.describe());
     let robot = forcecell::rsi::RobotSide::start(&spec, &a.robot)?;
     let (run, wire) = if a.sensor == "inproc" {
         robot.run_inproc_sensor(&mut |frac| bar.update(frac))?

@@ -45,6 +45,24 @@ pub struct RsiArgs {
     pub external_robot: Option<SocketAddr>,
 }
 
+impl RsiArgs {
+    /// One line for the run's header.
+    pub fn describe(&self) -> String {
+        match (self.external_robot, self.robot) {
+            (Some(addr), _) => format!("KUKA RSI driver listening on {addr} for an external robot"),
+            (None, RobotBackend::Inproc) => "in-process robot".to_string(),
+            (None, RobotBackend::Rsi) => format!(
+                "KUKA RSI driver ↔ simulated KRC over loopback UDP ({})",
+                if self.realtime {
+                    "real time"
+                } else {
+                    "lockstep"
+                }
+            ),
+        }
+    }
+}
+
 /// What the wire did during a run.
 #[derive(Clone, Debug)]
 pub struct WireSummary {
