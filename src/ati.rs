@@ -13,10 +13,10 @@ use ati_can::{
     MemBus, SocketCanTransport,
 };
 use hal::{ForceSensor, Wrench};
-use sim::InProcRobot;
 use sim::ati_node::{AtiNode, NodeConfig, SharedNode, WorldSource, serve};
 
-use crate::runner::{RunResult, RunSpec, run_with};
+use crate::rsi::{RobotSide, WireSummary};
+use crate::runner::{RunResult, RunSpec};
 
 /// Parse a base identifier written as `0x20`, `20h` or decimal.
 pub fn parse_base(s: &str) -> Result<Base, String> {
@@ -52,7 +52,16 @@ pub fn run_sim(
     can: Option<&str>,
     progress: &mut dyn FnMut(f64),
 ) -> Result<RunResult> {
-    let world = spec.world();
+    run_sim_with(RobotSide::inproc(spec), can, progress).map(|(run, _)| run)
+}
+
+/// [`run_sim`] with any robot side (the in-process robot, RSI over loopback, an external RSI client).
+pub fn run_sim_with(
+    robot: RobotSide,
+    can: Option<&str>,
+    progress: &mut dyn FnMut(f64),
+) -> Result<(RunResult, Option<WireSummary>)> {
+    let world = robot.world().clone();
     let base = Base::DEFAULT;
     let node = SharedNode::new(
         AtiNode::new(
@@ -64,7 +73,6 @@ pub fn run_sim(
         )
         .map_err(|e| anyhow!("simulated ATI node: {e}"))?,
     );
-    let robot = InProcRobot::new(world.clone());
     let cfg = sim_driver_config(base, can);
     match can {
         None => {
@@ -74,7 +82,7 @@ pub fn run_sim(
             driver
                 .start()
                 .context("ATI start-up on the in-memory bus")?;
-            run_with(spec, &world, robot, Lockstep(driver), progress)
+            robot.run(Lockstep(driver), progress)
         }
         Some(iface) => {
             let stop = Arc::new(AtomicBool::new(false));
@@ -88,7 +96,7 @@ pub fn run_sim(
                 driver
                     .start()
                     .with_context(|| format!("ATI start-up on {iface}"))?;
-                run_with(spec, &world, robot, Lockstep(driver), progress)
+                robot.run(Lockstep(driver), progress)
             })();
             stop.store(true, Ordering::Release);
             serving

@@ -6,5 +6,6 @@ pub mod ati;
 pub mod metrics;
 pub mod plot;
 pub mod record;
+pub mod rsi;
 pub mod runner;
 pub mod scenario;

@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
-use forcecell::runner::{RunResult, RunSpec, run_inproc};
+use forcecell::runner::{RunResult, RunSpec};
 use forcecell::scenario::Scenario;
 use forcecell::{plot, record};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -27,6 +27,8 @@ struct Cli {
 enum Command {
     /// Simulate a cell: run a scenario, print a summary, write DIR/NAME.csv and DIR/NAME.png.
     Sim(SimArgs),
+    /// Write the robot-side KUKA RSI files (Ethernet config XML, KRL template) for this configuration.
+    RsiConfig(forcecell::rsi::RsiConfigArgs),
     /// Plot a recorded trace (CSV written by `sim` or `run`) to PNG and print its metrics.
     Plot(PlotArgs),
     /// Run a simulated sensor node alone on a CAN interface.
@@ -138,12 +140,20 @@ struct SimArgs {
     /// Run the ATI sensor over this SocketCAN interface (e.g. vcan0) instead of the in-memory bus.
     #[arg(long)]
     can: Option<String>,
+    #[command(flatten)]
+    robot: forcecell::rsi::RsiArgs,
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Sim(a) => sim(a),
+        Command::RsiConfig(a) => forcecell::rsi::rsi_config(&a).map(|files| {
+            for f in files {
+                println!("wrote {}", f.display());
+            }
+            ExitCode::SUCCESS
+        }),
         Command::Plot(a) => plot_trace(a),
         Command::SimSensor(a) => forcecell::ati::sim_sensor(
             &a.bus.can,
@@ -198,12 +208,17 @@ fn sim(a: SimArgs) -> Result<ExitCode> {
             (_, Some(iface)) => format!("ATI driver ↔ simulated node on {iface}"),
         }
     );
-    let run = if a.sensor == "inproc" {
-        run_inproc(&spec, &mut |frac| bar.update(frac))?
+    println!("robot: {}", a.robot.describe());
+    let robot = forcecell::rsi::RobotSide::start(&spec, &a.robot)?;
+    let (run, wire) = if a.sensor == "inproc" {
+        robot.run_inproc_sensor(&mut |frac| bar.update(frac))?
     } else {
-        forcecell::ati::run_sim(&spec, a.can.as_deref(), &mut |frac| bar.update(frac))?
+        forcecell::ati::run_sim_with(robot, a.can.as_deref(), &mut |frac| bar.update(frac))?
     };
     bar.finish();
+    if let Some(w) = &wire {
+        w.print();
+    }
     report(&spec, &run, &a.out, a.check)
 }
 

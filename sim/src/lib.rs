@@ -4,11 +4,13 @@
 
 pub mod ati_node;
 pub mod inner;
+pub mod krc;
 pub mod plant;
 pub mod sensor_model;
 pub mod world;
 
 pub use inner::{InnerLoop, InnerLoopModel};
+pub use krc::{Krc, KrcConfig, KrcEnd, KrcReport, Mechanism, RigidArm, Timing};
 pub use plant::{ContactPlant, Event, Schedule};
 pub use sensor_model::{SensorModel, SensorParams, Window};
 pub use world::{InProcRobot, InProcSensor, SharedWorld, Truth, World};
