@@ -58,7 +58,7 @@ impl Default for BenchOptions {
 /// The B scenarios that are not ours (listed in the table so the set is complete).
 pub const ELSEWHERE: &[(&str, &str)] = &[(
     "b10-gravity",
-    "gravity compensation: controller::gravity (built on another branch)",
+    "gravity compensation: controller::gravity, asserted by its own test b10_two_kilogram_tool_reoriented_leaves_under_0_3_newton",
 )];
 
 /// The built-in B scenarios selected by `opts`, in name order.

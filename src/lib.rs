@@ -2,10 +2,12 @@
 //! recording, metrics and plots. The `forcecell` binary is a thin CLI over it.
 #![cfg_attr(not(test), warn(missing_docs))]
 
+pub mod ati;
 pub mod bench;
 pub mod metrics;
 pub mod plot;
 pub mod record;
+pub mod rsi;
 pub mod runner;
 pub mod scenario;
 pub mod tune;

@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
-use forcecell::runner::{RunResult, RunSpec, run_inproc};
+use forcecell::runner::{RunResult, RunSpec};
 use forcecell::scenario::Scenario;
 use forcecell::{plot, record};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -27,6 +27,8 @@ struct Cli {
 enum Command {
     /// Simulate a cell: run a scenario, print a summary, write DIR/NAME.csv and DIR/NAME.png.
     Sim(SimArgs),
+    /// Write the robot-side KUKA RSI files (Ethernet config XML, KRL template) for this configuration.
+    RsiConfig(forcecell::rsi::RsiConfigArgs),
     /// Plot a recorded trace (CSV written by `sim` or `run`) to PNG and print its metrics.
     Plot(PlotArgs),
     /// Judge a tuning (damping ratio, delay margin) or propose impedance parameters for a stiffness range
@@ -34,6 +36,77 @@ enum Command {
     Tune(TuneArgs),
     /// Run the B scenarios on P1 and P2 with the robust and the paper's tuning: one table, plots in OUT.
     BenchScenarios(BenchArgs),
+    /// Run a simulated sensor node alone on a CAN interface.
+    SimSensor(SimSensorArgs),
+    /// Talk to a force/torque sensor: identity, readings, bias.
+    Sensor(SensorArgs),
+}
+
+/// Which sensor on which CAN interface (shared by `sim-sensor` and `sensor`).
+#[derive(Args)]
+struct CanSensorArgs {
+    /// Sensor family (only `ati`: ATI NETCANOEM over CAN).
+    #[arg(value_parser = ["ati"])]
+    kind: String,
+    /// CAN interface, e.g. can0 or vcan0.
+    #[arg(long)]
+    can: String,
+    /// Base identifier (ids BASE<<4 | opcode).
+    #[arg(long, default_value = "0x20", value_parser = forcecell::ati::parse_base)]
+    base: ati_can::Base,
+}
+
+#[derive(Args)]
+struct SimSensorArgs {
+    #[command(flatten)]
+    bus: CanSensorArgs,
+    /// Constant Fz the node reports, N.
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
+    fz: f64,
+    /// Gauge noise, counts (standard deviation).
+    #[arg(long, default_value_t = 2.0)]
+    noise: f64,
+    /// Stop after this many seconds (default: run until interrupted).
+    #[arg(long)]
+    seconds: Option<f64>,
+}
+
+#[derive(Args)]
+struct SensorArgs {
+    #[command(flatten)]
+    bus: CanSensorArgs,
+    /// Bus bit rate, bit/s (sets the per-request deadline).
+    #[arg(long, default_value_t = 1_000_000)]
+    bitrate: u32,
+    /// Calibration slot to select.
+    #[arg(long, default_value_t = 0)]
+    slot: u8,
+    /// The board's turnaround allowance added to each request's wire time, µs (raise it on a loaded
+    /// host or a virtual interface).
+    #[arg(long, default_value_t = 300)]
+    turnaround_us: u64,
+    #[command(subcommand)]
+    action: SensorCommand,
+}
+
+#[derive(Subcommand)]
+enum SensorCommand {
+    /// Identity and calibration (firmware, serial, slot, matrix, counts per unit, units, status).
+    Info,
+    /// A stream of readings (N, N·m, bias removed), ten per second.
+    Read {
+        /// Lines to print.
+        #[arg(long, default_value_t = 20)]
+        count: u32,
+        /// Poll rate, Hz.
+        #[arg(long, default_value_t = 500.0)]
+        rate: f64,
+        /// Take a bias first (hold the sensor still, unloaded).
+        #[arg(long)]
+        tare: bool,
+    },
+    /// Take a bias over 200 samples and print it (refused while saturated, in error or moving).
+    Tare,
 }
 
 #[derive(Args)]
@@ -105,15 +178,39 @@ struct SimArgs {
     /// Exit with status 1 when a scenario target is missed.
     #[arg(long)]
     check: bool,
+    /// Force sensor: `ati` (the ATI CAN driver against a simulated node, in lockstep) or `inproc`
+    /// (the world's sensor model read directly, no wire).
+    #[arg(long, default_value = "ati", value_parser = ["ati", "inproc"])]
+    sensor: String,
+    /// Run the ATI sensor over this SocketCAN interface (e.g. vcan0) instead of the in-memory bus.
+    #[arg(long)]
+    can: Option<String>,
+    #[command(flatten)]
+    robot: forcecell::rsi::RsiArgs,
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Sim(a) => sim(a),
+        Command::RsiConfig(a) => forcecell::rsi::rsi_config(&a).map(|files| {
+            for f in files {
+                println!("wrote {}", f.display());
+            }
+            ExitCode::SUCCESS
+        }),
         Command::Plot(a) => plot_trace(a),
         Command::Tune(a) => tune(a),
         Command::BenchScenarios(a) => bench_scenarios(a),
+        Command::SimSensor(a) => forcecell::ati::sim_sensor(
+            &a.bus.can,
+            a.bus.base,
+            hal::Wrench::from_array([0.0, 0.0, a.fz, 0.0, 0.0, 0.0]),
+            a.noise,
+            a.seconds,
+        )
+        .map(|()| ExitCode::SUCCESS),
+        Command::Sensor(a) => sensor(a),
     };
     match result {
         Ok(code) => code,
@@ -147,8 +244,28 @@ fn sim(a: SimArgs) -> Result<ExitCode> {
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create output directory {}", a.out.display()))?;
     let mut bar = DelayedBar::new(Duration::from_millis(300));
-    let run = run_inproc(&spec, &mut |frac| bar.update(frac))?;
+    if a.sensor == "inproc" && a.can.is_some() {
+        anyhow::bail!("--can needs --sensor ati");
+    }
+    println!(
+        "sensor: {}",
+        match (a.sensor.as_str(), a.can.as_deref()) {
+            ("inproc", _) => "in-process sensor model".to_string(),
+            (_, None) => "ATI driver ↔ simulated node, in-memory CAN bus".to_string(),
+            (_, Some(iface)) => format!("ATI driver ↔ simulated node on {iface}"),
+        }
+    );
+    println!("robot: {}", a.robot.describe());
+    let robot = forcecell::rsi::RobotSide::start(&spec, &a.robot)?;
+    let (run, wire) = if a.sensor == "inproc" {
+        robot.run_inproc_sensor(&mut |frac| bar.update(frac))?
+    } else {
+        forcecell::ati::run_sim_with(robot, a.can.as_deref(), &mut |frac| bar.update(frac))?
+    };
     bar.finish();
+    if let Some(w) = &wire {
+        w.print();
+    }
     report(&spec, &run, &a.out, a.check)
 }
 
@@ -187,6 +304,25 @@ fn bench_scenarios(a: BenchArgs) -> Result<ExitCode> {
     } else {
         ExitCode::SUCCESS
     })
+}
+
+fn sensor(a: SensorArgs) -> Result<ExitCode> {
+    let cfg = ati_can::Config {
+        base: a.bus.base,
+        bitrate: a.bitrate,
+        slot: a.slot,
+        turnaround: Duration::from_micros(a.turnaround_us),
+        ..ati_can::Config::default()
+    };
+    let action = match a.action {
+        SensorCommand::Info => forcecell::ati::SensorAction::Info,
+        SensorCommand::Tare => forcecell::ati::SensorAction::Tare,
+        SensorCommand::Read { count, rate, tare } => {
+            forcecell::ati::SensorAction::Read { count, rate, tare }
+        }
+    };
+    forcecell::ati::sensor(&a.bus.can, cfg, action)?;
+    Ok(ExitCode::SUCCESS)
 }
 
 fn plot_trace(a: PlotArgs) -> Result<ExitCode> {

@@ -6,13 +6,15 @@
 //!   gating bad input so it never reaches the command;
 //! * [`robust`] — forcecell's robust law (with [`estimator`] and [`conditioning`]): what holds the force
 //!   on a cell with sampling, lag, delay and a noisy sensor;
-//! * [`tune`] — damping ratio and delay margin of impedance parameters, proposals, verdicts.
+//! * [`tune`] — damping ratio and delay margin of impedance parameters, proposals, verdicts;
+//! * [`gravity`] — tool weight and sensor bias: least-squares identification and run-time compensation.
 #![cfg_attr(not(test), warn(missing_docs))]
 
 pub mod conditioning;
 pub mod config;
 pub mod control_loop;
 pub mod estimator;
+pub mod gravity;
 pub mod law;
 pub mod robust;
 pub mod tune;

@@ -2,12 +2,15 @@
 //! a sensor model, and the simulated peers that speak to forcecell's drivers.
 #![cfg_attr(not(test), warn(missing_docs))]
 
+pub mod ati_node;
 pub mod inner;
+pub mod krc;
 pub mod plant;
 pub mod sensor_model;
 pub mod world;
 
 pub use inner::{InnerLoop, InnerLoopModel};
+pub use krc::{Krc, KrcConfig, KrcEnd, KrcReport, Mechanism, RigidArm, Timing};
 pub use plant::{ContactPlant, Event, Schedule};
 pub use sensor_model::{SensorModel, SensorParams, Window};
 pub use world::{InProcRobot, InProcSensor, SharedWorld, Truth, World};

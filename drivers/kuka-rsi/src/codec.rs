@@ -1,0 +1,928 @@
+//! The sans-IO RSI codec, one for both directions.
+//!
+//! A [`Schema`] says which elements a message carries, in which order and of which type; it is built
+//! from the robot's Ethernet config ([`crate::EthernetConfig::rob_schema`] for what the robot sends,
+//! [`crate::EthernetConfig::sen_schema`] for what it receives). A [`Frame`] holds one message's values
+//! in numbered slots plus its IPOC, in wire units (mm, degrees) exactly as on the wire.
+//!
+//! * The driver parses `<Rob>` and writes `<Sen>`; the simulated controller writes `<Rob>` and parses
+//!   `<Sen>` — the same [`Schema::parse`] and [`Schema::write`].
+//! * Neither allocates: the frame is a fixed array, the writer fills a caller's buffer.
+//! * The IPOC is kept as the digits received and echoed verbatim.
+//! * Numbers are written as plain fixed-point with the schema's precision: never an exponent, NaN or inf.
+
+use core::fmt;
+
+use crate::xml::{ParseError, Visitor, scan_message};
+
+/// How many numeric values one message can hold (six internal poses, `Delay`, `Tech` and 64 user
+/// channels fit with room to spare).
+pub const MAX_SLOTS: usize = 128;
+
+/// How many elements one message can name (besides `IPOC`).
+pub const MAX_ELEMENTS: usize = 128;
+
+/// The type of one value, as the config's `TYPE` attribute names it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ValueType {
+    /// `0`/`1` (also accepts `TRUE`/`FALSE`).
+    Bool,
+    /// A signed integer.
+    Long,
+    /// A fixed-point decimal.
+    Double,
+    /// Free text. The codec checks it is ASCII, does not keep it, and writes it empty.
+    String,
+}
+
+impl ValueType {
+    /// The config's spelling.
+    pub fn as_config(self) -> &'static str {
+        match self {
+            Self::Bool => "BOOL",
+            Self::Long => "LONG",
+            Self::Double => "DOUBLE",
+            Self::String => "STRING",
+        }
+    }
+
+    /// Parse the config's spelling (case-insensitive).
+    pub fn from_config(s: &str) -> Option<Self> {
+        match s.to_ascii_uppercase().as_str() {
+            "BOOL" => Some(Self::Bool),
+            "LONG" => Some(Self::Long),
+            "DOUBLE" => Some(Self::Double),
+            "STRING" => Some(Self::String),
+            _ => None,
+        }
+    }
+}
+
+/// One value of an element: an attribute, or the element's text.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Field {
+    /// Attribute name; empty for an element's text.
+    pub name: String,
+    /// Type.
+    pub ty: ValueType,
+    /// Slot in a [`Frame`]; `None` for strings.
+    pub slot: Option<usize>,
+    /// HOLDON of the config (what the robot does with this value on a late reply).
+    pub holdon: bool,
+    key: u64,
+}
+
+/// What an element carries.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Content {
+    /// `<Tag A="…" B="…"/>`.
+    Attributes(Vec<Field>),
+    /// `<Tag>…</Tag>`.
+    Text(Field),
+}
+
+/// One element of a message.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ElementSpec {
+    /// Tag name.
+    pub tag: String,
+    /// Its values.
+    pub content: Content,
+    key: u64,
+}
+
+impl ElementSpec {
+    /// The fields, attributes or text.
+    pub fn fields(&self) -> &[Field] {
+        match &self.content {
+            Content::Attributes(f) => f,
+            Content::Text(f) => core::slice::from_ref(f),
+        }
+    }
+}
+
+/// Which message a schema describes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Direction {
+    /// Robot → PC, root `<Rob>`.
+    Rob,
+    /// PC → robot, root `<Sen>`.
+    Sen,
+}
+
+impl Direction {
+    fn root(self) -> &'static [u8] {
+        match self {
+            Self::Rob => b"Rob",
+            Self::Sen => b"Sen",
+        }
+    }
+}
+
+/// The layout of one message: elements in order, their slots, the `Type` attribute and precision.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Schema {
+    direction: Direction,
+    type_value: String,
+    elements: Vec<ElementSpec>,
+    slots: usize,
+    required: u128,
+    precision: u8,
+}
+
+impl Schema {
+    /// An empty schema. `type_value` is written as the root's `Type`; for [`Direction::Sen`] a parsed
+    /// message must carry exactly it (the robot's `SENTYPE`). `precision` is the number of decimals
+    /// written for doubles (0–9).
+    pub fn new(direction: Direction, type_value: &str, precision: u8) -> Result<Self, String> {
+        if precision > 9 {
+            return Err(format!("precision must be 0..=9 decimals, got {precision}"));
+        }
+        if type_value.is_empty()
+            || !type_value
+                .bytes()
+                .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-')
+        {
+            return Err(format!(
+                "Type {type_value:?} must be non-empty ASCII letters, digits, '_' or '-'"
+            ));
+        }
+        Ok(Self {
+            direction,
+            type_value: type_value.to_owned(),
+            elements: Vec::new(),
+            slots: 0,
+            required: 0,
+            precision,
+        })
+    }
+
+    /// Which message this is.
+    pub fn direction(&self) -> Direction {
+        self.direction
+    }
+
+    /// The root's `Type` value.
+    pub fn type_value(&self) -> &str {
+        &self.type_value
+    }
+
+    /// Decimals written for doubles.
+    pub fn precision(&self) -> u8 {
+        self.precision
+    }
+
+    /// The elements in order.
+    pub fn elements(&self) -> &[ElementSpec] {
+        &self.elements
+    }
+
+    /// Number of slots in use.
+    pub fn slots(&self) -> usize {
+        self.slots
+    }
+
+    fn check_name(name: &str) -> Result<(), String> {
+        let ok = name
+            .bytes()
+            .next()
+            .is_some_and(|b| b.is_ascii_alphabetic() || b == b'_')
+            && name
+                .bytes()
+                .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-');
+        if ok && name != "IPOC" {
+            Ok(())
+        } else {
+            Err(format!(
+                "{name:?} is not usable as an RSI tag or attribute name (ASCII letters, digits, '_', '-'; not IPOC)"
+            ))
+        }
+    }
+
+    fn field(&mut self, name: &str, ty: ValueType, holdon: bool) -> Result<Field, String> {
+        let slot = if ty == ValueType::String {
+            None
+        } else {
+            if self.slots == MAX_SLOTS {
+                return Err(format!("more than {MAX_SLOTS} values in one message"));
+            }
+            self.required |= 1u128 << self.slots;
+            self.slots += 1;
+            Some(self.slots - 1)
+        };
+        Ok(Field {
+            name: name.to_owned(),
+            ty,
+            slot,
+            holdon,
+            key: short_key(name.as_bytes()),
+        })
+    }
+
+    /// Add attribute `name` of element `tag` (created at the end if new).
+    pub fn push_attr(
+        &mut self,
+        tag: &str,
+        name: &str,
+        ty: ValueType,
+        holdon: bool,
+    ) -> Result<(), String> {
+        Self::check_name(tag)?;
+        Self::check_name(name)?;
+        let idx = match self.elements.iter().position(|e| e.tag == tag) {
+            Some(i) => i,
+            None => {
+                if self.elements.len() == MAX_ELEMENTS {
+                    return Err(format!("more than {MAX_ELEMENTS} elements in one message"));
+                }
+                self.elements.push(ElementSpec {
+                    tag: tag.to_owned(),
+                    content: Content::Attributes(Vec::new()),
+                    key: short_key(tag.as_bytes()),
+                });
+                self.elements.len() - 1
+            }
+        };
+        if let Content::Attributes(fields) = &self.elements[idx].content {
+            if fields.iter().any(|f| f.name == name) {
+                return Err(format!("{tag}.{name} is configured twice"));
+            }
+        } else {
+            return Err(format!(
+                "{tag} is configured both as a text element and with attribute {name}"
+            ));
+        }
+        let field = self.field(name, ty, holdon)?;
+        if let Content::Attributes(fields) = &mut self.elements[idx].content {
+            fields.push(field);
+        }
+        Ok(())
+    }
+
+    /// Add a text element `<tag>value</tag>` at the end.
+    pub fn push_text(&mut self, tag: &str, ty: ValueType, holdon: bool) -> Result<(), String> {
+        Self::check_name(tag)?;
+        if self.elements.iter().any(|e| e.tag == tag) {
+            return Err(format!("{tag} is configured twice"));
+        }
+        if self.elements.len() == MAX_ELEMENTS {
+            return Err(format!("more than {MAX_ELEMENTS} elements in one message"));
+        }
+        let field = self.field("", ty, holdon)?;
+        self.elements.push(ElementSpec {
+            tag: tag.to_owned(),
+            content: Content::Text(field),
+            key: short_key(tag.as_bytes()),
+        });
+        Ok(())
+    }
+
+    /// The slot of attribute `attr` of `tag`, or of the text of `tag` when `attr` is empty.
+    pub fn slot(&self, tag: &str, attr: &str) -> Option<usize> {
+        let e = self.elements.iter().find(|e| e.tag == tag)?;
+        e.fields().iter().find(|f| f.name == attr)?.slot
+    }
+
+    /// The slots of six attributes of `tag` (e.g. `RIst` `X Y Z A B C`), if all are there.
+    pub fn six(&self, tag: &str, attrs: [&str; 6]) -> Option<[usize; 6]> {
+        let mut out = [0; 6];
+        for (o, a) in out.iter_mut().zip(attrs) {
+            *o = self.slot(tag, a)?;
+        }
+        Some(out)
+    }
+
+    /// The field behind a slot.
+    pub fn field_of(&self, slot: usize) -> Option<&Field> {
+        self.elements
+            .iter()
+            .flat_map(|e| e.fields())
+            .find(|f| f.slot == Some(slot))
+    }
+
+    /// Name an element index from a [`ParseError`].
+    pub fn element_name(&self, index: u8) -> Option<&str> {
+        self.elements.get(index as usize).map(|e| e.tag.as_str())
+    }
+
+    /// Parse one message into `frame`. On error the frame's contents are unspecified.
+    pub fn parse(&self, bytes: &[u8], frame: &mut Frame) -> Result<(), ParseError> {
+        frame.present = 0;
+        frame.ipoc = Ipoc::default();
+        let mut st = ParseState {
+            schema: self,
+            frame,
+            cur: Cur::Unknown,
+            next_element: 0,
+            next_field: 0,
+            seen: 0,
+            ipoc_seen: false,
+            type_seen: false,
+        };
+        let root = scan_message(bytes, &mut st)?;
+        if root != self.direction.root() {
+            return Err(ParseError::WrongRoot);
+        }
+        if self.direction == Direction::Sen && !st.type_seen {
+            return Err(ParseError::WrongType);
+        }
+        if !st.ipoc_seen {
+            return Err(ParseError::MissingIpoc);
+        }
+        let missing = self.required & !st.frame.present;
+        if missing != 0 {
+            let slot = missing.trailing_zeros() as usize;
+            let element = self
+                .elements
+                .iter()
+                .position(|e| e.fields().iter().any(|f| f.slot == Some(slot)))
+                .unwrap_or(0);
+            return Err(ParseError::MissingElement {
+                element: element as u8,
+            });
+        }
+        Ok(())
+    }
+
+    /// Write one message from `frame` into `out`; returns the number of bytes written.
+    pub fn write(&self, frame: &Frame, out: &mut [u8]) -> Result<usize, WriteError> {
+        let mut w = Out { buf: out, n: 0 };
+        w.put(b"<")?;
+        w.put(self.direction.root())?;
+        w.put(b" Type=\"")?;
+        w.put(self.type_value.as_bytes())?;
+        w.put(b"\">")?;
+        for e in &self.elements {
+            w.put(b"<")?;
+            w.put(e.tag.as_bytes())?;
+            match &e.content {
+                Content::Attributes(fields) => {
+                    for f in fields {
+                        w.put(b" ")?;
+                        w.put(f.name.as_bytes())?;
+                        w.put(b"=\"")?;
+                        self.value(&mut w, f, frame)?;
+                        w.put(b"\"")?;
+                    }
+                    w.put(b"/>")?;
+                }
+                Content::Text(f) => {
+                    w.put(b">")?;
+                    self.value(&mut w, f, frame)?;
+                    w.put(b"</")?;
+                    w.put(e.tag.as_bytes())?;
+                    w.put(b">")?;
+                }
+            }
+        }
+        w.put(b"<IPOC>")?;
+        w.put(frame.ipoc.digits())?;
+        w.put(b"</IPOC></")?;
+        w.put(self.direction.root())?;
+        w.put(b">")?;
+        Ok(w.n)
+    }
+
+    fn value(&self, w: &mut Out<'_>, f: &Field, frame: &Frame) -> Result<(), WriteError> {
+        let Some(slot) = f.slot else {
+            return Ok(());
+        };
+        let v = frame.values[slot];
+        if !v.is_finite() {
+            return Err(WriteError::NonFinite { slot });
+        }
+        match f.ty {
+            ValueType::Bool => w.put(if v != 0.0 { b"1" } else { b"0" }),
+            ValueType::Long => w.fixed(v, 0, slot),
+            ValueType::Double => w.fixed(v, self.precision, slot),
+            ValueType::String => Ok(()),
+        }
+    }
+}
+
+/// Why a message could not be written.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WriteError {
+    /// The output buffer is too small.
+    BufferTooSmall,
+    /// A value is NaN or infinite (never written).
+    NonFinite {
+        /// Slot.
+        slot: usize,
+    },
+    /// A value is too large to write in plain fixed-point at the schema's precision.
+    OutOfRange {
+        /// Slot.
+        slot: usize,
+    },
+}
+
+impl fmt::Display for WriteError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::BufferTooSmall => f.write_str("output buffer too small for the message"),
+            Self::NonFinite { slot } => write!(f, "value in slot {slot} is not finite"),
+            Self::OutOfRange { slot } => {
+                write!(
+                    f,
+                    "value in slot {slot} is too large for fixed-point output"
+                )
+            }
+        }
+    }
+}
+
+impl std::error::Error for WriteError {}
+
+/// An IPOC: the digits as received (echoed verbatim) and their value.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub struct Ipoc {
+    value: u64,
+    digits: [u8; 20],
+    len: u8,
+}
+
+impl fmt::Debug for Ipoc {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "Ipoc({})",
+            core::str::from_utf8(self.digits()).unwrap_or("?")
+        )
+    }
+}
+
+impl Ipoc {
+    /// The canonical digits of `value`.
+    pub fn new(value: u64) -> Self {
+        let mut digits = [0u8; 20];
+        let mut tmp = [0u8; 20];
+        let mut n = 0;
+        let mut v = value;
+        loop {
+            tmp[n] = b'0' + (v % 10) as u8;
+            n += 1;
+            v /= 10;
+            if v == 0 {
+                break;
+            }
+        }
+        for k in 0..n {
+            digits[k] = tmp[n - 1 - k];
+        }
+        Self {
+            value,
+            digits,
+            len: n as u8,
+        }
+    }
+
+    /// Parse 1–20 ASCII digits (leading zeros kept for the echo).
+    pub fn parse(text: &[u8]) -> Result<Self, ParseError> {
+        if text.is_empty() || text.len() > 20 || !text.iter().all(u8::is_ascii_digit) {
+            return Err(ParseError::BadIpoc);
+        }
+        let mut value: u64 = 0;
+        for &d in text {
+            value = value
+                .checked_mul(10)
+                .and_then(|v| v.checked_add(u64::from(d - b'0')))
+                .ok_or(ParseError::BadIpoc)?;
+        }
+        let mut digits = [0u8; 20];
+        digits[..text.len()].copy_from_slice(text);
+        Ok(Self {
+            value,
+            digits,
+            len: text.len() as u8,
+        })
+    }
+
+    /// Its value.
+    pub fn value(&self) -> u64 {
+        self.value
+    }
+
+    /// The digits exactly as received.
+    pub fn digits(&self) -> &[u8] {
+        &self.digits[..self.len as usize]
+    }
+}
+
+/// One message's values in wire units, by slot, and its IPOC.
+#[derive(Clone, PartialEq)]
+pub struct Frame {
+    values: [f64; MAX_SLOTS],
+    present: u128,
+    ipoc: Ipoc,
+}
+
+impl Default for Frame {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl fmt::Debug for Frame {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let n = 128 - self.present.leading_zeros() as usize;
+        f.debug_struct("Frame")
+            .field("ipoc", &self.ipoc)
+            .field("values", &&self.values[..n])
+            .finish()
+    }
+}
+
+impl Frame {
+    /// All zeros, IPOC 0.
+    pub fn new() -> Self {
+        Self {
+            values: [0.0; MAX_SLOTS],
+            present: 0,
+            ipoc: Ipoc::new(0),
+        }
+    }
+
+    /// The value in `slot` (0 when never set).
+    pub fn get(&self, slot: usize) -> f64 {
+        self.values[slot]
+    }
+
+    /// Set the value in `slot`.
+    pub fn set(&mut self, slot: usize, v: f64) {
+        self.values[slot] = v;
+        self.present |= 1u128 << slot;
+    }
+
+    /// Six slots at once.
+    pub fn get6(&self, slots: [usize; 6]) -> [f64; 6] {
+        slots.map(|s| self.values[s])
+    }
+
+    /// Set six slots at once.
+    pub fn set6(&mut self, slots: [usize; 6], v: [f64; 6]) {
+        for (s, x) in slots.into_iter().zip(v) {
+            self.set(s, x);
+        }
+    }
+
+    /// True when the last parse (or a `set`) filled `slot`.
+    pub fn is_present(&self, slot: usize) -> bool {
+        self.present & (1u128 << slot) != 0
+    }
+
+    /// The IPOC.
+    pub fn ipoc(&self) -> &Ipoc {
+        &self.ipoc
+    }
+
+    /// Set the IPOC.
+    pub fn set_ipoc(&mut self, ipoc: Ipoc) {
+        self.ipoc = ipoc;
+    }
+}
+
+/// Names of up to 8 bytes packed into one integer (names never contain NUL, so zero padding is
+/// unambiguous); 0 for longer names, which are compared byte by byte.
+fn short_key(name: &[u8]) -> u64 {
+    if name.is_empty() || name.len() > 8 {
+        return 0;
+    }
+    name.iter()
+        .rev()
+        .fold(0u64, |k, &b| (k << 8) | u64::from(b))
+}
+
+enum Cur {
+    Element(usize),
+    Ipoc,
+    Unknown,
+}
+
+struct ParseState<'s, 'f> {
+    schema: &'s Schema,
+    frame: &'f mut Frame,
+    cur: Cur,
+    /// Where the next element / field most likely is (messages come in config order).
+    next_element: usize,
+    next_field: usize,
+    seen: u128,
+    ipoc_seen: bool,
+    type_seen: bool,
+}
+
+impl ParseState<'_, '_> {
+    fn store(&mut self, f: &Field, value: &[u8], at: usize) -> Result<(), ParseError> {
+        let Some(slot) = f.slot else {
+            return Ok(());
+        };
+        let v = match f.ty {
+            ValueType::Double => parse_decimal(value),
+            ValueType::Long => parse_integer(value),
+            ValueType::Bool => parse_bool(value),
+            ValueType::String => return Ok(()),
+        }
+        .ok_or(ParseError::BadNumber { at })?;
+        self.frame.set(slot, v);
+        Ok(())
+    }
+}
+
+impl<'a> Visitor<'a> for ParseState<'_, '_> {
+    fn root_attr(&mut self, name: &'a [u8], value: &'a [u8], _at: usize) -> Result<(), ParseError> {
+        if name.eq_ignore_ascii_case(b"type") {
+            if self.schema.direction == Direction::Sen && value != self.schema.type_value.as_bytes()
+            {
+                return Err(ParseError::WrongType);
+            }
+            self.type_seen = true;
+        }
+        Ok(())
+    }
+
+    fn child(&mut self, tag: &'a [u8]) -> Result<(), ParseError> {
+        if tag == b"IPOC" {
+            if self.ipoc_seen {
+                return Err(ParseError::BadIpoc);
+            }
+            self.cur = Cur::Ipoc;
+            return Ok(());
+        }
+        let els = &self.schema.elements;
+        let key = short_key(tag);
+        let is = |e: &ElementSpec| e.key == key && (key != 0 || e.tag.as_bytes() == tag);
+        let found = match els.get(self.next_element) {
+            Some(e) if is(e) => Some(self.next_element),
+            _ => els.iter().position(is),
+        };
+        self.next_field = 0;
+        self.cur = match found {
+            Some(i) => {
+                if self.seen & (1u128 << i) != 0 {
+                    return Err(ParseError::DuplicateElement { element: i as u8 });
+                }
+                self.seen |= 1u128 << i;
+                self.next_element = i + 1;
+                Cur::Element(i)
+            }
+            None => Cur::Unknown,
+        };
+        Ok(())
+    }
+
+    fn child_attr(&mut self, name: &'a [u8], value: &'a [u8], at: usize) -> Result<(), ParseError> {
+        let Cur::Element(i) = self.cur else {
+            return Ok(());
+        };
+        let schema = self.schema;
+        if let Content::Attributes(fields) = &schema.elements[i].content {
+            let key = short_key(name);
+            let is = |f: &Field| f.key == key && (key != 0 || f.name.as_bytes() == name);
+            let found = match fields.get(self.next_field) {
+                Some(f) if is(f) => Some(self.next_field),
+                _ => fields.iter().position(is),
+            };
+            if let Some(k) = found {
+                self.next_field = k + 1;
+                self.store(&fields[k], value, at)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn child_text(&mut self, text: &'a [u8], at: usize) -> Result<(), ParseError> {
+        match self.cur {
+            Cur::Ipoc => {
+                self.frame.ipoc = Ipoc::parse(text)?;
+                self.ipoc_seen = true;
+                Ok(())
+            }
+            Cur::Element(i) => {
+                let schema = self.schema;
+                if let Content::Text(f) = &schema.elements[i].content {
+                    self.store(f, text, at)?;
+                }
+                Ok(())
+            }
+            Cur::Unknown => Ok(()),
+        }
+    }
+}
+
+/// Exact powers of ten as f64 (10^0 ..= 10^22 are all exactly representable).
+const POW10F: [f64; 23] = [
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+];
+
+/// `[+-]digits[.digits]` or `[+-].digits`, finite. No exponent, no `inf`, no `nan`.
+///
+/// Fast path (Clinger): up to 19 digits whose value is below 2^53 with at most 22 decimals is one
+/// exact integer divided by one exact power of ten — correctly rounded, like `str::parse`, which
+/// handles everything else.
+pub(crate) fn parse_decimal(s: &[u8]) -> Option<f64> {
+    let (neg, body) = match s.first()? {
+        b'-' => (true, &s[1..]),
+        b'+' => (false, &s[1..]),
+        _ => (false, s),
+    };
+    let mut mant: u64 = 0;
+    let mut digits = 0u32;
+    let mut frac = 0usize;
+    let mut dot = false;
+    for &c in body {
+        match c {
+            b'0'..=b'9' => {
+                if digits < 19 {
+                    mant = mant * 10 + u64::from(c - b'0');
+                }
+                digits += 1;
+                frac += usize::from(dot);
+            }
+            b'.' if !dot => dot = true,
+            _ => return None,
+        }
+    }
+    if digits == 0 {
+        return None;
+    }
+    if digits <= 19 && mant < (1u64 << 53) && frac < POW10F.len() {
+        let v = mant as f64 / POW10F[frac];
+        return Some(if neg { -v } else { v });
+    }
+    let v: f64 = core::str::from_utf8(s).ok()?.parse().ok()?;
+    v.is_finite().then_some(v)
+}
+
+/// `[+-]digits` within i64.
+pub(crate) fn parse_integer(s: &[u8]) -> Option<f64> {
+    let (neg, body) = match s.first()? {
+        b'-' => (true, &s[1..]),
+        b'+' => (false, &s[1..]),
+        _ => (false, s),
+    };
+    if body.is_empty() || body.len() > 19 {
+        return None;
+    }
+    let mut v: i64 = 0;
+    for &c in body {
+        if !c.is_ascii_digit() {
+            return None;
+        }
+        v = v.checked_mul(10)?.checked_add(i64::from(c - b'0'))?;
+    }
+    Some(if neg { -v } else { v } as f64)
+}
+
+fn parse_bool(s: &[u8]) -> Option<f64> {
+    if s == b"1" || s.eq_ignore_ascii_case(b"true") {
+        Some(1.0)
+    } else if s == b"0" || s.eq_ignore_ascii_case(b"false") {
+        Some(0.0)
+    } else {
+        None
+    }
+}
+
+struct Out<'b> {
+    buf: &'b mut [u8],
+    n: usize,
+}
+
+const POW10: [u64; 10] = [
+    1,
+    10,
+    100,
+    1_000,
+    10_000,
+    100_000,
+    1_000_000,
+    10_000_000,
+    100_000_000,
+    1_000_000_000,
+];
+
+impl Out<'_> {
+    fn put(&mut self, s: &[u8]) -> Result<(), WriteError> {
+        let end = self.n + s.len();
+        if end > self.buf.len() {
+            return Err(WriteError::BufferTooSmall);
+        }
+        self.buf[self.n..end].copy_from_slice(s);
+        self.n = end;
+        Ok(())
+    }
+
+    fn put_digits(&mut self, mut v: u64, min_len: usize) -> Result<(), WriteError> {
+        let mut tmp = [b'0'; 20];
+        let mut n = 0;
+        while v > 0 || n < min_len.max(1) {
+            tmp[19 - n] = b'0' + (v % 10) as u8;
+            v /= 10;
+            n += 1;
+        }
+        self.put(&tmp[20 - n..])
+    }
+
+    /// Plain fixed-point with `decimals` digits after the point, rounded half away from zero.
+    /// Refuses (`OutOfRange`) when `|v|·10^decimals` is not exactly representable (≥ 2^53).
+    fn fixed(&mut self, v: f64, decimals: u8, slot: usize) -> Result<(), WriteError> {
+        let scale = POW10[decimals as usize];
+        let scaled = (v.abs() * scale as f64).round();
+        if !scaled.is_finite() || scaled >= 9_007_199_254_740_992.0 {
+            return Err(WriteError::OutOfRange { slot });
+        }
+        let n = scaled as u64;
+        if v.is_sign_negative() && n != 0 {
+            self.put(b"-")?;
+        }
+        self.put_digits(n / scale, 1)?;
+        if decimals > 0 {
+            self.put(b".")?;
+            self.put_digits(n % scale, decimals as usize)?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write_one(v: f64, d: u8) -> String {
+        let mut buf = [0u8; 64];
+        let mut o = Out {
+            buf: &mut buf,
+            n: 0,
+        };
+        o.fixed(v, d, 0).unwrap();
+        let n = o.n;
+        String::from_utf8(buf[..n].to_vec()).unwrap()
+    }
+
+    #[test]
+    fn fixed_point_output() {
+        assert_eq!(write_one(0.0, 4), "0.0000");
+        assert_eq!(write_one(-0.0, 4), "0.0000");
+        assert_eq!(write_one(-0.00004, 4), "0.0000");
+        assert_eq!(write_one(-0.00005, 4), "-0.0001");
+        assert_eq!(write_one(445.0, 4), "445.0000");
+        assert_eq!(write_one(-12.34567, 3), "-12.346");
+        assert_eq!(write_one(1e-30, 4), "0.0000");
+        assert_eq!(write_one(7.0, 0), "7");
+        assert_eq!(write_one(123_456_789.5, 1), "123456789.5");
+    }
+
+    #[test]
+    fn huge_values_are_refused_not_written_with_an_exponent() {
+        let mut buf = [0u8; 64];
+        let mut o = Out {
+            buf: &mut buf,
+            n: 0,
+        };
+        assert_eq!(
+            o.fixed(1e300, 4, 3),
+            Err(WriteError::OutOfRange { slot: 3 })
+        );
+        assert_eq!(o.n, 0, "nothing written");
+    }
+
+    #[test]
+    fn decimal_parser_is_plain() {
+        assert_eq!(parse_decimal(b"445.0000"), Some(445.0));
+        assert_eq!(parse_decimal(b"-0.5"), Some(-0.5));
+        assert_eq!(parse_decimal(b"+.5"), Some(0.5));
+        assert_eq!(parse_decimal(b"3."), Some(3.0));
+        for bad in [
+            &b""[..],
+            b"-",
+            b".",
+            b"1e5",
+            b"inf",
+            b"NaN",
+            b"1.2.3",
+            b"1 2",
+            b"0x10",
+        ] {
+            assert_eq!(parse_decimal(bad), None, "{:?}", core::str::from_utf8(bad));
+        }
+        let huge = [b'9'; 400];
+        assert_eq!(parse_decimal(&huge), None, "overflow to inf is rejected");
+    }
+
+    #[test]
+    fn ipoc_keeps_digits_verbatim() {
+        let i = Ipoc::parse(b"000123").unwrap();
+        assert_eq!(i.value(), 123);
+        assert_eq!(i.digits(), b"000123");
+        assert_eq!(Ipoc::new(18_446_744_073_709_551_615).value(), u64::MAX);
+        assert_eq!(
+            Ipoc::parse(b"18446744073709551616"),
+            Err(ParseError::BadIpoc)
+        );
+        assert_eq!(Ipoc::parse(b""), Err(ParseError::BadIpoc));
+        assert_eq!(Ipoc::parse(b"-1"), Err(ParseError::BadIpoc));
+        assert_eq!(Ipoc::new(0).digits(), b"0");
+        assert_eq!(Ipoc::new(4_294_967_296_123).digits(), b"4294967296123");
+    }
+}

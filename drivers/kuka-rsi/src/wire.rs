@@ -1,0 +1,103 @@
+//! The one place where SI meets the wire: metres ↔ millimetres, radians ↔ degrees, rotation
+//! vectors and quaternions ↔ KUKA's `A B C` angles (A about Z, then B about Y, then C about X).
+
+use hal::{Pose, UnitQuaternion, Vector3};
+
+/// Millimetres per metre.
+pub const MM_PER_M: f64 = 1000.0;
+
+/// `[X, Y, Z, A, B, C]` in mm and degrees → a pose in m.
+pub fn pose_from_wire(v: [f64; 6]) -> Pose {
+    Pose {
+        position: Vector3::new(v[0], v[1], v[2]) / MM_PER_M,
+        orientation: UnitQuaternion::from_euler_angles(
+            v[5].to_radians(),
+            v[4].to_radians(),
+            v[3].to_radians(),
+        ),
+    }
+}
+
+/// A pose in m → `[X, Y, Z, A, B, C]` in mm and degrees.
+pub fn pose_to_wire(p: &Pose) -> [f64; 6] {
+    let (c, b, a) = p.orientation.euler_angles();
+    let x = p.position * MM_PER_M;
+    [
+        x.x,
+        x.y,
+        x.z,
+        a.to_degrees(),
+        b.to_degrees(),
+        c.to_degrees(),
+    ]
+}
+
+/// A correction offset (translation m, rotation vector rad) → `[X, Y, Z, A, B, C]` in mm and degrees.
+pub fn offset_to_wire(translation: &Vector3<f64>, rotation: &Vector3<f64>) -> [f64; 6] {
+    let (c, b, a) = UnitQuaternion::from_scaled_axis(*rotation).euler_angles();
+    let x = translation * MM_PER_M;
+    [
+        x.x,
+        x.y,
+        x.z,
+        a.to_degrees(),
+        b.to_degrees(),
+        c.to_degrees(),
+    ]
+}
+
+/// `[X, Y, Z, A, B, C]` in mm and degrees → a correction offset (translation m, rotation vector rad).
+pub fn offset_from_wire(v: [f64; 6]) -> (Vector3<f64>, Vector3<f64>) {
+    let q =
+        UnitQuaternion::from_euler_angles(v[5].to_radians(), v[4].to_radians(), v[3].to_radians());
+    (Vector3::new(v[0], v[1], v[2]) / MM_PER_M, q.scaled_axis())
+}
+
+/// Metres → millimetres (for limits stated in SI and compared at the wire).
+pub fn m_to_mm(m: f64) -> f64 {
+    m * MM_PER_M
+}
+
+/// Millimetres → metres.
+pub fn mm_to_m(mm: f64) -> f64 {
+    mm / MM_PER_M
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn kuka_abc_is_zyx() {
+        // A = 90° about Z turns the tool's x axis onto base y.
+        let p = pose_from_wire([445.0, 0.0, 890.0, 90.0, 0.0, 0.0]);
+        let x = p.orientation * Vector3::x();
+        assert!((x - Vector3::y()).norm() < 1e-12, "{x:?}");
+        assert!((p.position - Vector3::new(0.445, 0.0, 0.890)).norm() < 1e-12);
+        // C = 180° about X flips z.
+        let p = pose_from_wire([0.0, 0.0, 0.0, 0.0, 0.0, 180.0]);
+        assert!((p.orientation * Vector3::z() + Vector3::z()).norm() < 1e-12);
+    }
+
+    #[test]
+    fn pose_round_trip() {
+        let v = [445.0, -12.5, 890.25, 30.0, -20.0, 170.0];
+        let back = pose_to_wire(&pose_from_wire(v));
+        for (a, b) in v.iter().zip(back) {
+            assert!((a - b).abs() < 1e-9, "{v:?} vs {back:?}");
+        }
+    }
+
+    #[test]
+    fn small_offsets_map_axis_by_axis() {
+        let w = offset_to_wire(
+            &Vector3::new(0.0, 0.0, 0.000012),
+            &Vector3::new(0.0, 0.0, 1f64.to_radians()),
+        );
+        assert!((w[2] - 0.012).abs() < 1e-12);
+        assert!((w[3] - 1.0).abs() < 1e-9, "A is about z: {w:?}");
+        let (t, r) = offset_from_wire(w);
+        assert!((t.z - 0.000012).abs() < 1e-15);
+        assert!((r.z - 1f64.to_radians()).abs() < 1e-12);
+    }
+}

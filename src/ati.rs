@@ -1,0 +1,337 @@
+//! The ATI NETCANOEM sensor in the application: the default force sensor of `forcecell sim` (the driver
+//! talking to a simulated node over the in-memory bus, or over a SocketCAN interface), the simulated node
+//! on its own (`forcecell sim-sensor ati`) and a real sensor's tools (`forcecell sensor ati`).
+
+use core::time::Duration;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use anyhow::{Context, Result, anyhow, bail};
+use ati_can::{
+    AtiSensor, Base, BiasConfig, CanTransport, Config, DeviceInfo, Driver, Health, Lockstep,
+    MemBus, SocketCanTransport,
+};
+use hal::{ForceSensor, Wrench};
+use sim::ati_node::{AtiNode, NodeConfig, SharedNode, WorldSource, serve};
+
+use crate::rsi::{RobotSide, WireSummary};
+use crate::runner::{RunResult, RunSpec};
+
+/// Parse a base identifier written as `0x20`, `20h` or decimal.
+pub fn parse_base(s: &str) -> Result<Base, String> {
+    let v = if let Some(hex) = s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
+        u8::from_str_radix(hex, 16)
+    } else {
+        s.parse::<u8>()
+    }
+    .map_err(|e| format!("base {s:?}: {e}"))?;
+    Base::new(v).ok_or_else(|| format!("base {s} is above 0x7F"))
+}
+
+/// Driver settings for a simulated sensor on `can` (`None`: the in-memory bus).
+fn sim_driver_config(base: Base, can: Option<&str>) -> Config {
+    Config {
+        base,
+        // vcan has no bit rate, only scheduling (and a slow guest under User-Mode Linux): allow 20 ms
+        // per answer there. Lockstep does not care about the period, only about getting the answer.
+        turnaround: if can.is_some() {
+            Duration::from_millis(20)
+        } else {
+            Config::default().turnaround
+        },
+        ..Config::default()
+    }
+}
+
+/// Run a scenario with the in-process robot and the ATI driver in lockstep with a simulated node that
+/// reads the world's sensor model: over the in-memory bus (virtual clock, deterministic) or, with `can`,
+/// over that SocketCAN interface (the node answers from its own socket in a thread).
+pub fn run_sim(
+    spec: &RunSpec,
+    can: Option<&str>,
+    progress: &mut dyn FnMut(f64),
+) -> Result<RunResult> {
+    run_sim_with(RobotSide::inproc(spec), can, progress).map(|(run, _)| run)
+}
+
+/// [`run_sim`] with any robot side (the in-process robot, RSI over loopback, an external RSI client).
+pub fn run_sim_with(
+    robot: RobotSide,
+    can: Option<&str>,
+    progress: &mut dyn FnMut(f64),
+) -> Result<(RunResult, Option<WireSummary>)> {
+    let world = robot.world().clone();
+    let base = Base::DEFAULT;
+    let node = SharedNode::new(
+        AtiNode::new(
+            NodeConfig {
+                base,
+                ..NodeConfig::default()
+            },
+            WorldSource::measured(world.clone()),
+        )
+        .map_err(|e| anyhow!("simulated ATI node: {e}"))?,
+    );
+    let cfg = sim_driver_config(base, can);
+    match can {
+        None => {
+            let bus = MemBus::with_virtual_clock();
+            bus.attach(node);
+            let mut driver = Driver::new(bus.port(), cfg)?;
+            driver
+                .start()
+                .context("ATI start-up on the in-memory bus")?;
+            robot.run(Lockstep(driver), progress)
+        }
+        Some(iface) => {
+            let stop = Arc::new(AtomicBool::new(false));
+            let node_port = SocketCanTransport::open(iface)?;
+            let serving = {
+                let stop = Arc::clone(&stop);
+                std::thread::spawn(move || serve(&node, node_port, &stop))
+            };
+            let result = (|| {
+                let mut driver = Driver::new(SocketCanTransport::open(iface)?, cfg)?;
+                driver
+                    .start()
+                    .with_context(|| format!("ATI start-up on {iface}"))?;
+                robot.run(Lockstep(driver), progress)
+            })();
+            stop.store(true, Ordering::Release);
+            serving
+                .join()
+                .map_err(|_| anyhow!("the simulated ATI node thread panicked"))?
+                .with_context(|| format!("simulated ATI node on {iface}"))?;
+            result
+        }
+    }
+}
+
+/// `forcecell sim-sensor ati`: the simulated node alone on `iface`, answering with a constant wrench plus
+/// noise until `seconds` have passed (forever when `None`).
+pub fn sim_sensor(
+    iface: &str,
+    base: Base,
+    wrench: Wrench,
+    noise_counts: f64,
+    seconds: Option<f64>,
+) -> Result<()> {
+    let node = SharedNode::new(
+        AtiNode::new(
+            NodeConfig {
+                base,
+                noise_counts,
+                ..NodeConfig::default()
+            },
+            move |_t: Duration| wrench,
+        )
+        .map_err(|e| anyhow!("simulated ATI node: {e}"))?,
+    );
+    let transport = SocketCanTransport::open(iface)?;
+    let stop = Arc::new(AtomicBool::new(false));
+    if let Some(s) = seconds {
+        if !(s.is_finite() && s > 0.0) {
+            bail!("--seconds must be positive, got {s}");
+        }
+        let stop = Arc::clone(&stop);
+        std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_secs_f64(s));
+            stop.store(true, Ordering::Release);
+        });
+    }
+    println!(
+        "simulated ATI NETCANOEM node on {iface}, base {base} (ids 0x{:03X}..=0x{:03X}), Fz {} N; Ctrl-C ends it",
+        base.id(0),
+        base.id(0xF),
+        wrench.force.z
+    );
+    serve(&node, transport, &stop).with_context(|| format!("serving on {iface}"))?;
+    let n = node.lock();
+    println!("answered {} requests ({} polls)", n.requests(), n.polls());
+    Ok(())
+}
+
+/// What `forcecell sensor ati` does.
+#[derive(Clone, Copy, Debug)]
+pub enum SensorAction {
+    /// Identity and calibration.
+    Info,
+    /// A stream of readings.
+    Read {
+        /// Lines to print.
+        count: u32,
+        /// Poll rate, Hz.
+        rate: f64,
+        /// Take a bias first.
+        tare: bool,
+    },
+    /// Take a bias and print it.
+    Tare,
+}
+
+fn print_info(info: &DeviceInfo) {
+    println!("firmware        {}", info.firmware);
+    println!(
+        "serial          {}",
+        info.serial_text().unwrap_or_else(|| "(no answer)".into())
+    );
+    println!("calibration     slot {}", info.slot);
+    let c = &info.calibration;
+    println!(
+        "counts per unit force {}{}, torque {}",
+        c.counts_per_force,
+        if info.counts_assumed {
+            " (assumed: firmware < 3.7)"
+        } else {
+            ""
+        },
+        c.counts_per_torque
+    );
+    println!(
+        "units           {:?}, {:?}{}",
+        c.force_unit,
+        c.torque_unit,
+        if info.units_assumed {
+            " (assumed: no answer)"
+        } else {
+            ""
+        }
+    );
+    println!("matrix (rows Fx Fy Fz Tx Ty Tz, columns sg0..sg5):");
+    for row in &c.matrix {
+        let cells: Vec<String> = row.iter().map(|v| format!("{v:>12.4}")).collect();
+        println!("  {}", cells.join(" "));
+    }
+}
+
+fn bias_config() -> BiasConfig {
+    BiasConfig {
+        window: 200,
+        max_spread: 400,
+    }
+}
+
+/// `forcecell sensor ati`: talk to a real sensor (or the simulated node) on `iface`.
+pub fn sensor(iface: &str, mut cfg: Config, action: SensorAction) -> Result<()> {
+    if let SensorAction::Read { rate, .. } = action
+        && rate.is_finite()
+        && rate > 0.0
+    {
+        // A sample is stale after three missed polls.
+        cfg.stale_after = cfg.stale_after.max(Duration::from_secs_f64(3.0 / rate));
+    }
+    let transport = SocketCanTransport::open(iface)?;
+    let mut driver = Driver::new(transport, cfg)?;
+    let info = driver
+        .start()
+        .with_context(|| format!("ATI sensor at base {} on {iface}", cfg.base))?;
+    // Start-up ends before the first poll: get a sample (or the reason there is none).
+    for _ in 0..20 {
+        if driver.health() != Health::Waiting {
+            break;
+        }
+        driver.step()?;
+    }
+    match action {
+        SensorAction::Info => {
+            print_info(&info);
+            println!("status          {}", driver.status());
+            println!("health          {:?}", driver.health());
+            Ok(())
+        }
+        SensorAction::Tare => {
+            let bias = driver.tare(bias_config())?;
+            println!("bias (counts, sg0..sg5): {bias:.1?}");
+            println!(
+                "the bias lives in this process only; `sensor ati read --tare` takes it again"
+            );
+            Ok(())
+        }
+        SensorAction::Read { count, rate, tare } => {
+            if tare {
+                let bias = driver.tare(bias_config())?;
+                println!("bias (counts): {bias:.1?}");
+            }
+            stream(driver, count, rate)
+        }
+    }
+}
+
+fn stream<T: CanTransport + Send + 'static>(
+    driver: Driver<T>,
+    count: u32,
+    rate: f64,
+) -> Result<()> {
+    let mut sensor = AtiSensor::spawn(driver, rate)?;
+    let t0 = Instant::now();
+    println!(
+        "{:>8} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>7}  health",
+        "t s", "Fx N", "Fy N", "Fz N", "Tx N·m", "Ty N·m", "Tz N·m", "age ms"
+    );
+    for _ in 0..count {
+        std::thread::sleep(Duration::from_millis(100));
+        let t = t0.elapsed().as_secs_f64();
+        match sensor.read() {
+            Ok(s) => {
+                let w = s.wrench.to_array();
+                println!(
+                    "{t:>8.2} {:>9.3} {:>9.3} {:>9.3} {:>9.4} {:>9.4} {:>9.4} {:>7.2}  {:?}",
+                    w[0],
+                    w[1],
+                    w[2],
+                    w[3],
+                    w[4],
+                    w[5],
+                    s.age.as_secs_f64() * 1e3,
+                    sensor.health()
+                );
+            }
+            Err(e) => println!("{t:>8.2} {e}"),
+        }
+    }
+    let c = sensor.counters();
+    println!(
+        "{} samples, {} timeouts, {} malformed, {} out of sequence, {} device errors, {} saturated",
+        c.samples, c.timeouts, c.malformed, c.sequence_errors, c.device_errors, c.saturated
+    );
+    if sensor.health() == Health::BusOff {
+        bail!("the CAN controller is bus-off");
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::runner::run_inproc;
+    use crate::scenario::Scenario;
+
+    /// The default sensor path (driver ↔ node over the in-memory bus, lockstep) measures what the
+    /// in-process sensor measures, up to the ATI count quantisation (0.01 N with the node's calibration).
+    #[test]
+    fn the_ati_path_matches_the_in_process_sensor() {
+        let spec = RunSpec::new(Scenario::load("paper-fig9").unwrap(), None, None).unwrap();
+        let ati = run_sim(&spec, None, &mut |_| {}).unwrap();
+        let inproc = run_inproc(&spec, &mut |_| {}).unwrap();
+        assert_eq!(ati.rows.len(), inproc.rows.len());
+        assert_eq!(ati.stats.sensor_faults, 0);
+        assert!(ati.ended_early.is_none());
+        let worst = ati
+            .rows
+            .iter()
+            .zip(&inproc.rows)
+            .map(|(a, b)| (a.f - b.f).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 0.05, "largest difference {worst} N");
+        assert!((ati.metrics.ss_error - inproc.metrics.ss_error).abs() < 0.01);
+    }
+
+    #[test]
+    fn base_parsing() {
+        assert_eq!(parse_base("0x20"), Ok(Base::DEFAULT));
+        assert_eq!(parse_base("32"), Ok(Base::DEFAULT));
+        assert!(parse_base("0x80").unwrap_err().contains("above"));
+        assert!(parse_base("zz").is_err());
+    }
+}

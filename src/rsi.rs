@@ -1,0 +1,451 @@
+//! The KUKA RSI wiring of the application: `forcecell sim` over real loopback UDP (the driver against
+//! the simulated controller, or against any external RSI client), and `forcecell rsi-config`.
+
+use std::net::{Ipv4Addr, SocketAddr};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread;
+use std::time::Duration;
+
+use anyhow::{Context, Result, anyhow, bail};
+use clap::{Args, ValueEnum};
+use controller::LoopConfig;
+use hal::{Correction, Cycle, ForceSensor, RobotLink};
+use kuka_rsi::{
+    CorrectionMode, Diagnostics, EthernetConfig, Limits, LinkConfig, LinkError, PoscorrLimits,
+    RobotFilter, RobotSetup, RsiLink,
+};
+use sim::krc::{Krc, KrcConfig, KrcEnd, KrcReport, Timing};
+use sim::{InProcRobot, InProcSensor, InnerLoopModel, SharedWorld};
+
+use crate::runner::{RunResult, RunSpec, run_with};
+
+/// Which robot backend `forcecell sim` drives.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum RobotBackend {
+    /// The KUKA RSI driver over loopback UDP against the simulated KUKA controller.
+    Rsi,
+    /// The in-process robot (no wire).
+    Inproc,
+}
+
+/// `forcecell sim` options for the robot side.
+#[derive(Args, Clone, Debug)]
+pub struct RsiArgs {
+    /// Robot backend.
+    #[arg(long, value_enum, default_value = "rsi")]
+    pub robot: RobotBackend,
+    /// Run the simulated controller on the wall clock (one datagram per period) instead of lockstep.
+    #[arg(long)]
+    pub realtime: bool,
+    /// Start no simulated controller: listen on ADDR:PORT for any RSI client (a real KRC, another
+    /// simulator); the simulated sensor computes force from the pose that client reports.
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub external_robot: Option<SocketAddr>,
+}
+
+impl RsiArgs {
+    /// One line for the run's header.
+    pub fn describe(&self) -> String {
+        match (self.external_robot, self.robot) {
+            (Some(addr), _) => format!("KUKA RSI driver listening on {addr} for an external robot"),
+            (None, RobotBackend::Inproc) => "in-process robot".to_string(),
+            (None, RobotBackend::Rsi) => format!(
+                "KUKA RSI driver ↔ simulated KRC over loopback UDP ({})",
+                if self.realtime {
+                    "real time"
+                } else {
+                    "lockstep"
+                }
+            ),
+        }
+    }
+}
+
+/// What the wire did during a run.
+#[derive(Clone, Debug)]
+pub struct WireSummary {
+    /// The driver's counters and latency distribution.
+    pub diagnostics: Diagnostics,
+    /// The simulated controller's report (none with an external robot).
+    pub krc: Option<KrcReport>,
+}
+
+impl WireSummary {
+    /// Print a short table.
+    pub fn print(&self) {
+        let d = &self.diagnostics;
+        let c = d.counters;
+        let l = &d.latency;
+        println!(
+            "RSI link: {} received, {} answered, {} late, {} skipped, {} stale, {} foreign, {} malformed, {} oversized",
+            c.received, c.answered, c.late, c.skipped, c.stale, c.foreign, c.malformed, c.oversized
+        );
+        println!(
+            "  receive→send: p50 {:?}, p99 {:?}, p99.9 {:?}, max {:?}",
+            l.quantile(0.5),
+            l.quantile(0.99),
+            l.quantile(0.999),
+            l.max()
+        );
+        if let Some(k) = &self.krc {
+            println!(
+                "  simulated KRC: {} cycles, {} good, {} late, max Delay {}, ended {:?}",
+                k.cycles, k.good, k.late, k.max_delay, k.end
+            );
+        }
+    }
+}
+
+/// Robot-side limits wide enough for a tuning's own loop limits, so the driver never acts before the
+/// loop does: the envelope is the loop's `max_offset`, the rate limit its `max_step`, POSCORR 10 % and
+/// POSCORRMON 20 % beyond the envelope. (The scenarios work in absolute normal positions around 10 mm,
+/// beyond RSI's default ±5 mm.)
+pub fn cell_limits(loop_cfg: &LoopConfig) -> (Limits, PoscorrLimits, PoscorrLimits) {
+    let limits = Limits {
+        max_translation: loop_cfg.max_offset,
+        max_translation_step: loop_cfg.max_step,
+        ..Limits::default()
+    };
+    let poscorr = PoscorrLimits {
+        translation: loop_cfg.max_offset * 1.1,
+        ..PoscorrLimits::default()
+    };
+    let mon = PoscorrLimits {
+        translation: loop_cfg.max_offset * 1.2,
+        ..PoscorrLimits::MONITOR_DEFAULT
+    };
+    (limits, poscorr, mon)
+}
+
+fn period_of(model: &InnerLoopModel) -> Duration {
+    Duration::from_secs_f64(model.period)
+}
+
+/// The robot half of a simulated cell, ready to run: the world it drives and, over RSI, the bound
+/// driver and the simulated controller already sending (or waiting for an external client). The
+/// sensor half is chosen separately and handed to [`RobotSide::run`].
+pub struct RobotSide {
+    spec: RunSpec,
+    world: SharedWorld,
+    kind: Kind,
+}
+
+enum Kind {
+    Inproc,
+    Simulated {
+        link: Box<RsiLink>,
+        krc: thread::JoinHandle<KrcReport>,
+        abort: Arc<AtomicBool>,
+    },
+    External {
+        link: Box<RsiLink>,
+    },
+}
+
+impl RobotSide {
+    /// The in-process robot on a fresh world (no wire).
+    pub fn inproc(spec: &RunSpec) -> Self {
+        Self {
+            world: spec.world(),
+            spec: spec.clone(),
+            kind: Kind::Inproc,
+        }
+    }
+
+    /// The robot the options ask for.
+    pub fn start(spec: &RunSpec, args: &RsiArgs) -> Result<Self> {
+        if let Some(addr) = args.external_robot {
+            return Self::external(spec, addr);
+        }
+        match args.robot {
+            RobotBackend::Inproc if args.realtime => {
+                bail!("--realtime needs the RSI robot backend (--robot rsi)")
+            }
+            RobotBackend::Inproc => Ok(Self::inproc(spec)),
+            RobotBackend::Rsi => Self::simulated(spec, args.realtime),
+        }
+    }
+
+    /// The scenario as this robot runs it (an external robot sets the period and the inner loop).
+    pub fn spec(&self) -> &RunSpec {
+        &self.spec
+    }
+
+    /// The world the robot moves; a sensor backend measures it.
+    pub fn world(&self) -> &SharedWorld {
+        &self.world
+    }
+
+    fn simulated(spec: &RunSpec, realtime: bool) -> Result<Self> {
+        let world = spec.world();
+        let local = SocketAddr::from((Ipv4Addr::LOCALHOST, 0));
+        let ethernet = EthernetConfig::forcecell(Ipv4Addr::LOCALHOST, 0, false);
+        let (limits, poscorr, poscorrmon) = cell_limits(&spec.tuning.loop_cfg);
+        let mut lc = LinkConfig::new(ethernet.clone(), RobotFilter::Any);
+        lc.bind = Some(local);
+        lc.period = period_of(&spec.plant);
+        lc.limits = limits;
+        lc.poscorr = poscorr;
+        lc.poscorrmon = poscorrmon;
+        lc.first_contact_timeout = Some(Duration::from_secs(10));
+        // 1 s: lockstep pauses whenever the loop does.
+        lc.watchdog_cycles = ((1.0 / spec.plant.period).ceil() as u32).max(25);
+        let mut link = RsiLink::bind(lc).context("RSI driver")?;
+        let mut kc = KrcConfig::new(ethernet, link.local_addr()?);
+        kc.period = period_of(&spec.plant);
+        kc.ipoc_step = ((spec.plant.period * 1000.0).round() as u64).max(1);
+        kc.timing = if realtime {
+            Timing::Realtime
+        } else {
+            Timing::Lockstep {
+                deadline: Duration::from_millis(500),
+            }
+        };
+        // Lockstep: exactly one datagram per step. Real time: the robot keeps its clock whatever the
+        // loop misses, so it runs until the loop is done and aborts it.
+        kc.cycles = (!realtime).then(|| spec.steps());
+        kc.poscorr = poscorr;
+        kc.poscorrmon = poscorrmon;
+        let mut krc = Krc::new(kc).context("simulated KUKA controller")?;
+        link.set_robot_filter(RobotFilter::Exact(krc.local_addr()?));
+        let abort = krc.abort_handle();
+        let mut mech: SharedWorld = world.clone();
+        let krc = thread::Builder::new()
+            .name("sim-krc".into())
+            .spawn(move || krc.run(&mut mech))?;
+        Ok(Self {
+            spec: spec.clone(),
+            world,
+            kind: Kind::Simulated {
+                link: Box::new(link),
+                krc,
+                abort,
+            },
+        })
+    }
+
+    fn external(spec: &RunSpec, addr: SocketAddr) -> Result<Self> {
+        let mut spec = spec.clone();
+        // The client is the clock and the inner loop: the world just follows what it reports.
+        spec.plant = InnerLoopModel {
+            period: 0.004,
+            tau: 0.0,
+            delay_cycles: 0,
+        };
+        spec.plant_label = "external".into();
+        let world = spec.world();
+        let ip = match addr.ip() {
+            std::net::IpAddr::V4(ip) => ip,
+            std::net::IpAddr::V6(_) => bail!("RSI is IPv4: give an IPv4 ADDR:PORT"),
+        };
+        let ethernet = EthernetConfig::forcecell(ip, addr.port(), false);
+        let (limits, poscorr, poscorrmon) = cell_limits(&spec.tuning.loop_cfg);
+        let mut lc = LinkConfig::new(ethernet, RobotFilter::Any);
+        lc.limits = limits;
+        lc.poscorr = poscorr;
+        lc.poscorrmon = poscorrmon;
+        let link = RsiLink::bind(lc).context("RSI driver")?;
+        println!(
+            "listening for an RSI client on {} (SENTYPE ImFree; `forcecell rsi-config` writes its files)",
+            link.local_addr()?
+        );
+        Ok(Self {
+            spec,
+            world,
+            kind: Kind::External {
+                link: Box::new(link),
+            },
+        })
+    }
+
+    /// Run the scenario with this robot and `sensor` (which must measure [`RobotSide::world`]).
+    pub fn run<S>(
+        self,
+        sensor: S,
+        progress: &mut dyn FnMut(f64),
+    ) -> Result<(RunResult, Option<WireSummary>)>
+    where
+        S: ForceSensor,
+        S::Error: Send + Sync + 'static,
+    {
+        let Self { spec, world, kind } = self;
+        match kind {
+            Kind::Inproc => {
+                let robot = InProcRobot::new(world.clone());
+                Ok((run_with(&spec, &world, robot, sensor, progress)?, None))
+            }
+            Kind::Simulated {
+                mut link,
+                krc,
+                abort,
+            } => {
+                let result = run_with(&spec, &world, &mut *link, sensor, progress);
+                abort.store(true, Ordering::Relaxed);
+                let report = krc
+                    .join()
+                    .map_err(|_| anyhow!("the simulated controller panicked"))?;
+                let run = result?;
+                if !matches!(report.end, KrcEnd::Completed | KrcEnd::Aborted) {
+                    eprintln!("note: the simulated controller ended with {:?}", report.end);
+                }
+                Ok((
+                    run,
+                    Some(WireSummary {
+                        diagnostics: link.diagnostics().clone(),
+                        krc: Some(report),
+                    }),
+                ))
+            }
+            Kind::External { mut link } => {
+                let robot = ExternalRobot {
+                    link: &mut link,
+                    world: world.clone(),
+                };
+                let run = run_with(&spec, &world, robot, sensor, progress)?;
+                Ok((
+                    run,
+                    Some(WireSummary {
+                        diagnostics: link.diagnostics().clone(),
+                        krc: None,
+                    }),
+                ))
+            }
+        }
+    }
+
+    /// Run with the world's own sensor model read in process (no sensor wire).
+    pub fn run_inproc_sensor(
+        self,
+        progress: &mut dyn FnMut(f64),
+    ) -> Result<(RunResult, Option<WireSummary>)> {
+        let sensor = InProcSensor::new(self.world.clone());
+        self.run(sensor, progress)
+    }
+}
+
+/// Run a scenario with the chosen robot backend and the in-process sensor.
+pub fn run(
+    spec: &RunSpec,
+    args: &RsiArgs,
+    progress: &mut dyn FnMut(f64),
+) -> Result<(RunResult, Option<WireSummary>)> {
+    RobotSide::start(spec, args)?.run_inproc_sensor(progress)
+}
+
+/// An external RSI client drives a world whose robot follows the reported pose exactly: each cycle
+/// the normal offset the client reports becomes the world's position, and the simulated sensor
+/// measures there.
+struct ExternalRobot<'a> {
+    link: &'a mut RsiLink,
+    world: SharedWorld,
+}
+
+impl RobotLink for ExternalRobot<'_> {
+    type Error = LinkError;
+
+    fn next_cycle(&mut self) -> Result<Cycle, LinkError> {
+        let c = self.link.next_cycle()?;
+        let x = c.tool_offset().z;
+        if x.is_finite() {
+            sim::world::lock(&self.world).advance(Some(&Correction::along_z(x)));
+        }
+        Ok(c)
+    }
+
+    fn reply(&mut self, correction: &Correction) -> Result<(), LinkError> {
+        self.link.reply(correction)
+    }
+}
+
+/// Correction mode on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ModeArg {
+    /// `RSI_ON(#ABSOLUTE)`, HOLDON 1 (recommended).
+    Absolute,
+    /// `RSI_ON(#RELATIVE)`, HOLDON 0.
+    Relative,
+}
+
+/// `forcecell rsi-config` options.
+#[derive(Args, Clone, Debug)]
+pub struct RsiConfigArgs {
+    /// The PC's address as the robot sees it (IP_NUMBER).
+    #[arg(long, default_value = "192.168.1.10")]
+    pub ip: Ipv4Addr,
+    /// UDP port (PORT).
+    #[arg(long, default_value_t = 49152)]
+    pub port: u16,
+    /// Correction mode.
+    #[arg(long, value_enum, default_value = "absolute")]
+    pub mode: ModeArg,
+    /// Use the 12 ms `#IPO` cycle instead of 4 ms `#IPO_FAST`.
+    #[arg(long)]
+    pub ipo12: bool,
+    /// ETHERNET Timeout: late replies tolerated before RSI stops.
+    #[arg(long, default_value_t = 100)]
+    pub timeout: u32,
+    /// Built-in tuning name or tuning TOML file: its loop limits set POSCORR and POSCORRMON.
+    /// Without it, RSI's defaults (5 mm / 5°, 6 mm / 6°).
+    #[arg(long)]
+    pub tuning: Option<String>,
+    /// Base name of the files.
+    #[arg(long, default_value = "forcecell_rsi")]
+    pub name: String,
+    /// Output directory.
+    #[arg(long, default_value = "out/rsi")]
+    pub out: PathBuf,
+}
+
+/// The robot-side setup for these options.
+pub fn robot_setup(a: &RsiConfigArgs) -> Result<RobotSetup> {
+    if a.name.is_empty()
+        || !a
+            .name
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'_')
+    {
+        bail!(
+            "--name {:?}: KRL names are ASCII letters, digits and '_'",
+            a.name
+        );
+    }
+    let relative = a.mode == ModeArg::Relative;
+    let (poscorr, poscorrmon) = match &a.tuning {
+        Some(t) => {
+            let t = crate::scenario::load_tuning(t)?;
+            let (_, p, m) = cell_limits(&t.loop_cfg);
+            (p, m)
+        }
+        None => (PoscorrLimits::default(), PoscorrLimits::MONITOR_DEFAULT),
+    };
+    Ok(RobotSetup {
+        ethernet: EthernetConfig::forcecell(a.ip, a.port, relative),
+        mode: if relative {
+            CorrectionMode::Relative
+        } else {
+            CorrectionMode::Absolute
+        },
+        ipo_fast: !a.ipo12,
+        timeout: a.timeout,
+        precision: 4,
+        poscorr,
+        poscorrmon,
+        name: a.name.clone(),
+    })
+}
+
+/// Write the robot-side files; returns their paths.
+pub fn rsi_config(a: &RsiConfigArgs) -> Result<Vec<PathBuf>> {
+    let setup = robot_setup(a)?;
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("cannot create output directory {}", a.out.display()))?;
+    let mut written = Vec::new();
+    for (name, text) in setup.files() {
+        let path = a.out.join(name);
+        std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
+        written.push(path);
+    }
+    Ok(written)
+}

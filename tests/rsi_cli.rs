@@ -1,0 +1,193 @@
+//! `forcecell sim` over RSI and `forcecell rsi-config`, as a user runs them (loopback only).
+
+use std::net::{SocketAddr, UdpSocket};
+use std::path::Path;
+use std::process::{Command, Output};
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use hal::{Pose, UnitQuaternion, Vector3};
+use kuka_rsi::{EthernetConfig, PoscorrLimits};
+use sim::krc::{Krc, KrcConfig, RigidArm, Timing};
+
+fn forcecell(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_forcecell"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("run forcecell")
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+#[test]
+fn rsi_config_writes_matching_robot_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = forcecell(
+        &[
+            "rsi-config",
+            "--ip",
+            "10.0.0.5",
+            "--port",
+            "6008",
+            "--out",
+            "robot",
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let xml = std::fs::read_to_string(dir.path().join("robot/forcecell_rsi.xml")).unwrap();
+    let cfg = EthernetConfig::parse(&xml).unwrap();
+    assert_eq!(
+        cfg,
+        EthernetConfig::forcecell([10, 0, 0, 5].into(), 6008, false)
+    );
+    let krl = std::fs::read_to_string(dir.path().join("robot/forcecell_rsi.src")).unwrap();
+    assert!(krl.contains("RSI_ON(#ABSOLUTE, #IPO_FAST)"), "{krl}");
+    assert!(krl.contains("ConfigFile=forcecell_rsi.xml"), "{krl}");
+    assert!(krl.contains("+-5.000 mm"), "{krl}");
+
+    let o = forcecell(
+        &[
+            "rsi-config",
+            "--mode",
+            "relative",
+            "--ipo12",
+            "--tuning",
+            "paper",
+            "--name",
+            "cell3",
+            "--out",
+            "r2",
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let cfg =
+        EthernetConfig::parse(&std::fs::read_to_string(dir.path().join("r2/cell3.xml")).unwrap())
+            .unwrap();
+    assert!(
+        cfg.receive
+            .iter()
+            .filter(|e| e.tag.starts_with("RKorr"))
+            .all(|e| e.holdon == Some(false)),
+        "relative mode never re-applies an increment"
+    );
+    let krl = std::fs::read_to_string(dir.path().join("r2/cell3.src")).unwrap();
+    assert!(krl.contains("RSI_ON(#RELATIVE, #IPO)"), "{krl}");
+    assert!(
+        krl.contains("+-55.000 mm"),
+        "POSCORR from the tuning: {krl}"
+    );
+
+    let o = forcecell(&["rsi-config", "--name", "bad name"], dir.path());
+    assert!(!o.status.success());
+    assert!(text(&o.stderr).contains("KRL names"), "{}", text(&o.stderr));
+}
+
+fn rows(dir: &Path, file: &str) -> Vec<String> {
+    std::fs::read_to_string(dir.join(file))
+        .unwrap()
+        .lines()
+        .map(str::to_owned)
+        .collect()
+}
+
+#[test]
+fn sim_over_rsi_matches_the_in_process_robot() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = forcecell(&["sim", "--out", "udp"], dir.path());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let out = text(&o.stdout);
+    assert!(
+        out.contains("RSI link: 2000 received, 2000 answered"),
+        "{out}"
+    );
+    assert!(out.contains("2000 good, 0 late"), "{out}");
+    let o = forcecell(&["sim", "--robot", "inproc", "--out", "mem"], dir.path());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(!text(&o.stdout).contains("RSI link"));
+    let udp = rows(dir.path(), "udp/paper-fig9.csv");
+    let mem = rows(dir.path(), "mem/paper-fig9.csv");
+    assert_eq!(udp.len(), mem.len());
+    assert_eq!(udp[0], mem[0]);
+    // The wire carries 0.1 µm; the force trajectories agree to within that times the stiffness.
+    let col = |r: &str, i: usize| r.split(',').nth(i).unwrap().parse::<f64>().unwrap();
+    let f = udp[0].split(',').position(|h| h == "f").unwrap();
+    let worst = udp[1..]
+        .iter()
+        .zip(&mem[1..])
+        .map(|(a, b)| (col(a, f) - col(b, f)).abs())
+        .fold(0.0, f64::max);
+    assert!(worst < 0.05, "force differs by up to {worst} N");
+
+    let o = forcecell(&["sim", "--robot", "inproc", "--realtime"], dir.path());
+    assert!(!o.status.success());
+    assert!(text(&o.stderr).contains("--realtime needs"));
+}
+
+#[test]
+fn sim_with_an_external_robot_client() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let listen = format!("127.0.0.1:{port}");
+    let child = Command::new(env!("CARGO_BIN_EXE_forcecell"))
+        .args(["sim", "--external-robot", &listen, "--out", "ext"])
+        .current_dir(dir.path())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Any RSI client will do: here the simulated controller on a stiff arm.
+    let target: SocketAddr = listen.parse().unwrap();
+    let mut kc = KrcConfig::new(
+        EthernetConfig::forcecell([127, 0, 0, 1].into(), port, false),
+        target,
+    );
+    kc.timing = Timing::Lockstep {
+        deadline: Duration::from_millis(200),
+    };
+    kc.timeout = 1_000_000;
+    kc.poscorr = PoscorrLimits {
+        translation: 0.055,
+        ..PoscorrLimits::default()
+    };
+    kc.poscorrmon = PoscorrLimits {
+        translation: 0.06,
+        ..PoscorrLimits::MONITOR_DEFAULT
+    };
+    let mut krc = Krc::new(kc).unwrap();
+    let abort = krc.abort_handle();
+    let client = std::thread::spawn(move || {
+        krc.run(&mut RigidArm::new(Pose {
+            position: Vector3::new(0.5, 0.0, 0.3),
+            orientation: UnitQuaternion::from_euler_angles(core::f64::consts::PI, 0.0, 0.0),
+        }))
+    });
+    let o = child.wait_with_output().unwrap();
+    abort.store(true, Ordering::Relaxed);
+    let report = client.join().unwrap();
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let out = text(&o.stdout);
+    assert!(out.contains("listening for an RSI client"), "{out}");
+    assert!(out.contains("500 answered"), "{out}");
+    assert!(report.good >= 500, "{report:?}");
+    // The client's reported pose drove the simulated sensor: contact was made and force controlled.
+    let csv = rows(dir.path(), "ext/paper-fig9.csv");
+    let f = csv[0].split(',').position(|h| h == "f").unwrap();
+    let last: f64 = csv
+        .last()
+        .unwrap()
+        .split(',')
+        .nth(f)
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!((last - 5.0).abs() < 0.5, "final force {last} N");
+}
