@@ -3,9 +3,11 @@
 #![cfg_attr(not(test), warn(missing_docs))]
 
 pub mod ati;
+pub mod bench;
 pub mod metrics;
 pub mod plot;
 pub mod record;
 pub mod rsi;
 pub mod runner;
 pub mod scenario;
+pub mod tune;

@@ -31,6 +31,11 @@ enum Command {
     RsiConfig(forcecell::rsi::RsiConfigArgs),
     /// Plot a recorded trace (CSV written by `sim` or `run`) to PNG and print its metrics.
     Plot(PlotArgs),
+    /// Judge a tuning (damping ratio, delay margin) or propose impedance parameters for a stiffness range
+    /// and the robot's loop.
+    Tune(TuneArgs),
+    /// Run the B scenarios on P1 and P2 with the robust and the paper's tuning: one table, plots in OUT.
+    BenchScenarios(BenchArgs),
     /// Run a simulated sensor node alone on a CAN interface.
     SimSensor(SimSensorArgs),
     /// Talk to a force/torque sensor: identity, readings, bias.
@@ -105,6 +110,46 @@ enum SensorCommand {
 }
 
 #[derive(Args)]
+struct TuneArgs {
+    /// Softest expected surface, N/m.
+    #[arg(long, default_value_t = 10_000.0)]
+    k_min: f64,
+    /// Stiffest expected surface, N/m.
+    #[arg(long, default_value_t = 500_000.0)]
+    k_max: f64,
+    /// The robot's loop by plant name (p0, p1, p2); --period/--lag/--delay override its values.
+    #[arg(long, default_value = "p2", value_parser = ["p0", "p1", "p2"])]
+    plant: String,
+    /// Control period, s.
+    #[arg(long)]
+    period: Option<f64>,
+    /// Position-loop lag, s.
+    #[arg(long)]
+    lag: Option<f64>,
+    /// Pure delay, s.
+    #[arg(long)]
+    delay: Option<f64>,
+    /// A tuning to judge (built-in name or TOML file); without it, parameters are proposed.
+    #[arg(long)]
+    tuning: Option<String>,
+    /// Force set-point of a proposal, N.
+    #[arg(long, default_value_t = 5.0)]
+    f_r: f64,
+}
+
+#[derive(Args)]
+struct BenchArgs {
+    /// Only scenarios whose name starts with one of these (e.g. b01 b05).
+    only: Vec<String>,
+    /// Output directory for the CSVs and plots.
+    #[arg(long, default_value = "out/bench")]
+    out: PathBuf,
+    /// Exit with status 1 when the robust tuning misses a target.
+    #[arg(long)]
+    check: bool,
+}
+
+#[derive(Args)]
 struct PlotArgs {
     /// The trace, CSV.
     csv: PathBuf,
@@ -155,6 +200,8 @@ fn main() -> ExitCode {
             ExitCode::SUCCESS
         }),
         Command::Plot(a) => plot_trace(a),
+        Command::Tune(a) => tune(a),
+        Command::BenchScenarios(a) => bench_scenarios(a),
         Command::SimSensor(a) => forcecell::ati::sim_sensor(
             &a.bus.can,
             a.bus.base,
@@ -220,6 +267,43 @@ fn sim(a: SimArgs) -> Result<ExitCode> {
         w.print();
     }
     report(&spec, &run, &a.out, a.check)
+}
+
+fn tune(a: TuneArgs) -> Result<ExitCode> {
+    let mut model = forcecell::tune::loop_of_plant(&a.plant)?;
+    model.period = a.period.unwrap_or(model.period);
+    model.lag = a.lag.unwrap_or(model.lag);
+    model.delay = a.delay.unwrap_or(model.delay);
+    let req = forcecell::tune::TuneRequest {
+        k_min: a.k_min,
+        k_max: a.k_max,
+        model,
+        tuning: a.tuning,
+        f_r: a.f_r,
+    };
+    let (text, safe) = forcecell::tune::report(&req)?;
+    println!("{text}");
+    Ok(if safe {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
+}
+
+fn bench_scenarios(a: BenchArgs) -> Result<ExitCode> {
+    let opts = forcecell::bench::BenchOptions {
+        only: a.only,
+        ..Default::default()
+    };
+    let rows = forcecell::bench::run(&opts, &a.out, &mut |label| eprintln!("running {label}"))?;
+    print!("{}", forcecell::bench::table(&rows));
+    println!("plots and traces in {}", a.out.display());
+    let missed = rows.iter().any(|r| r.tuning == "robust" && !r.pass);
+    Ok(if a.check && missed {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    })
 }
 
 fn sensor(a: SensorArgs) -> Result<ExitCode> {
@@ -364,6 +448,19 @@ fn report(spec: &RunSpec, run: &RunResult, out: &Path, check: bool) -> Result<Ex
                 run.stats.sensor_faults, run.stats.nonfinite_inputs, run.stats.limited
             ),
         ),
+        ("law events", {
+            let e = &run.law_events;
+            format!(
+                "{} contacts, {} lift-offs, {} force-limit retracts; limited: {} velocity, {} acceleration, {} deviation, {} estimator bound",
+                e.contacts,
+                e.lift_offs,
+                e.force_limits,
+                e.velocity_limits,
+                e.acceleration_limits,
+                e.deviation_limits,
+                e.estimator_bounds
+            )
+        }),
     ];
     println!();
     for (k, v) in table {

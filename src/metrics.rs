@@ -12,6 +12,9 @@
 //! * `contact_losses` — drops of the true force to zero after first contact; `contact_loss_time` — the
 //!   longest of them, s;
 //! * `true_force_std` — standard deviation of the true force in the window, N;
+//! * `force_std_detrended` — the same about the least-squares line through it, N: the fluctuation a
+//!   controller causes, without the slow trend a drifting sensor bias imposes (unobservable in a steady
+//!   contact);
 //! * `kc_hat`, `xc_hat` — estimates at the window's end; `kc_rel_error` — `|k̂_c − k_c|/k_c` there.
 
 use crate::record::Row;
@@ -29,6 +32,7 @@ pub const METRIC_NAMES: &[&str] = &[
     "contact_losses",
     "contact_loss_time",
     "true_force_std",
+    "force_std_detrended",
     "kc_hat",
     "xc_hat",
     "kc_rel_error",
@@ -60,6 +64,8 @@ pub struct Metrics {
     pub contact_loss_time: f64,
     /// N.
     pub true_force_std: f64,
+    /// N.
+    pub force_std_detrended: f64,
     /// N/m.
     pub kc_hat: f64,
     /// m.
@@ -92,6 +98,7 @@ impl Metrics {
             contact_losses: 0.0,
             contact_loss_time: 0.0,
             true_force_std: f64::NAN,
+            force_std_detrended: f64::NAN,
             kc_hat: f64::NAN,
             xc_hat: f64::NAN,
             kc_rel_error: f64::NAN,
@@ -106,6 +113,22 @@ impl Metrics {
         let n = win.len() as f64;
         let mean = win.iter().map(|r| force(r)).sum::<f64>() / n;
         m.true_force_std = (win.iter().map(|r| (force(r) - mean).powi(2)).sum::<f64>() / n).sqrt();
+        let mean_t = win.iter().map(|r| r.t).sum::<f64>() / n;
+        let stt = win.iter().map(|r| (r.t - mean_t).powi(2)).sum::<f64>();
+        let slope = if stt > 0.0 {
+            win.iter()
+                .map(|r| (r.t - mean_t) * (force(r) - mean))
+                .sum::<f64>()
+                / stt
+        } else {
+            0.0
+        };
+        m.force_std_detrended = (win
+            .iter()
+            .map(|r| (force(r) - mean - slope * (r.t - mean_t)).powi(2))
+            .sum::<f64>()
+            / n)
+            .sqrt();
         m.peak_force = win
             .iter()
             .map(|r| force(r))
@@ -185,6 +208,7 @@ impl Metrics {
             "contact_losses" => self.contact_losses,
             "contact_loss_time" => self.contact_loss_time,
             "true_force_std" => self.true_force_std,
+            "force_std_detrended" => self.force_std_detrended,
             "kc_hat" => self.kc_hat,
             "xc_hat" => self.xc_hat,
             "kc_rel_error" => self.kc_rel_error,
@@ -250,6 +274,23 @@ mod tests {
         let m = Metrics::compute(&trace(&[0.0, 0.0]), 0.0, f64::INFINITY);
         assert!(m.first_contact.is_nan());
         assert!(m.settle_time.is_infinite());
+    }
+
+    #[test]
+    fn detrended_std_removes_a_drift_and_keeps_the_ripple() {
+        let ramp: Vec<f64> = (0..100).map(|k| 5.0 - 0.01 * k as f64).collect();
+        let m = Metrics::compute(&trace(&ramp), 0.0, f64::INFINITY);
+        assert!(m.true_force_std > 0.2, "{}", m.true_force_std);
+        assert!(m.force_std_detrended < 1e-9, "{}", m.force_std_detrended);
+        let ripple: Vec<f64> = (0..100)
+            .map(|k| 5.0 - 0.01 * k as f64 + if k % 2 == 0 { 0.1 } else { -0.1 })
+            .collect();
+        let m = Metrics::compute(&trace(&ripple), 0.0, f64::INFINITY);
+        assert!(
+            (m.force_std_detrended - 0.1).abs() < 0.01,
+            "{}",
+            m.force_std_detrended
+        );
     }
 
     #[test]

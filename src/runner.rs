@@ -4,7 +4,7 @@
 use std::time::{Duration, Instant};
 
 use anyhow::{Result, anyhow};
-use controller::{ControlLoop, ForceLaw, LoopError, LoopStats, Tuning};
+use controller::{ControlLoop, EventCounts, ForceLaw, LoopError, LoopStats, Tuning};
 use hal::{ForceSensor, RobotLink};
 use sim::{InProcRobot, InProcSensor, InnerLoopModel, SharedWorld, World};
 
@@ -82,6 +82,8 @@ pub struct RunResult {
     pub rows: Vec<Row>,
     /// Loop counters.
     pub stats: LoopStats,
+    /// The law's own event counters (contacts, lift-offs, limits that acted; zero for laws without).
+    pub law_events: EventCounts,
     /// Metrics over the whole run.
     pub metrics: Metrics,
     /// Wall-clock time the run took.
@@ -177,6 +179,7 @@ where
     progress(1.0);
     let wall = started.elapsed();
     let stats = lp.stats();
+    let law_events = lp.law().counters();
     drop(lp);
     let truth = sim::world::lock(world).truth_log();
     let period = spec.plant.period;
@@ -194,6 +197,7 @@ where
     Ok(RunResult {
         rows,
         stats,
+        law_events,
         metrics,
         wall,
         ended_early,

@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::control_loop::LoopConfig;
 use crate::law::{AdaptiveParams, ForceLaw, ImpedanceLaw, ImpedanceParams, Reference};
+use crate::robust::{RobustLaw, RobustParams};
 
 /// Which law runs, with its parameters.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -25,6 +26,8 @@ pub enum LawConfig {
         #[serde(default)]
         x_r: f64,
     },
+    /// forcecell's robust law (`controller::robust`): estimator, observer, state machine, limits.
+    Robust(Box<RobustParams>),
 }
 
 /// A named tuning: a law and the loop's limits.
@@ -54,10 +57,19 @@ pub struct Overrides {
 }
 
 impl LawConfig {
-    /// The impedance parameters of any law.
-    pub fn impedance(&self) -> &ImpedanceParams {
+    /// The impedance filter's parameters, for the laws that have one (the robust law has none).
+    pub fn impedance(&self) -> Option<&ImpedanceParams> {
         match self {
-            Self::Paper { impedance, .. } | Self::Impedance { impedance, .. } => impedance,
+            Self::Paper { impedance, .. } | Self::Impedance { impedance, .. } => Some(impedance),
+            Self::Robust(_) => None,
+        }
+    }
+
+    /// The force set-point, N.
+    pub fn set_point(&self) -> f64 {
+        match self {
+            Self::Paper { impedance, .. } | Self::Impedance { impedance, .. } => impedance.f_r,
+            Self::Robust(p) => p.f_r,
         }
     }
 
@@ -77,6 +89,12 @@ impl LawConfig {
                     *x_r = x;
                 }
             }
+            // The robust law has no fixed reference: `x_r` does not apply to it.
+            Self::Robust(p) => {
+                if let Some(f) = o.f_r {
+                    p.f_r = f;
+                }
+            }
         }
     }
 
@@ -93,6 +111,7 @@ impl LawConfig {
             Self::Impedance { impedance, x_r } => {
                 Box::new(ImpedanceLaw::new(impedance, Reference::Fixed { x_r })?)
             }
+            Self::Robust(ref p) => Box::new(RobustLaw::new(**p)?),
         })
     }
 }

@@ -138,6 +138,103 @@ pub struct Output {
     pub kc_hat: f64,
     /// Surface position estimate `x̂_c` (NaN for the fixed-reference law).
     pub xc_hat: f64,
+    /// Contact state, for laws that run a contact state machine (`None` for the paper's law).
+    pub state: Option<ContactState>,
+    /// What happened in this step (state changes, limits that acted).
+    pub events: Events,
+}
+
+/// Where a law with a contact state machine is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ContactState {
+    /// Moving towards an unknown surface at the bounded approach speed.
+    Approach,
+    /// In contact, regulating the force.
+    Contact,
+    /// Contact was lost: moving back towards the surface, fast first, then at approach speed.
+    Reacquire,
+    /// The force limit was exceeded: moving away before approaching again.
+    Retract,
+}
+
+impl ContactState {
+    /// A small code for recordings: 0 approach, 1 contact, 2 re-acquire, 3 retract.
+    pub fn code(self) -> u8 {
+        match self {
+            Self::Approach => 0,
+            Self::Contact => 1,
+            Self::Reacquire => 2,
+            Self::Retract => 3,
+        }
+    }
+}
+
+/// Events of one step. A limit that acted is always an event: nothing is clamped silently.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub struct Events {
+    /// Contact was detected (approach or re-acquire ended).
+    pub contact: bool,
+    /// Contact was lost.
+    pub lift_off: bool,
+    /// The conditioned force exceeded the maximum force: the law retracts.
+    pub force_limit: bool,
+    /// The command's velocity was limited.
+    pub velocity_limit: bool,
+    /// The command's acceleration was limited.
+    pub acceleration_limit: bool,
+    /// The command would have left the allowed deviation from the programmed path.
+    pub deviation_limit: bool,
+    /// The stiffness estimate was projected back into its bounds.
+    pub estimator_bound: bool,
+    /// A non-finite input or step reached the law; it held its command.
+    pub bad_input: bool,
+}
+
+impl Events {
+    /// True when any limit acted (not counting contact and lift-off, which are state changes).
+    pub fn any_limit(&self) -> bool {
+        self.force_limit
+            || self.velocity_limit
+            || self.acceleration_limit
+            || self.deviation_limit
+            || self.estimator_bound
+            || self.bad_input
+    }
+}
+
+/// Counters of [`Events`] since the law started.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub struct EventCounts {
+    /// Contacts detected.
+    pub contacts: u64,
+    /// Contacts lost.
+    pub lift_offs: u64,
+    /// Force-limit retractions.
+    pub force_limits: u64,
+    /// Steps with the velocity limited.
+    pub velocity_limits: u64,
+    /// Steps with the acceleration limited.
+    pub acceleration_limits: u64,
+    /// Steps with the deviation from the path limited.
+    pub deviation_limits: u64,
+    /// Steps with the stiffness estimate projected.
+    pub estimator_bounds: u64,
+    /// Steps with non-finite input held.
+    pub bad_inputs: u64,
+}
+
+impl EventCounts {
+    /// Count one step's events.
+    pub fn add(&mut self, e: &Events) {
+        self.contacts += u64::from(e.contact);
+        self.lift_offs += u64::from(e.lift_off);
+        self.force_limits += u64::from(e.force_limit);
+        self.velocity_limits += u64::from(e.velocity_limit);
+        self.acceleration_limits += u64::from(e.acceleration_limit);
+        self.deviation_limits += u64::from(e.deviation_limit);
+        self.estimator_bounds += u64::from(e.estimator_bound);
+        self.bad_inputs += u64::from(e.bad_input);
+    }
 }
 
 /// A 1-DOF force control law: what the control loop runs every cycle.
@@ -152,6 +249,10 @@ pub trait ForceLaw {
     fn step(&mut self, x: f64, f: f64, dt: f64) -> Output;
     /// The force set-point, N.
     fn set_point(&self) -> f64;
+    /// Events counted since `start` (laws without limits or a state machine count nothing).
+    fn counters(&self) -> EventCounts {
+        EventCounts::default()
+    }
 }
 
 impl<L: ForceLaw + ?Sized> ForceLaw for Box<L> {
@@ -163,6 +264,9 @@ impl<L: ForceLaw + ?Sized> ForceLaw for Box<L> {
     }
     fn set_point(&self) -> f64 {
         (**self).set_point()
+    }
+    fn counters(&self) -> EventCounts {
+        (**self).counters()
     }
 }
 
@@ -234,6 +338,7 @@ impl ImpedanceLaw {
             x_r,
             kc_hat: self.kc,
             xc_hat: self.big_kc / self.kc,
+            ..Output::default()
         }
     }
 }

@@ -4,17 +4,25 @@
 //!   on) as a pure `step` over an injected `dt`;
 //! * [`control_loop`] — the loop that wires any [`hal::RobotLink`] and [`hal::ForceSensor`] to a law,
 //!   gating bad input so it never reaches the command;
+//! * [`robust`] — forcecell's robust law (with [`estimator`] and [`conditioning`]): what holds the force
+//!   on a cell with sampling, lag, delay and a noisy sensor;
+//! * [`tune`] — damping ratio and delay margin of impedance parameters, proposals, verdicts;
 //! * [`gravity`] — tool weight and sensor bias: least-squares identification and run-time compensation.
 #![cfg_attr(not(test), warn(missing_docs))]
 
+pub mod conditioning;
 pub mod config;
 pub mod control_loop;
+pub mod estimator;
 pub mod gravity;
 pub mod law;
+pub mod robust;
+pub mod tune;
 
 pub use config::{LawConfig, Overrides, Tuning};
 pub use control_loop::{ControlLoop, CycleReport, Fault, LoopConfig, LoopError, LoopStats};
 pub use law::{
-    AdaptiveParams, ForceLaw, ImpedanceLaw, ImpedanceParams, Output, Reference,
-    fixed_reference_steady_state_error,
+    AdaptiveParams, ContactState, EventCounts, Events, ForceLaw, ImpedanceLaw, ImpedanceParams,
+    Output, Reference, fixed_reference_steady_state_error,
 };
+pub use robust::{ContactParams, LimitParams, ResponseParams, RobustLaw, RobustParams};

@@ -1,0 +1,378 @@
+//! Online identification of the environment `f = k_c·(x − x_c)` by recursive least squares with
+//! forgetting, well scaled, gated and projected.
+//!
+//! # Why not the paper's gradient law
+//! The paper adapts `[k_c, K_c = k_c·x_c]` on the regressor `[x, −1]` with `x ≈ 0.01 m`, so the stiffness
+//! channel moves at `r1·x² ≈ 5·10⁻⁴ s⁻¹` and never learns anything. Here the model is written around a
+//! reference position `x₀` captured at contact onset and the position is scaled by `s = f_r/k̂_c(0)` (the
+//! expected penetration), so both regressor entries are of order one:
+//!
+//! `f = θ₀·φ₀ + θ₁`, `φ₀ = (x − x₀)/s`, `θ₀ = k_c·s` (N), `θ₁ = k_c·(x₀ − x_c)` (N).
+//!
+//! # Safeguards
+//! * **excitation gate** — update only while the position moves by more than a force-equivalent
+//!   threshold from its slow average (`kc_max·|x − x̄| ≥ excitation`) *and* the force moves from its own
+//!   (`|f − f̄| ≥ excitation`): a static contact carries no information about `k_c`, and adapting on it
+//!   lets bias drift (which the closed loop turns into a correlated position drift) pull `k̂_c` away;
+//!   a moving surface under a held force moves the position alone;
+//! * **dead-zone** on the prediction error;
+//! * **forgetting** with a time constant counted in *adapting* time only, so the covariance cannot wind
+//!   up while the gate is closed, plus a covariance ceiling;
+//! * **projection** of `k̂_c` into `[kc_min, kc_max]`, reported every time it acts.
+//!
+//! The estimator uses the raw (unfiltered) force and the measured position of the same instant: the
+//! output noise of a force sensor does not bias least squares, a filter's lag would.
+
+use serde::{Deserialize, Serialize};
+
+/// Estimator configuration.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EstimatorParams {
+    /// Initial stiffness estimate `k̂_c(0)`, N/m.
+    pub kc0: f64,
+    /// Lower bound of `k̂_c`, N/m.
+    pub kc_min: f64,
+    /// Upper bound of `k̂_c`, N/m.
+    pub kc_max: f64,
+    /// Forgetting time constant, s of adapting time.
+    pub memory: f64,
+    /// Excitation needed to adapt, N: the conditioned force must leave its slow average by this much, and
+    /// the position by this much at `kc_max` (`kc_max·|x − x̄|`).
+    pub excitation: f64,
+    /// Time constant of the slow position average `x̄` the excitation is measured from, s.
+    pub excitation_window: f64,
+    /// Dead-zone on the prediction error, N.
+    pub dead_zone: f64,
+    /// Initial relative uncertainty of `k̂_c` at each contact onset (1 = ±100 %).
+    pub initial_uncertainty: f64,
+    /// Adapt only while the observed surface moves slower than this, m/s (see
+    /// [`surface_moving`]): on a moving surface the position follows the surface under a steady force,
+    /// and the regression learns the motion instead of the stiffness.
+    pub max_surface_speed: f64,
+}
+
+impl EstimatorParams {
+    /// Checks the values.
+    pub fn validate(&self) -> Result<(), String> {
+        let pos = |n: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(format!("estimator.{n} must be > 0, got {v}"))
+            }
+        };
+        let nonneg = |n: &str, v: f64| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(format!("estimator.{n} must be >= 0, got {v}"))
+            }
+        };
+        pos("kc0", self.kc0)?;
+        pos("kc_min", self.kc_min)?;
+        pos("kc_max", self.kc_max)?;
+        pos("memory", self.memory)?;
+        pos("excitation_window", self.excitation_window)?;
+        pos("initial_uncertainty", self.initial_uncertainty)?;
+        pos("max_surface_speed", self.max_surface_speed)?;
+        nonneg("excitation", self.excitation)?;
+        nonneg("dead_zone", self.dead_zone)?;
+        if self.kc_min > self.kc_max {
+            return Err(format!(
+                "estimator.kc_min {} N/m is above kc_max {} N/m",
+                self.kc_min, self.kc_max
+            ));
+        }
+        if !(self.kc_min..=self.kc_max).contains(&self.kc0) {
+            return Err(format!(
+                "estimator.kc0 {} N/m is outside [kc_min, kc_max] = [{}, {}] N/m",
+                self.kc0, self.kc_min, self.kc_max
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// What one estimator update did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Update {
+    /// The estimate moved.
+    pub adapted: bool,
+    /// `k̂_c` had to be projected back into its bounds.
+    pub projected: bool,
+}
+
+/// Whether the surface observer reports real surface motion rather than the apparent motion a wrong
+/// `k̂_c` produces.
+///
+/// The observer sees `x̃_c = x − f/k̂_c`. With a still surface and `k̂_c ≠ k_c` it reports
+/// `(1 − k_c/k̂_c)·ẋ`: opposite to the robot's velocity when `k̂_c` is too low, smaller than it when too
+/// high. A surface that really moves shows an observed velocity that leads the robot's (the robot
+/// follows it) or comes while the robot is still. `v_c` is the observed surface velocity, `v_x` the
+/// robot's (same filtering), m/s.
+pub fn surface_moving(v_c: f64, v_x: f64, max_surface_speed: f64) -> bool {
+    v_c.abs() > max_surface_speed
+        && (v_c * v_x >= 0.0 || v_x.abs() < 0.1 * v_c.abs())
+        && v_c.abs() >= 0.85 * v_x.abs()
+}
+
+/// Recursive least squares on `f = k_c·(x − x_c(t))`, with the surface locally linear in time.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StiffnessEstimator {
+    p: EstimatorParams,
+    /// Position scale `s`, m.
+    scale: f64,
+    /// `[k_c·s, k_c·(x₀ − x_c(t₀)), −k_c·ẋ_c·memory]`, N.
+    theta: [f64; 3],
+    /// Covariance, symmetric.
+    cov: [[f64; 3]; 3],
+    /// Reference position `x₀`, m.
+    x0: f64,
+    /// Time since the reference `t₀`, s.
+    t: f64,
+    /// Slow average of the position, m.
+    x_slow: f64,
+    /// Slow average of the force, N.
+    f_slow: f64,
+}
+
+/// Covariance given to the intercept and the surface-velocity term at each contact onset.
+const INTERCEPT_UNCERTAINTY: f64 = 100.0;
+/// Multiple of `excitation` above which a force transient is informative on a moving surface too.
+const STRONG_EXCITATION: f64 = 10.0;
+/// Largest relative rate of change of `k̂_c`, 1/s.
+const MAX_RATE: f64 = 30.0;
+/// Ceiling of any diagonal covariance entry.
+const COV_MAX: f64 = 1.0e4;
+
+impl StiffnessEstimator {
+    /// An estimator at `k̂_c(0)` with position scale `scale` (m, typically `f_r/k̂_c(0)`).
+    pub fn new(p: EstimatorParams, scale: f64) -> Self {
+        Self {
+            scale,
+            theta: [p.kc0 * scale, 0.0, 0.0],
+            cov: [[0.0; 3]; 3],
+            x0: 0.0,
+            t: 0.0,
+            x_slow: 0.0,
+            f_slow: 0.0,
+            p,
+        }
+    }
+
+    /// Change the configuration keeping the estimate (projected into the new bounds).
+    pub fn set_params(&mut self, p: EstimatorParams) {
+        self.p = p;
+        let k = self.kc().clamp(p.kc_min, p.kc_max);
+        self.theta[0] = k * self.scale;
+    }
+
+    /// Start over at `k̂_c(0)`.
+    pub fn reset(&mut self) {
+        self.theta = [self.p.kc0 * self.scale, 0.0, 0.0];
+        self.cov = [[0.0; 3]; 3];
+    }
+
+    /// Contact begins at measured position `x` (m) with measured force `f` (N): re-anchor the model there
+    /// and open the covariance (the stiffness estimate is kept, its uncertainty restored).
+    pub fn begin_contact(&mut self, x: f64, f: f64) {
+        self.x0 = x;
+        self.t = 0.0;
+        self.x_slow = x;
+        self.f_slow = f;
+        self.theta[1] = f;
+        self.theta[2] = 0.0;
+        let u = self.p.initial_uncertainty * self.theta[0];
+        self.cov = [
+            [u * u, 0.0, 0.0],
+            [0.0, INTERCEPT_UNCERTAINTY, 0.0],
+            [0.0, 0.0, INTERCEPT_UNCERTAINTY],
+        ];
+    }
+
+    /// Stiffness estimate, N/m.
+    pub fn kc(&self) -> f64 {
+        self.theta[0] / self.scale
+    }
+
+    /// Surface position estimate now, m.
+    pub fn xc(&self) -> f64 {
+        self.x0 - (self.theta[1] + self.theta[2] * self.t / self.p.memory) / self.kc()
+    }
+
+    fn regressor(&self, x: f64) -> [f64; 3] {
+        [(x - self.x0) / self.scale, 1.0, self.t / self.p.memory]
+    }
+
+    /// Predicted force at `x` now, N.
+    pub fn predict(&self, x: f64) -> f64 {
+        let phi = self.regressor(x);
+        (0..3).map(|i| self.theta[i] * phi[i]).sum()
+    }
+
+    /// One update in contact with measured `x` (m), raw measured force `f` (N), step `dt` (s), and
+    /// whether the surface is moving (see [`surface_moving`]).
+    ///
+    /// `f_gate` is the force the excitation gate looks at — the robust law passes its conditioned force,
+    /// so that sensor noise alone never opens the gate — while the regression itself uses the raw `f`.
+    pub fn update(&mut self, x: f64, f: f64, f_gate: f64, dt: f64, moving: bool) -> Update {
+        self.t += dt;
+        if self.t > self.p.memory {
+            // Re-anchor the time origin so the regressor stays of order one.
+            self.theta[1] += self.theta[2] * self.t / self.p.memory;
+            self.t = 0.0;
+        }
+        let a = (dt / self.p.excitation_window).min(1.0);
+        self.x_slow += a * (x - self.x_slow);
+        self.f_slow += a * (f_gate - self.f_slow);
+        let mut up = Update::default();
+        // Excited only when position *and* force move against their slow averages: a moving force at a
+        // still position (bias drift) carries no information about the stiffness, nor does a position
+        // following a moving surface under a steady force.
+        // The position criterion is taken at the stiffest expected surface: with k̂_c still too low it
+        // would otherwise hide exactly the transients that correct it.
+        let excited = self.p.kc_max * (x - self.x_slow).abs() >= self.p.excitation
+            && (f_gate - self.f_slow).abs() >= self.p.excitation
+            // …and the same way, as a positive stiffness against a still surface makes them: a force
+            // falling while the position advances is a surface moving away, not information on k_c.
+            && (f_gate - self.f_slow) * (x - self.x_slow) > 0.0;
+        let phi = self.regressor(x);
+        let err = f - self.predict(x);
+        // A strong force transient (an impact, a stiffness change) is informative even when the observer,
+        // misled by a wrong k̂_c itself, reports a moving surface.
+        let strong = (f_gate - self.f_slow).abs() >= STRONG_EXCITATION * self.p.excitation;
+        let still = !moving || strong;
+        if !excited || !still || err.abs() <= self.p.dead_zone {
+            return up;
+        }
+        let lambda = (-dt / self.p.memory).exp();
+        let c = self.cov;
+        let mut pphi = [0.0; 3];
+        for (i, v) in pphi.iter_mut().enumerate() {
+            *v = (0..3).map(|j| c[i][j] * phi[j]).sum();
+        }
+        let denom = lambda + (0..3).map(|i| phi[i] * pphi[i]).sum::<f64>();
+        let mut n = [[0.0; 3]; 3];
+        for i in 0..3 {
+            self.theta[i] += pphi[i] / denom * err;
+            for j in 0..3 {
+                n[i][j] = (c[i][j] - pphi[i] * pphi[j] / denom) / lambda;
+            }
+        }
+        // Symmetric, with a bounded, non-negative diagonal.
+        for i in 0..3 {
+            n[i][i] = n[i][i].clamp(0.0, COV_MAX);
+            for j in 0..i {
+                let v = 0.5 * (n[i][j] + n[j][i]);
+                let lim = (n[i][i] * n[j][j]).sqrt();
+                n[i][j] = v.clamp(-lim, lim);
+                n[j][i] = n[i][j];
+            }
+        }
+        self.cov = n;
+        up.adapted = true;
+        // No single step moves k̂_c by more than MAX_RATE·dt relative: a burst of biased samples (a
+        // surface starting to move, an impact) cannot throw the estimate across its range at once.
+        let k_before = self.theta[0] - pphi[0] / denom * err;
+        let max_step = MAX_RATE * dt * k_before.abs();
+        if (self.theta[0] - k_before).abs() > max_step {
+            let k_lim = k_before + (self.theta[0] - k_before).clamp(-max_step, max_step);
+            let f_here = self.predict(x);
+            self.theta[0] = k_lim;
+            self.theta[1] = f_here - self.theta[0] * phi[0] - self.theta[2] * phi[2];
+        }
+        let k = self.kc();
+        if !(k.is_finite() && (self.p.kc_min..=self.p.kc_max).contains(&k)) {
+            up.projected = true;
+            let kp = if k.is_finite() {
+                k.clamp(self.p.kc_min, self.p.kc_max)
+            } else {
+                self.p.kc0
+            };
+            // Keep the prediction at the current position unchanged while moving the slope.
+            let f_here = if k.is_finite() { self.predict(x) } else { f };
+            self.theta[0] = kp * self.scale;
+            self.theta[1] = f_here - self.theta[0] * phi[0] - self.theta[2] * phi[2];
+        }
+        if !self.theta.iter().all(|v| v.is_finite()) {
+            self.begin_contact(x, f);
+        }
+        up
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn params() -> EstimatorParams {
+        EstimatorParams {
+            kc0: 50_000.0,
+            kc_min: 10_000.0,
+            kc_max: 500_000.0,
+            memory: 0.5,
+            excitation: 0.1,
+            excitation_window: 0.05,
+            dead_zone: 0.0,
+            initial_uncertainty: 1.0,
+            max_surface_speed: 1e-3,
+        }
+    }
+
+    #[test]
+    fn learns_stiffness_and_surface_from_a_transient() {
+        let (k, xc) = (70_000.0, 0.010);
+        let mut e = StiffnessEstimator::new(params(), 1e-4);
+        e.begin_contact(0.01001, k * 0.00001);
+        for i in 0..300 {
+            let t = i as f64 * 1e-3;
+            let x = 0.01001 + 0.00006 * (1.0 - (-t / 0.02).exp()) + 1e-5 * (t * 30.0).sin();
+            e.update(x, k * (x - xc), k * (x - xc), 1e-3, false);
+        }
+        assert!((e.kc() - k).abs() / k < 0.01, "k̂ {}", e.kc());
+        assert!((e.xc() - xc).abs() < 1e-6, "x̂ {}", e.xc());
+    }
+
+    #[test]
+    fn apparent_motion_from_a_wrong_stiffness_is_not_surface_motion() {
+        let v = 0.002;
+        // k̂ too low by 4: the observer moves against the robot.
+        assert!(!surface_moving(-3.0 * v, v, 1e-3));
+        // k̂ too high by 2: it moves with the robot, but slower.
+        assert!(!surface_moving(0.5 * v, v, 1e-3));
+        // A ramp the robot follows, and one it has not started to follow.
+        assert!(surface_moving(v, v, 1e-3));
+        assert!(surface_moving(v, 0.0, 1e-3));
+        // Slow enough to ignore.
+        assert!(!surface_moving(0.0005, 0.0, 1e-3));
+    }
+
+    #[test]
+    fn static_contact_does_not_adapt() {
+        let mut e = StiffnessEstimator::new(params(), 1e-4);
+        e.begin_contact(0.0101, 5.0);
+        for i in 0..1000 {
+            // Drifting force at a still position: bias drift, no information about k_c.
+            let f = 5.0 + i as f64 * 1e-3;
+            let up = e.update(0.0101, f, f, 1e-3, false);
+            assert!(!up.adapted);
+        }
+        assert_eq!(e.kc(), 50_000.0);
+    }
+
+    #[test]
+    fn projection_holds_the_bounds_and_says_so() {
+        let mut e = StiffnessEstimator::new(params(), 1e-4);
+        e.begin_contact(0.0, 0.0);
+        let mut projected = false;
+        for i in 0..200 {
+            let x = 1e-4 * (i as f64 * 0.1).sin();
+            // A "stiffness" of 5 MN/m, far above kc_max.
+            let up = e.update(x, 5.0e6 * x, 5.0e6 * x, 1e-3, false);
+            projected |= up.projected;
+            assert!(e.kc() <= 500_000.0 + 1e-6);
+        }
+        assert!(projected);
+    }
+}

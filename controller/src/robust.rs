@@ -1,0 +1,729 @@
+//! The robust force law: forcecell's own mode beside the paper's.
+//!
+//! # The law (in contact)
+//! With the measured position `x`, the conditioned force `f̃`, the stiffness estimate `k̂_c` and the
+//! force set-point `f_r`, the command is
+//!
+//! `x_cmd = x + κ·(f_r − f̃)/k̂_c + T_lead·v̂_c + I`, `İ = k_i·(f_r − f̃)/k̂_c` (clamped),
+//!
+//! i.e. "go to where the spring would give `f_r`", anchored on the position the robot *reports* rather
+//! than on an internal integrator. Written as the paper's eq. 23, it is `x_cmd = x̃_c + [κ·f_r +
+//! (1 − κ)·f̃]/k̂_c` with the surface observed directly, `x̃_c = x − f̃/k̂_c`, instead of estimated slowly.
+//!
+//! Why this shape: the robot's inner loop `P(s) = e^{−sT_d}/(τs + 1)` carries the command to the
+//! position, so with `g = κ·k_c/k̂_c` the closed loop's characteristic equation is
+//! `e^{sT_d}·(τs + 1) = F(s)·(1 − g)` (`F` the conditioning low-pass, applied to position and force
+//! alike). For `Re s ≥ 0` the left side has modulus ≥ 1 and the right side < 1 whenever `0 < g < 2`:
+//! **the proportional loop is stable for any delay and any lag as long as `k̂_c > κ·k_c/2`**. The
+//! estimator only has to be roughly right for stability, and right for speed. (The feed-forward and the
+//! small integral below sit outside this argument; the scenario tests B1–B9 and the delay sweep B7 are
+//! what covers them.) The proportional correction is also weighted by `e²/(e² + (gate·σ)²)` — `e` the
+//! force error, `σ` the sensor noise measured online — which only lowers `g`.
+//!
+//! Moving surfaces: the observed surface `x̃_c` goes through a second-order tracking observer whose
+//! velocity `v̂_c` is fed forward over the inner loop's lead time `T_lead` (delay + lag); the small integral
+//! `I` removes what a wrong `T_lead` leaves.
+//!
+//! # Contact state machine
+//! `Approach` (bounded speed, anchored to the measured position) → `Contact` when the conditioned force
+//! reaches `contact_force` (or one raw sample three times that) → `Reacquire` when the raw force stays
+//! below `lift_force` for `lift_time` (fast for `reacquire_distance`, then at approach speed) →
+//! `Contact` … and from anywhere `Retract` when the conditioned force exceeds `max_force`.
+//!
+//! # Limits
+//! Deviation from the programmed path, command velocity and acceleration (with braking distance), the
+//! estimator's bounds and the force limit. Every one that acts is an [`Events`] flag of the step and a
+//! counter ([`ForceLaw::counters`]).
+
+use serde::{Deserialize, Serialize};
+
+use crate::conditioning::{ConditioningParams, SignalFilter};
+use crate::estimator::{EstimatorParams, StiffnessEstimator, surface_moving};
+use crate::law::{ContactState, EventCounts, Events, ForceLaw, Output};
+
+/// How the law responds in contact.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ResponseParams {
+    /// Fraction `κ` of the force error, converted to a position by `k̂_c`, corrected per command. In
+    /// (0, 1]; the loop stays stable while `κ·k_c/k̂_c < 2`.
+    pub kappa: f64,
+    /// Lead time `T_lead` of the inner loop (delay + lag) over which the surface velocity is fed forward, s.
+    pub lead: f64,
+    /// Further lead in control periods (robot interfaces delay by whole cycles: one tuning then fits a
+    /// 1 kHz and a 250 Hz cell), periods.
+    #[serde(default)]
+    pub lead_cycles: f64,
+    /// Integral gain `k_i`, 1/s (0: none).
+    pub integral: f64,
+    /// Largest magnitude of the integral term, m.
+    pub integral_limit: f64,
+    /// Natural frequency of the surface observer, Hz.
+    pub surface_bandwidth: f64,
+    /// Dead-band on the fed-forward surface velocity per newton of sensor noise, (m/s)/N: the law
+    /// measures the noise online, and inside `σ·feedforward_deadband` the observed velocity is taken for
+    /// differentiated noise rather than motion (above it only the excess is fed forward). A noise-free
+    /// sensor gets no dead-band.
+    pub feedforward_deadband: f64,
+    /// Largest rate of change of the set-point when it is changed, N/s (bumpless changes).
+    pub set_point_rate: f64,
+    /// Noise gate: the proportional correction is weighted by `e²/(e² + (noise_gate·σ)²)`, with `e` the
+    /// conditioned force error and `σ` the sensor noise the law measures online. 0 switches it off.
+    /// Errors well above the noise get the full gain, errors inside it a small one (the integral keeps
+    /// the mean), so noise does not shake the tool.
+    pub noise_gate: f64,
+}
+
+/// The contact state machine.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ContactParams {
+    /// Speed towards an unknown surface, m/s.
+    pub approach_speed: f64,
+    /// Conditioned force that means contact, N.
+    pub contact_force: f64,
+    /// Raw force below which contact is lost, N (< `contact_force`).
+    pub lift_force: f64,
+    /// How long the force must stay below `lift_force`, s.
+    pub lift_time: f64,
+    /// Speed after a loss of contact, m/s.
+    pub reacquire_speed: f64,
+    /// Distance covered at `reacquire_speed` before falling back to `approach_speed`, m.
+    pub reacquire_distance: f64,
+    /// Speed away from the surface after the force limit, m/s.
+    pub retract_speed: f64,
+    /// Distance to retract before approaching again, m.
+    pub retract_distance: f64,
+}
+
+/// Hard limits. Each one that acts is reported.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LimitParams {
+    /// Conditioned force above which the law retracts, N.
+    pub max_force: f64,
+    /// Largest command velocity, m/s.
+    pub max_velocity: f64,
+    /// Largest command acceleration, m/s².
+    pub max_acceleration: f64,
+    /// Largest magnitude of the command, i.e. deviation from the programmed path along the normal, m.
+    pub max_deviation: f64,
+}
+
+/// Everything the robust law needs.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobustParams {
+    /// Force set-point `f_r`, N.
+    pub f_r: f64,
+    /// Response in contact.
+    pub response: ResponseParams,
+    /// Force conditioning.
+    pub conditioning: ConditioningParams,
+    /// Stiffness estimator.
+    pub estimator: EstimatorParams,
+    /// Contact state machine.
+    pub contact: ContactParams,
+    /// Limits.
+    pub limits: LimitParams,
+}
+
+fn positive(name: &str, v: f64) -> Result<(), String> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(format!("{name} must be > 0, got {v}"))
+    }
+}
+
+fn non_negative(name: &str, v: f64) -> Result<(), String> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        Err(format!("{name} must be >= 0, got {v}"))
+    }
+}
+
+impl RobustParams {
+    /// Checks every value and the relations between them.
+    pub fn validate(&self) -> Result<(), String> {
+        non_negative("f_r", self.f_r)?;
+        let r = &self.response;
+        positive("response.kappa", r.kappa)?;
+        if r.kappa > 1.0 {
+            return Err(format!("response.kappa must be <= 1, got {}", r.kappa));
+        }
+        non_negative("response.lead", r.lead)?;
+        non_negative("response.lead_cycles", r.lead_cycles)?;
+        non_negative("response.integral", r.integral)?;
+        non_negative("response.integral_limit", r.integral_limit)?;
+        positive("response.surface_bandwidth", r.surface_bandwidth)?;
+        non_negative("response.feedforward_deadband", r.feedforward_deadband)?;
+        positive("response.set_point_rate", r.set_point_rate)?;
+        non_negative("response.noise_gate", r.noise_gate)?;
+        self.conditioning.validate()?;
+        self.estimator.validate()?;
+        let c = &self.contact;
+        positive("contact.approach_speed", c.approach_speed)?;
+        positive("contact.contact_force", c.contact_force)?;
+        non_negative("contact.lift_force", c.lift_force)?;
+        non_negative("contact.lift_time", c.lift_time)?;
+        positive("contact.reacquire_speed", c.reacquire_speed)?;
+        non_negative("contact.reacquire_distance", c.reacquire_distance)?;
+        positive("contact.retract_speed", c.retract_speed)?;
+        non_negative("contact.retract_distance", c.retract_distance)?;
+        if c.lift_force >= c.contact_force {
+            return Err(format!(
+                "contact.lift_force {} N must be below contact.contact_force {} N",
+                c.lift_force, c.contact_force
+            ));
+        }
+        let l = &self.limits;
+        positive("limits.max_force", l.max_force)?;
+        positive("limits.max_velocity", l.max_velocity)?;
+        positive("limits.max_acceleration", l.max_acceleration)?;
+        positive("limits.max_deviation", l.max_deviation)?;
+        if l.max_force <= self.f_r.max(c.contact_force) {
+            return Err(format!(
+                "limits.max_force {} N must be above the set-point {} N and contact.contact_force",
+                l.max_force, self.f_r
+            ));
+        }
+        for (n, v) in [
+            ("contact.approach_speed", c.approach_speed),
+            ("contact.reacquire_speed", c.reacquire_speed),
+            ("contact.retract_speed", c.retract_speed),
+        ] {
+            if v > l.max_velocity {
+                return Err(format!(
+                    "{n} {v} m/s is above limits.max_velocity {} m/s",
+                    l.max_velocity
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Position scale of the estimator's regressor: the penetration the set-point needs at `k̂_c(0)`, m.
+    fn scale(&self) -> f64 {
+        self.f_r.max(1.0) / self.estimator.kc0
+    }
+}
+
+/// Time constant of the sensor-noise estimate, s.
+const NOISE_WINDOW: f64 = 1.0;
+/// Floor of the clipping level of the noise estimate, N.
+const NOISE_FLOOR: f64 = 0.05;
+
+/// A loss of contact sooner than this after contact was detected is a bounce, s.
+const BOUNCE_TIME: f64 = 0.5;
+
+/// Smallest dead-band on the fed-forward surface velocity, m/s (transients of the observer).
+const DEADBAND_FLOOR: f64 = 0.0001;
+
+/// An observed-surface innovation above this fraction of the set-point's penetration `f_r/k̂_c` in one
+/// step is a jump, not motion.
+const STEP_INNOVATION: f64 = 0.25;
+
+/// How long large innovations count as one jump rather than motion, s (a step needs about this long
+/// to pass the force conditioning).
+const JUMP_TIME: f64 = 0.03;
+
+/// Relative force error within which the integral acts.
+const INTEGRATION_BAND: f64 = 0.3;
+
+/// The robust law. See the module documentation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RobustLaw {
+    p: RobustParams,
+    state: ContactState,
+    /// Active set-point, slewing towards `p.f_r`, N.
+    f_r: f64,
+    force: SignalFilter,
+    position: SignalFilter,
+    est: StiffnessEstimator,
+    /// How long the observer's innovation has been a jump, s.
+    jump_time: f64,
+    /// Observed surface, m, and its velocity, m/s.
+    zc: f64,
+    vc: f64,
+    integ: f64,
+    /// Last command, m, and its velocity, m/s.
+    u: f64,
+    v: f64,
+    /// Time the raw force has been below the lift force, s.
+    below: f64,
+    /// Distance travelled in the current re-acquire or retract, m.
+    travelled: f64,
+    /// Time since contact was last detected, s.
+    in_contact: f64,
+    /// The observed surface velocity away from the tool when contact was last lost, m/s.
+    v_lost: f64,
+    /// The two previous raw forces, N, and the sensor noise variance measured from them, N².
+    f_prev: Option<(f64, f64)>,
+    /// Previous conditioned position, m, and its velocity, m/s.
+    xf_prev: Option<f64>,
+    v_x: f64,
+    noise_var: f64,
+    counts: EventCounts,
+}
+
+impl RobustLaw {
+    /// A law with validated parameters, at rest at 0.
+    pub fn new(p: RobustParams) -> Result<Self, String> {
+        p.validate()?;
+        let position_params = ConditioningParams {
+            notch: None,
+            ..p.conditioning
+        };
+        Ok(Self {
+            state: ContactState::Approach,
+            f_r: p.f_r,
+            force: SignalFilter::new(p.conditioning),
+            position: SignalFilter::new(position_params),
+            est: StiffnessEstimator::new(p.estimator, p.scale()),
+            jump_time: 0.0,
+            zc: f64::NAN,
+            vc: 0.0,
+            integ: 0.0,
+            u: 0.0,
+            v: 0.0,
+            below: 0.0,
+            travelled: 0.0,
+            in_contact: f64::INFINITY,
+            v_lost: 0.0,
+            f_prev: None,
+            xf_prev: None,
+            v_x: 0.0,
+            noise_var: 0.0,
+            counts: EventCounts::default(),
+            p,
+        })
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &RobustParams {
+        &self.p
+    }
+
+    /// The contact state.
+    pub fn state(&self) -> ContactState {
+        self.state
+    }
+
+    /// The set-point in force now (it slews towards a new one), N.
+    pub fn active_set_point(&self) -> f64 {
+        self.f_r
+    }
+
+    /// Change the parameters while running, without a bump: the estimates, filters, contact state and
+    /// command are kept, a new set-point is approached at `set_point_rate`, and the velocity and
+    /// acceleration limits keep acting on the command.
+    pub fn set_params(&mut self, p: RobustParams) -> Result<(), String> {
+        p.validate()?;
+        self.force.set_params(p.conditioning);
+        self.position.set_params(ConditioningParams {
+            notch: None,
+            ..p.conditioning
+        });
+        self.est.set_params(p.estimator);
+        self.p = p;
+        Ok(())
+    }
+
+    /// Change the force set-point only (bumpless, see [`set_params`](Self::set_params)).
+    pub fn set_set_point(&mut self, f_r: f64) -> Result<(), String> {
+        let mut p = self.p;
+        p.f_r = f_r;
+        self.set_params(p)
+    }
+
+    fn output(&self, events: Events) -> Output {
+        let k = self.est.kc();
+        Output {
+            x_cmd: self.u,
+            x_r: self.zc + self.f_r / k,
+            kc_hat: k,
+            xc_hat: self.zc,
+            state: Some(self.state),
+            events,
+        }
+    }
+
+    fn enter_contact(&mut self, x: f64, f: f64, ff: f64, xf: f64, ev: &mut Events) {
+        self.state = ContactState::Contact;
+        self.est.begin_contact(x, f);
+        self.zc = xf - ff / self.est.kc();
+        self.vc = 0.0;
+        self.integ = 0.0;
+        self.below = 0.0;
+        self.in_contact = 0.0;
+        ev.contact = true;
+    }
+
+    /// Advance the contact state machine with the raw force `f` and the conditioned force `ff`.
+    fn transitions(&mut self, x: f64, f: f64, ff: f64, xf: f64, dt: f64, ev: &mut Events) {
+        let c = self.p.contact;
+        if ff > self.p.limits.max_force && self.state != ContactState::Retract {
+            ev.force_limit = true;
+            self.state = ContactState::Retract;
+            self.travelled = 0.0;
+            return;
+        }
+        match self.state {
+            ContactState::Approach | ContactState::Reacquire => {
+                // The conditioned force, confirmed by the raw one (the filter still remembers a
+                // contact just lost), or one strong raw sample.
+                if (ff >= c.contact_force && f >= c.lift_force) || f >= 3.0 * c.contact_force {
+                    self.enter_contact(x, f, ff, xf, ev);
+                }
+            }
+            ContactState::Contact => {
+                self.in_contact += dt;
+                if f < c.lift_force {
+                    self.below += dt;
+                    if self.below >= c.lift_time {
+                        self.state = ContactState::Reacquire;
+                        // The fast search is for a surface that went away. A contact lost while the
+                        // tool itself was moving away (the law's own answer to a force jump), or lost
+                        // again soon after a re-acquisition (a bounce), is searched for at approach
+                        // speed.
+                        let retracting = self.v_x < -c.approach_speed;
+                        self.travelled = if !retracting && self.in_contact >= BOUNCE_TIME {
+                            0.0
+                        } else {
+                            c.reacquire_distance
+                        };
+                        ev.lift_off = true;
+                        self.v_lost = self.vc.max(0.0);
+                        // The force is gone: forget the filter's memory of it.
+                        self.force.reset_to(f);
+                    }
+                } else {
+                    self.below = 0.0;
+                }
+            }
+            ContactState::Retract => {
+                if self.travelled >= c.retract_distance && ff < c.lift_force {
+                    self.state = ContactState::Approach;
+                }
+            }
+        }
+    }
+
+    /// The command the state wants before limits.
+    fn desired(&mut self, x: f64, ff: f64, xf: f64, dt: f64) -> f64 {
+        let c = self.p.contact;
+        let r = self.p.response;
+        match self.state {
+            ContactState::Approach => {
+                // Anchored: never more than a few lead times of approach ahead of the robot.
+                let gap = c.approach_speed * (4.0 * r.lead).max(0.05);
+                (self.u + c.approach_speed * dt).min(x + gap)
+            }
+            ContactState::Reacquire => {
+                // Fast first; then at approach speed, or faster when the surface was seen receding at
+                // lift-off (a receding surface outruns a slow search).
+                let speed = if self.travelled < c.reacquire_distance {
+                    c.reacquire_speed
+                } else {
+                    (c.approach_speed + 1.5 * self.v_lost).min(c.reacquire_speed)
+                };
+                self.travelled += speed * dt;
+                let gap = c.reacquire_distance + c.approach_speed * (4.0 * r.lead).max(0.05);
+                (self.u + speed * dt).min(x + gap)
+            }
+            ContactState::Retract => {
+                self.travelled += c.retract_speed * dt;
+                self.u - c.retract_speed * dt
+            }
+            ContactState::Contact => {
+                let k = self.est.kc();
+                // Surface observer: second-order tracker on x̃_c = x̄ − f̃/k̂_c.
+                let z = xf - ff / k;
+                let w = core::f64::consts::TAU * r.surface_bandwidth;
+                let w = w.min(0.5 / dt);
+                let e = z - self.zc;
+                let jump =
+                    e.abs() > STEP_INNOVATION * self.f_r.max(self.p.contact.contact_force) / k;
+                self.jump_time = if jump { self.jump_time + dt } else { 0.0 };
+                if jump && self.jump_time <= JUMP_TIME {
+                    // A jump (a surface step, a stiffness change seen through a stale k̂_c) is not
+                    // motion: the observed surface moves there without a velocity kick. What keeps
+                    // jumping for longer than the conditioning takes to pass a step is motion.
+                    self.zc = z;
+                } else {
+                    self.vc += dt * w * w * e;
+                    self.zc += dt * (self.vc + 2.0 * 0.8 * w * e);
+                }
+                let e = self.f_r - ff;
+                let n = r.noise_gate * r.noise_gate * self.noise_var;
+                let weight = if n > 0.0 { e * e / (e * e + n) } else { 1.0 };
+                let delta = e / k;
+                // Conditional integration: only near the set-point, where what is left is a ramp's lag
+                // (a transient's error is the proportional path's business, integrating it overshoots).
+                if (self.f_r - ff).abs()
+                    <= INTEGRATION_BAND * self.f_r.max(self.p.contact.contact_force)
+                {
+                    let lim = r.integral_limit;
+                    self.integ = (self.integ + dt * r.integral * delta).clamp(-lim, lim);
+                }
+                let deadband = (r.feedforward_deadband * self.noise_var.sqrt()).max(DEADBAND_FLOOR);
+                let v_ff = self.vc.signum() * (self.vc.abs() - deadband).max(0.0);
+                let lead = r.lead + r.lead_cycles * dt;
+                xf + weight * r.kappa * delta + lead * v_ff + self.integ
+            }
+        }
+    }
+
+    /// Apply deviation, velocity and acceleration limits to `want`, flagging each one that acts.
+    fn limit(&mut self, want: f64, dt: f64, ev: &mut Events) -> f64 {
+        let l = self.p.limits;
+        let mut target = want;
+        if target.abs() > l.max_deviation {
+            target = target.clamp(-l.max_deviation, l.max_deviation);
+            ev.deviation_limit = true;
+        }
+        let dist = target - self.u;
+        let mut v = dist / dt;
+        if v.abs() > l.max_velocity {
+            v = v.clamp(-l.max_velocity, l.max_velocity);
+            ev.velocity_limit = true;
+        }
+        // Braking: never faster than what can still stop at the target (not a limit event: it is how
+        // an acceleration-limited command reaches a target without overshoot).
+        // Discrete time: the largest speed from which steps of at most `a·dt` velocity change still
+        // stop within `dist`.
+        let half = 0.5 * l.max_acceleration * dt;
+        let v_brake = (half * half + 2.0 * l.max_acceleration * dist.abs()).sqrt() - half;
+        v = v.clamp(-v_brake, v_brake);
+        let dv = l.max_acceleration * dt;
+        if (v - self.v).abs() > dv * (1.0 + 1e-9) {
+            v = v.clamp(self.v - dv, self.v + dv);
+            ev.acceleration_limit = true;
+        }
+        let mut u = self.u + v * dt;
+        if u.abs() > l.max_deviation {
+            u = u.clamp(-l.max_deviation, l.max_deviation);
+            v = (u - self.u) / dt;
+            ev.deviation_limit = true;
+        }
+        self.v = v;
+        u
+    }
+}
+
+impl ForceLaw for RobustLaw {
+    fn start(&mut self, x: f64) {
+        self.state = ContactState::Approach;
+        self.f_r = self.p.f_r;
+        self.force.clear();
+        self.position.clear();
+        self.est.reset();
+        self.zc = f64::NAN;
+        self.jump_time = 0.0;
+        self.vc = 0.0;
+        self.integ = 0.0;
+        self.u = if x.is_finite() { x } else { 0.0 };
+        self.v = 0.0;
+        self.below = 0.0;
+        self.travelled = 0.0;
+        self.in_contact = f64::INFINITY;
+        self.v_lost = 0.0;
+        self.f_prev = None;
+        self.xf_prev = None;
+        self.v_x = 0.0;
+        self.noise_var = 0.0;
+        self.counts = EventCounts::default();
+    }
+
+    fn step(&mut self, x: f64, f: f64, dt: f64) -> Output {
+        let mut ev = Events::default();
+        if !(x.is_finite() && f.is_finite() && dt.is_finite() && dt > 0.0) {
+            // Hold: the command stands still this step, and moves off from rest afterwards.
+            ev.bad_input = true;
+            self.v = 0.0;
+            self.counts.add(&ev);
+            return self.output(ev);
+        }
+        let df = self.p.response.set_point_rate * dt;
+        self.f_r += (self.p.f_r - self.f_r).clamp(-df, df);
+        let ff = self.force.step(f, dt);
+        // Sensor noise: the mean square of the raw force's second difference over six (white noise of
+        // variance σ² gives σ²; ramps give nothing, smooth motion little), averaged over NOISE_WINDOW.
+        // Each difference is clipped at three of its own standard deviations (plus a floor), so impacts
+        // and steps — rare, large — cannot pass for noise; true noise still builds the estimate up.
+        if let Some((p1, p2)) = self.f_prev {
+            let a = (dt / NOISE_WINDOW).min(1.0);
+            let clip = 3.0 * (6.0 * self.noise_var).sqrt() + NOISE_FLOOR;
+            let d2 = (f - 2.0 * p1 + p2).clamp(-clip, clip);
+            self.noise_var += a * (d2 * d2 / 6.0 - self.noise_var);
+        }
+        self.f_prev = Some((f, self.f_prev.map_or(f, |p| p.0)));
+        let xf = self.position.step(x, dt);
+        let v_x = self.xf_prev.map_or(0.0, |p| (xf - p) / dt);
+        self.xf_prev = Some(xf);
+        self.v_x = v_x;
+        self.transitions(x, f, ff, xf, dt, &mut ev);
+        let moving = surface_moving(self.vc, v_x, self.p.estimator.max_surface_speed);
+        if self.state == ContactState::Contact && self.est.update(x, f, ff, dt, moving).projected {
+            ev.estimator_bound = true;
+        }
+        let want = self.desired(x, ff, xf, dt);
+        let u = if want.is_finite() {
+            self.limit(want, dt, &mut ev)
+        } else {
+            ev.bad_input = true;
+            self.v = 0.0;
+            self.u
+        };
+        self.u = u;
+        self.counts.add(&ev);
+        self.output(ev)
+    }
+
+    fn set_point(&self) -> f64 {
+        self.p.f_r
+    }
+
+    fn counters(&self) -> EventCounts {
+        self.counts
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{LawConfig, Tuning};
+
+    fn params() -> RobustParams {
+        let t: Tuning = toml::from_str(include_str!("../../tunings/robust.toml")).unwrap();
+        match t.law {
+            LawConfig::Robust(p) => *p,
+            other => panic!("robust tuning expected, got {other:?}"),
+        }
+    }
+
+    /// Ideal inner loop against a spring whose surface is `xc(step)`; returns the law and the position.
+    fn drive(
+        law: &mut RobustLaw,
+        x: &mut f64,
+        steps: usize,
+        k: f64,
+        xc: impl Fn(usize) -> f64,
+    ) -> Vec<Output> {
+        (0..steps)
+            .map(|i| {
+                let f = (k * (*x - xc(i))).max(0.0);
+                let out = law.step(*x, f, 1e-3);
+                *x += 0.2 * (out.x_cmd - *x);
+                out
+            })
+            .collect()
+    }
+
+    #[test]
+    fn start_is_bumpless_and_approach_is_bounded() {
+        let p = params();
+        let mut law = RobustLaw::new(p).unwrap();
+        law.start(0.004);
+        let out = law.step(0.004, 0.0, 1e-3);
+        assert_eq!(out.state, Some(ContactState::Approach));
+        assert!((out.x_cmd - 0.004).abs() <= p.contact.approach_speed * 1e-3 + 1e-15);
+    }
+
+    #[test]
+    fn state_machine_contact_lift_off_reacquire() {
+        let p = params();
+        let mut law = RobustLaw::new(p).unwrap();
+        let mut x = 0.0095;
+        law.start(x);
+        let outs = drive(&mut law, &mut x, 6000, 70_000.0, |i| {
+            if i < 3000 { 0.010 } else { 0.0115 }
+        });
+        let first_contact = outs.iter().position(|o| o.events.contact).unwrap();
+        assert!(
+            outs[..first_contact]
+                .iter()
+                .all(|o| o.state == Some(ContactState::Approach))
+        );
+        let lift = outs.iter().position(|o| o.events.lift_off).unwrap();
+        assert!(lift >= 3000, "lift-off only after the surface retreats");
+        assert_eq!(outs[lift].state, Some(ContactState::Reacquire));
+        assert!(outs[lift..].iter().any(|o| o.events.contact));
+        assert_eq!(outs.last().unwrap().state, Some(ContactState::Contact));
+        let c = law.counters();
+        // The fast re-acquisition may bounce once; the search after a bounce is slow and holds.
+        assert!(
+            (2..=3).contains(&c.contacts) && c.lift_offs == c.contacts - 1,
+            "{c:?}"
+        );
+        let f = 70_000.0 * (x - 0.0115);
+        assert!((f - p.f_r).abs() < 0.05, "force {f} N");
+    }
+
+    #[test]
+    fn force_limit_retracts_and_is_reported() {
+        let p = params();
+        let mut law = RobustLaw::new(p).unwrap();
+        let mut x = 0.0100714;
+        law.start(x);
+        drive(&mut law, &mut x, 1000, 70_000.0, |_| 0.010);
+        // The surface jumps 2 mm towards the tool: 140 N.
+        let outs = drive(&mut law, &mut x, 400, 70_000.0, |_| 0.008);
+        let hit = outs.iter().position(|o| o.events.force_limit).unwrap();
+        assert!(hit < 20, "limit seen after {hit} steps");
+        assert_eq!(outs[hit].state, Some(ContactState::Retract));
+        assert!(outs[hit + 10].x_cmd < outs[hit].x_cmd, "moving away");
+        assert_eq!(law.counters().force_limits, 1);
+    }
+
+    #[test]
+    fn set_point_change_is_bumpless() {
+        let p = params();
+        let mut law = RobustLaw::new(p).unwrap();
+        let mut x = 0.0100714;
+        law.start(x);
+        drive(&mut law, &mut x, 1500, 70_000.0, |_| 0.010);
+        law.set_set_point(10.0).unwrap();
+        let before = x;
+        let outs = drive(&mut law, &mut x, 1500, 70_000.0, |_| 0.010);
+        // The set-point slews at its rate: the first command moves by no more than rate·dt/k̂ and κ.
+        let first_move = (outs[0].x_cmd - before).abs();
+        assert!(first_move < 2e-6, "first move {first_move} m");
+        assert!(outs.iter().all(|o| !o.events.any_limit()));
+        assert!((law.active_set_point() - 10.0).abs() < 1e-12);
+        let f = 70_000.0 * (x - 0.010);
+        assert!((f - 10.0).abs() < 0.05, "force {f} N");
+    }
+
+    #[test]
+    fn deviation_limit_is_an_event_never_a_silent_clamp() {
+        let mut p = params();
+        p.limits.max_deviation = 0.0002;
+        let mut law = RobustLaw::new(p).unwrap();
+        let mut x = 0.0;
+        law.start(x);
+        // The surface is out of reach (1 mm): the approach runs into the deviation limit.
+        let outs = drive(&mut law, &mut x, 2000, 70_000.0, |_| 0.001);
+        assert!(outs.iter().all(|o| o.x_cmd.abs() <= 0.0002 + 1e-15));
+        assert!(outs.iter().any(|o| o.events.deviation_limit));
+        assert!(law.counters().deviation_limits > 0);
+    }
+
+    #[test]
+    fn validation_names_what_is_wrong() {
+        let mut p = params();
+        p.contact.lift_force = p.contact.contact_force;
+        assert!(RobustLaw::new(p).unwrap_err().contains("lift_force"));
+        let mut p = params();
+        p.response.kappa = 1.5;
+        assert!(RobustLaw::new(p).unwrap_err().contains("kappa"));
+        let mut p = params();
+        p.estimator.kc0 = 1e7;
+        assert!(RobustLaw::new(p).unwrap_err().contains("kc0"));
+        let mut p = params();
+        p.limits.max_force = 1.0;
+        assert!(RobustLaw::new(p).unwrap_err().contains("max_force"));
+    }
+}

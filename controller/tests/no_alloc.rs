@@ -1,0 +1,49 @@
+//! B11: the robust law's step does not touch the heap. A counting global allocator (`stats_alloc`) in a
+//! test binary of its own, so no other test's allocations are counted.
+
+use std::alloc::System;
+
+use controller::{ForceLaw, LawConfig, RobustLaw, Tuning};
+use stats_alloc::{INSTRUMENTED_SYSTEM, Region, StatsAlloc};
+
+#[global_allocator]
+static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;
+
+#[test]
+fn robust_step_does_not_allocate() {
+    let t: Tuning = toml::from_str(include_str!("../../tunings/robust.toml")).unwrap();
+    let LawConfig::Robust(p) = t.law else {
+        panic!("robust tuning")
+    };
+    let mut law = RobustLaw::new(*p).unwrap();
+    law.start(0.009);
+    // Drive it through approach, contact, lift-off, re-acquire and back against a spring.
+    let (k, mut xc): (f64, f64) = (70_000.0, 0.010);
+    let mut x = 0.009;
+    let mut states = 0u32;
+    let region = Region::new(GLOBAL);
+    for i in 0..20_000 {
+        if i == 8_000 {
+            xc += 0.001;
+        }
+        if i == 14_000 {
+            xc -= 0.0015;
+        }
+        let f = (k * (x - xc)).max(0.0);
+        let out = law.step(x, f, 1e-3);
+        states |= 1 << out.state.map_or(7, |s| s.code());
+        x += 0.1 * (out.x_cmd - x);
+    }
+    let _ = law.step(f64::NAN, 1.0, 1e-3);
+    let change = region.change();
+    assert_eq!(
+        change.allocations + change.reallocations,
+        0,
+        "the step allocated: {change:?}"
+    );
+    assert_eq!(
+        states & 0b111,
+        0b111,
+        "approach, contact and re-acquire visited: {states:b}"
+    );
+}
