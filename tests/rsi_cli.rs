@@ -191,3 +191,70 @@ fn sim_with_an_external_robot_client() {
         .unwrap();
     assert!((last - 5.0).abs() < 0.5, "final force {last} N");
 }
+
+/// A simulated cell starts with its tool away from the programmed path (the correction in effect). With a
+/// tight per-cycle rate limit the first replies must neither drag the tool back towards the path nor
+/// differ from the in-process robot.
+#[test]
+fn a_tight_rate_limit_does_not_drag_the_tool_back_at_start() {
+    let dir = tempfile::tempdir().unwrap();
+    let robust =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("tunings/robust.toml"))
+            .unwrap();
+    let tight: String = robust
+        .lines()
+        .map(|l| {
+            if l.trim_start().starts_with("max_step") {
+                "max_step = 0.0002".to_string()
+            } else {
+                l.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    assert_ne!(tight, robust, "the tuning must set max_step");
+    std::fs::write(dir.path().join("tight.toml"), tight).unwrap();
+    let common = [
+        "-s",
+        "b01-approach",
+        "--plant",
+        "p2",
+        "--tuning",
+        "tight.toml",
+    ];
+    let rsi = forcecell(
+        &[&["sim", "--out", "rsi"][..], &common[..]].concat(),
+        dir.path(),
+    );
+    assert!(rsi.status.success(), "{}", text(&rsi.stderr));
+    let inproc = forcecell(
+        &[
+            &["sim", "--out", "in", "--robot", "inproc"][..],
+            &common[..],
+        ]
+        .concat(),
+        dir.path(),
+    );
+    assert!(inproc.status.success(), "{}", text(&inproc.stderr));
+    let x = |dir_name: &str| -> Vec<f64> {
+        rows(&dir.path().join(dir_name), "b01-approach-p2-robust.csv")
+            .iter()
+            .skip(1)
+            .map(|r| r.split(',').nth(4).unwrap().parse::<f64>().unwrap())
+            .collect()
+    };
+    let (xr, xi) = (x("rsi"), x("in"));
+    assert_eq!(xr.len(), xi.len());
+    let x0 = xr[0];
+    let lowest = xr.iter().take(50).copied().fold(f64::INFINITY, f64::min);
+    assert!(lowest >= x0 - 1e-6, "dragged from {x0} m to {lowest} m");
+    let worst = xr
+        .iter()
+        .zip(&xi)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(
+        worst < 1e-5,
+        "RSI and in-process robots differ by {worst} m"
+    );
+}

@@ -401,6 +401,22 @@ impl Run {
         let delay_slot = k.rob.slot("Delay", "D");
         let rkorr: [Option<usize>; 6] = POSE.map(|a| k.sen.slot("RKorr", a));
         let stop_slot = k.sen.slot("Stop", "");
+        if cfg.mode == CorrectionMode::Absolute {
+            // A simulated cell may start with its tool away from the programmed path: that offset is
+            // the correction in effect, as if an earlier RSI session had left it there, so a late first
+            // reply holds it instead of dropping the tool back onto the path.
+            let (actual, programmed) = mech.poses();
+            let offset = programmed
+                .orientation
+                .inverse_transform_vector(&(actual.position - programmed.position));
+            let wire0 = wire::offset_to_wire(&offset, &hal::Vector3::zeros());
+            for (i, slot) in rkorr.iter().enumerate() {
+                if let Some(s) = slot {
+                    self.held[*s] = wire0[i];
+                }
+            }
+            self.total = wire0;
+        }
         let start = Instant::now();
         let mut n: u64 = 0;
         loop {

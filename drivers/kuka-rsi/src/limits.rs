@@ -111,9 +111,15 @@ impl Shaper {
         }
     }
 
-    /// The robot's correction starts again from zero (a new session).
-    pub(crate) fn reset(&mut self) {
-        self.last = [0.0; 6];
+    /// A new session: rate-limit the next command against the correction the robot reports to be in
+    /// effect (`RIst − RSol`, `[tx, ty, tz, rx, ry, rz]` m and rad; zero at a real `RSI_ON`), so the first
+    /// reply can neither jump nor drag the tool back towards the path. Non-finite components count as 0.
+    pub(crate) fn reset_to(&mut self, in_effect: [f64; 6]) {
+        let mut ignored = false;
+        self.last = self.envelope(
+            in_effect.map(|v| if v.is_finite() { v } else { 0.0 }),
+            &mut ignored,
+        );
     }
 
     /// The total `[tx, ty, tz, rx, ry, rz]` (m, rad) to send for `c`; always finite.

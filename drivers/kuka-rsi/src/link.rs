@@ -413,8 +413,8 @@ impl RsiLink {
                 last_rx: rx_at,
                 peer: from,
             });
-            // A new RSI_ON starts its correction from zero.
-            self.shaper.reset();
+            // A new RSI_ON starts the robot's relative total from zero; the rate limit starts from the
+            // correction the robot reports in effect (set below, once the poses are decoded).
             self.last_wire = [0.0; 6];
         }
         let s = self.session.as_mut()?;
@@ -439,6 +439,12 @@ impl RsiLink {
             late_replies: delay,
             new_session,
         };
+        if new_session {
+            let t = cycle.tool_offset();
+            let r =
+                (cycle.programmed.orientation.inverse() * cycle.actual.orientation).scaled_axis();
+            self.shaper.reset_to([t.x, t.y, t.z, r.x, r.y, r.z]);
+        }
         Some(Accepted {
             cycle,
             ipoc,
