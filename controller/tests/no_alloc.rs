@@ -1,9 +1,11 @@
-//! B11: the robust law's step does not touch the heap. A counting global allocator (`stats_alloc`) in a
+//! B11: the laws' steps do not touch the heap (the robust law, and the paper's and fixed-reference laws). A counting global allocator (`stats_alloc`) in a
 //! test binary of its own, so no other test's allocations are counted.
 
 use std::alloc::System;
 
-use controller::{ForceLaw, LawConfig, RobustLaw, Tuning};
+use controller::{
+    ForceLaw, ImpedanceLaw, ImpedanceParams, LawConfig, Reference, RobustLaw, Tuning,
+};
 use stats_alloc::{INSTRUMENTED_SYSTEM, Region, StatsAlloc};
 
 #[global_allocator]
@@ -41,9 +43,30 @@ fn robust_step_does_not_allocate() {
         0,
         "the step allocated: {change:?}"
     );
+    paper_and_fixed_laws_step_without_allocating();
     assert_eq!(
         states & 0b111,
         0b111,
         "approach, contact and re-acquire visited: {states:b}"
     );
+}
+
+/// Called from the one test above: a second `#[test]` could run in parallel and allocate in the region.
+fn paper_and_fixed_laws_step_without_allocating() {
+    let mut paper = ImpedanceLaw::paper();
+    let mut fixed =
+        ImpedanceLaw::new(ImpedanceParams::PAPER, Reference::Fixed { x_r: 0.0101 }).unwrap();
+    paper.start(0.0091);
+    fixed.start(0.0091);
+    let mut x = 0.0091;
+    let region = Region::new(GLOBAL);
+    for k in 0..10_000 {
+        let k_c = if k < 5_000 { 70_000.0 } else { 40_000.0 };
+        let f = (k_c * (x - 0.01f64)).max(0.0);
+        x = paper.step(x, f, 1e-3).x_cmd;
+        std::hint::black_box(fixed.step(x, f, 1e-3));
+    }
+    let change = region.change();
+    assert_eq!(change.allocations + change.reallocations, 0, "{change:?}");
+    assert!(x.is_finite());
 }
