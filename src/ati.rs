@@ -205,7 +205,8 @@ fn print_info(info: &DeviceInfo) {
     }
 }
 
-fn bias_config() -> BiasConfig {
+/// The bias window used by `sensor ati tare` and `run`'s start-up tare.
+pub fn bias_config() -> BiasConfig {
     BiasConfig {
         window: 200,
         max_spread: 400,

@@ -4,6 +4,7 @@
 
 pub mod ati;
 pub mod bench;
+pub mod cell;
 pub mod metrics;
 pub mod plot;
 pub mod record;

@@ -25,6 +25,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run the controller on a real cell from a config file (KUKA RSI + ATI CAN): record and plot.
+    Run(RunArgs),
     /// Simulate a cell: run a scenario, print a summary, write DIR/NAME.csv and DIR/NAME.png.
     Sim(SimArgs),
     /// Write the robot-side KUKA RSI files (Ethernet config XML, KRL template) for this configuration.
@@ -150,6 +152,13 @@ struct BenchArgs {
 }
 
 #[derive(Args)]
+struct RunArgs {
+    /// The cell configuration (TOML; see the README's "Deploying on a cell").
+    #[arg(long, short)]
+    config: PathBuf,
+}
+
+#[derive(Args)]
 struct PlotArgs {
     /// The trace, CSV.
     csv: PathBuf,
@@ -200,6 +209,7 @@ fn main() -> ExitCode {
             ExitCode::SUCCESS
         }),
         Command::Plot(a) => plot_trace(a),
+        Command::Run(a) => forcecell::cell::run(&a.config).map(|()| ExitCode::SUCCESS),
         Command::Tune(a) => tune(a),
         Command::BenchScenarios(a) => bench_scenarios(a),
         Command::SimSensor(a) => forcecell::ati::sim_sensor(

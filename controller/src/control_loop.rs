@@ -273,6 +273,25 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         })
     }
 
+    /// End the robot's correction motion cleanly: wait for the next cycle and answer it with the last
+    /// command and `stop` set. Transient robot errors are skipped as in [`cycle`](Self::cycle).
+    pub fn stop(&mut self) -> Result<(), LoopError<R::Error, S::Error>> {
+        loop {
+            match self.robot.next_cycle() {
+                Ok(_) => break,
+                Err(e) if e.kind().is_transient() => self.stats.robot_glitches += 1,
+                Err(e) => return Err(LoopError::Robot(e)),
+            }
+        }
+        let command = Correction {
+            stop: true,
+            ..Correction::along_z(self.last_cmd)
+        };
+        self.robot.reply(&command).map_err(LoopError::Robot)?;
+        self.stats.cycles += 1;
+        Ok(())
+    }
+
     /// Limit a finite command to the step and envelope limits, noting which one acted.
     fn limit(&self, want: f64, fault: &mut Option<Fault>) -> f64 {
         let step = self.cfg.max_step;
@@ -469,6 +488,32 @@ mod tests {
             lp.cycle(),
             Err(LoopError::Sensor(ErrorKind::BusOff))
         ));
+    }
+
+    #[test]
+    fn stop_answers_the_next_cycle_with_the_last_command_and_stop() {
+        let mut robot = MockRobot::new();
+        let mut sensor = MockSensor::new();
+        robot
+            .expect_next_cycle()
+            .returning(|| Ok(cycle_at(1, 0.001)));
+        sensor.expect_read().returning(|| Ok(sample(0.0)));
+        let sent = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let log = sent.clone();
+        robot.expect_reply().returning(move |c| {
+            log.lock().unwrap().push(*c);
+            Ok(())
+        });
+        let mut lp = ControlLoop::new(robot, sensor, fixed_law(0.002), LoopConfig::default());
+        lp.cycle().unwrap();
+        lp.stop().unwrap();
+        let sent = sent.lock().unwrap();
+        assert_eq!(sent.len(), 2);
+        assert!(!sent[0].stop && sent[1].stop);
+        assert_eq!(
+            sent[1].translation, sent[0].translation,
+            "stop holds the last command"
+        );
     }
 
     #[test]

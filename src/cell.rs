@@ -1,0 +1,488 @@
+//! `forcecell run`: the controller on a real cell, wired from one TOML file — the KUKA RSI link, the ATI
+//! sensor polled over SocketCAN, gravity compensation, a tuning — recorded to CSV and plotted.
+//!
+//! ```toml
+//! tuning = "robust"                 # built-in name or a tuning file
+//! duration = 60.0                   # s of robot time; omit to run until the robot stops sending
+//! record = "recordings"             # the trace goes to record/run-<unix time>.csv (+ .png)
+//!
+//! [robot]
+//! listen = "192.168.1.100:49152"    # IP_NUMBER:PORT of the robot's Ethernet config
+//! robot_ip = "192.168.1.10"         # datagrams from anywhere else are dropped and counted
+//! ethernet_config = "forcecell_rsi.xml"   # optional: the robot's file (default: `forcecell rsi-config`'s layout)
+//! mode = "absolute"                 # or "relative"
+//! cycle_ms = 4                      # 4 (#IPO_FAST) or 12 (#IPO)
+//! watchdog_cycles = 25
+//! poscorr_mm = 5.0                  # the robot's POSCORR translation limit …
+//! poscorrmon_mm = 6.0               # … and POSCORRMON's
+//!
+//! [sensor]
+//! kind = "ati"
+//! can = "can0"
+//! base = 0x20
+//! bitrate = 1000000
+//! slot = 0
+//! poll_hz = 1000.0
+//! tare = true                       # bias at start: the tool must be in free air and still
+//!
+//! [gravity]                         # optional: the tool model (least-squares fit, controller::gravity)
+//! signed_mass = 2.0                 # kg, sign as fitted
+//! mass_moment = [0.0, 0.0, 0.16]    # m'·c, kg·m
+//! force_bias = [0.0, 0.0, 0.0]      # N
+//! torque_bias = [0.0, 0.0, 0.0]     # N·m
+//! mount_rotation = [0.0, 0.0, 0.0]  # sensor frame in the flange frame, rotation vector, rad
+//! max_age = 0.012                   # s: older orientations make the sample invalid (the loop holds)
+//! ```
+
+use std::net::{IpAddr, SocketAddr};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use anyhow::{Context, Result, anyhow, bail};
+use controller::compensated::{CompensatedSensor, OrientationTap, shared_orientation};
+use controller::gravity::{Compensator, GravityModel};
+use controller::{ControlLoop, LoopStats, Tuning};
+use hal::{ForceSensor, RobotLink, UnitQuaternion, Vector3};
+use kuka_rsi::{CorrectionMode, EthernetConfig, Limits, LinkConfig, PoscorrLimits, RobotFilter};
+use serde::Deserialize;
+
+use crate::record::{Row, fault_code};
+use crate::scenario::load_tuning;
+
+/// The robot side of a cell.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotConfig {
+    /// Where forcecell listens (the Ethernet config's `IP_NUMBER:PORT`).
+    pub listen: SocketAddr,
+    /// The robot controller's address: only its datagrams are accepted.
+    pub robot_ip: IpAddr,
+    /// The robot's Ethernet config file; default: the layout `forcecell rsi-config` writes.
+    #[serde(default)]
+    pub ethernet_config: Option<PathBuf>,
+    /// `absolute` (default) or `relative`.
+    #[serde(default)]
+    pub mode: ModeName,
+    /// Interpolation cycle, ms: 4 or 12.
+    #[serde(default = "default_cycle_ms")]
+    pub cycle_ms: u32,
+    /// Robot silent this many cycles → the run ends.
+    #[serde(default = "default_watchdog")]
+    pub watchdog_cycles: u32,
+    /// The robot's POSCORR translation limit, mm.
+    #[serde(default = "default_poscorr")]
+    pub poscorr_mm: f64,
+    /// The robot's POSCORRMON translation limit, mm.
+    #[serde(default = "default_poscorrmon")]
+    pub poscorrmon_mm: f64,
+}
+
+/// Correction mode by name.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ModeName {
+    /// `#ABSOLUTE`.
+    #[default]
+    Absolute,
+    /// `#RELATIVE`.
+    Relative,
+}
+
+fn default_cycle_ms() -> u32 {
+    4
+}
+fn default_watchdog() -> u32 {
+    25
+}
+fn default_poscorr() -> f64 {
+    5.0
+}
+fn default_poscorrmon() -> f64 {
+    6.0
+}
+
+/// The force sensor of a cell.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+pub enum SensorConfig {
+    /// An ATI NETCANOEM board (or Schunk FTM/FTN-CAN) on SocketCAN.
+    Ati {
+        /// CAN interface.
+        can: String,
+        /// Base identifier (7 bits).
+        #[serde(default = "default_base")]
+        base: u8,
+        /// Bus bit rate, bit/s.
+        #[serde(default = "default_bitrate")]
+        bitrate: u32,
+        /// Calibration slot.
+        #[serde(default)]
+        slot: u8,
+        /// Poll rate, Hz.
+        #[serde(default = "default_poll")]
+        poll_hz: f64,
+        /// Take a bias at start (tool in free air, still).
+        #[serde(default)]
+        tare: bool,
+    },
+}
+
+fn default_base() -> u8 {
+    0x20
+}
+fn default_bitrate() -> u32 {
+    1_000_000
+}
+fn default_poll() -> f64 {
+    1000.0
+}
+
+/// The tool model for gravity compensation.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GravityConfig {
+    /// Signed tool mass, kg.
+    pub signed_mass: f64,
+    /// `m'·c`, kg·m.
+    pub mass_moment: [f64; 3],
+    /// Force bias, N.
+    #[serde(default)]
+    pub force_bias: [f64; 3],
+    /// Torque bias, N·m.
+    #[serde(default)]
+    pub torque_bias: [f64; 3],
+    /// Sensor frame in the flange frame, rotation vector, rad.
+    #[serde(default)]
+    pub mount_rotation: [f64; 3],
+    /// Oldest usable orientation, s.
+    #[serde(default = "default_max_age")]
+    pub max_age: f64,
+}
+
+fn default_max_age() -> f64 {
+    0.012
+}
+
+/// A cell configuration file.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CellConfig {
+    /// Tuning: built-in name or file.
+    pub tuning: String,
+    /// Robot time to run, s; `None`: until the robot stops sending.
+    #[serde(default)]
+    pub duration: Option<f64>,
+    /// Where recordings go.
+    #[serde(default = "default_record")]
+    pub record: PathBuf,
+    /// The robot.
+    pub robot: RobotConfig,
+    /// The sensor.
+    pub sensor: SensorConfig,
+    /// The tool model; without it nothing is subtracted.
+    #[serde(default)]
+    pub gravity: Option<GravityConfig>,
+}
+
+fn default_record() -> PathBuf {
+    PathBuf::from("recordings")
+}
+
+impl CellConfig {
+    /// Parse and validate a cell file.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read cell config {}", path.display()))?;
+        Self::from_toml(&text, &path.display().to_string())
+    }
+
+    /// Parse and validate TOML text; `origin` names it in errors.
+    pub fn from_toml(text: &str, origin: &str) -> Result<Self> {
+        let c: Self = toml::from_str(text)
+            .map_err(|e| anyhow!("{origin}: {}", crate::scenario::one_line(&e.to_string())))?;
+        c.validate()
+            .with_context(|| format!("{origin}: invalid cell config"))?;
+        Ok(c)
+    }
+
+    fn validate(&self) -> Result<()> {
+        if let Some(d) = self.duration
+            && !(d.is_finite() && d > 0.0)
+        {
+            bail!("duration must be > 0 s, got {d}");
+        }
+        let r = &self.robot;
+        if r.cycle_ms != 4 && r.cycle_ms != 12 {
+            bail!("robot.cycle_ms must be 4 or 12, got {}", r.cycle_ms);
+        }
+        if r.watchdog_cycles == 0 {
+            bail!("robot.watchdog_cycles must be > 0");
+        }
+        for (n, v) in [
+            ("poscorr_mm", r.poscorr_mm),
+            ("poscorrmon_mm", r.poscorrmon_mm),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                bail!("robot.{n} must be > 0 mm, got {v}");
+            }
+        }
+        let SensorConfig::Ati {
+            base,
+            poll_hz,
+            slot,
+            ..
+        } = &self.sensor;
+        if *base > 0x7F {
+            bail!("sensor.base must be a 7-bit identifier (0..=0x7F), got {base:#x}");
+        }
+        if *slot > 15 {
+            bail!("sensor.slot must be 0..=15, got {slot}");
+        }
+        if !(poll_hz.is_finite() && *poll_hz > 0.0) {
+            bail!("sensor.poll_hz must be > 0, got {poll_hz}");
+        }
+        if let Some(g) = &self.gravity {
+            let all = [g.signed_mass, g.max_age]
+                .into_iter()
+                .chain(g.mass_moment)
+                .chain(g.force_bias)
+                .chain(g.torque_bias)
+                .chain(g.mount_rotation);
+            if all.clone().any(|v| !v.is_finite()) || g.max_age <= 0.0 {
+                bail!("gravity: every value must be finite and max_age > 0");
+            }
+        }
+        Ok(())
+    }
+
+    /// The tuning, validated.
+    pub fn tuning(&self) -> Result<Tuning> {
+        load_tuning(&self.tuning)
+    }
+
+    /// The compensator: the tool model, or nothing to subtract.
+    pub fn compensator(&self) -> Compensator {
+        match &self.gravity {
+            Some(g) => Compensator {
+                model: GravityModel {
+                    signed_mass: g.signed_mass,
+                    mass_moment: Vector3::from(g.mass_moment),
+                    force_bias: Vector3::from(g.force_bias),
+                    torque_bias: Vector3::from(g.torque_bias),
+                },
+                mount: UnitQuaternion::from_scaled_axis(Vector3::from(g.mount_rotation)),
+                max_age: g.max_age,
+            },
+            None => Compensator {
+                model: GravityModel {
+                    signed_mass: 0.0,
+                    mass_moment: Vector3::zeros(),
+                    force_bias: Vector3::zeros(),
+                    torque_bias: Vector3::zeros(),
+                },
+                mount: UnitQuaternion::identity(),
+                max_age: f64::INFINITY,
+            },
+        }
+    }
+
+    /// The RSI link's configuration: the robot's limits from the file, the driver's envelope inside them
+    /// (90 % of POSCORR, and never beyond the tuning's own envelope), the rate limit of the tuning.
+    pub fn link_config(&self, tuning: &Tuning) -> Result<LinkConfig> {
+        let r = &self.robot;
+        let relative = r.mode == ModeName::Relative;
+        let ethernet = match &r.ethernet_config {
+            Some(p) => {
+                let text = std::fs::read_to_string(p)
+                    .with_context(|| format!("cannot read Ethernet config {}", p.display()))?;
+                EthernetConfig::parse(&text).map_err(|e| anyhow!("{}: {e}", p.display()))?
+            }
+            None => {
+                let IpAddr::V4(ip) = r.listen.ip() else {
+                    bail!("robot.listen must be an IPv4 address (RSI is IPv4)");
+                };
+                EthernetConfig::forcecell(ip, r.listen.port(), relative)
+            }
+        };
+        let mut lc = LinkConfig::new(ethernet, RobotFilter::Ip(r.robot_ip));
+        lc.bind = Some(r.listen);
+        lc.period = Duration::from_millis(u64::from(r.cycle_ms));
+        lc.watchdog_cycles = r.watchdog_cycles;
+        lc.mode = if relative {
+            CorrectionMode::Relative
+        } else {
+            CorrectionMode::Absolute
+        };
+        lc.poscorr = PoscorrLimits {
+            translation: r.poscorr_mm * 1e-3,
+            ..PoscorrLimits::default()
+        };
+        lc.poscorrmon = PoscorrLimits {
+            translation: r.poscorrmon_mm * 1e-3,
+            ..PoscorrLimits::MONITOR_DEFAULT
+        };
+        lc.limits = Limits {
+            max_translation: (0.9 * lc.poscorr.translation).min(tuning.loop_cfg.max_offset),
+            max_translation_step: tuning.loop_cfg.max_step,
+            ..Limits::default()
+        };
+        lc.validate().map_err(|e| anyhow!("robot: {e}"))?;
+        Ok(lc)
+    }
+}
+
+/// How a cell run ended and what it recorded.
+#[derive(Debug)]
+pub struct CellOutcome {
+    /// One row per answered cycle (no truth columns on a real cell).
+    pub rows: Vec<Row>,
+    /// Loop counters.
+    pub stats: LoopStats,
+    /// Why it ended.
+    pub ended: String,
+    /// Whether `Stop` was sent.
+    pub stopped: bool,
+}
+
+/// Run the controller on `robot` and `sensor` until `duration` of robot time has passed, `stop` is set,
+/// or the robot link ends; then, if the link still stands, end the correction motion with `Stop`.
+/// Gravity compensation from `cfg` is applied between the two.
+pub fn run_cell<R, S>(
+    cfg: &CellConfig,
+    tuning: &Tuning,
+    robot: R,
+    sensor: S,
+    stop: &AtomicBool,
+) -> Result<CellOutcome>
+where
+    R: RobotLink,
+    S: ForceSensor,
+    R::Error: Send + Sync + 'static,
+    S::Error: Send + Sync + 'static,
+{
+    let law = tuning.law.build().map_err(|e| anyhow!(e))?;
+    let f_r = law.set_point();
+    let orientation = shared_orientation();
+    let robot = OrientationTap::new(robot, orientation.clone());
+    let sensor = CompensatedSensor::new(sensor, cfg.compensator(), orientation);
+    let mut lp = ControlLoop::new(robot, sensor, law, tuning.loop_cfg);
+    let mut rows = Vec::new();
+    let ended = loop {
+        if stop.load(Ordering::Relaxed) {
+            break "stopped by the operator".to_string();
+        }
+        match lp.cycle() {
+            Ok(r) => {
+                rows.push(Row {
+                    t: r.cycle.t,
+                    f: r.f.unwrap_or(f64::NAN),
+                    f_true: f64::NAN,
+                    f_r,
+                    x: r.x,
+                    x_cmd: r.command.translation.z,
+                    x_r: r.out.x_r,
+                    kc_hat: r.out.kc_hat,
+                    xc_hat: r.out.xc_hat,
+                    k_c: f64::NAN,
+                    x_c: f64::NAN,
+                    fault: fault_code(r.fault),
+                });
+                if cfg.duration.is_some_and(|d| r.cycle.t >= d) {
+                    break format!("{} s of robot time done", r.cycle.t);
+                }
+            }
+            Err(e) => {
+                return Ok(CellOutcome {
+                    rows,
+                    stats: lp.stats(),
+                    ended: format!("the loop ended: {e}"),
+                    stopped: false,
+                });
+            }
+        }
+    };
+    let stopped = lp.stop().is_ok();
+    Ok(CellOutcome {
+        rows,
+        stats: lp.stats(),
+        ended,
+        stopped,
+    })
+}
+
+/// `forcecell run --config FILE`: bind the robot link, start the sensor, run, record, plot.
+pub fn run(path: &Path) -> Result<()> {
+    let cfg = CellConfig::load(path)?;
+    let tuning = cfg.tuning()?;
+    let link_cfg = cfg.link_config(&tuning)?;
+    std::fs::create_dir_all(&cfg.record)
+        .with_context(|| format!("cannot create {}", cfg.record.display()))?;
+    let SensorConfig::Ati {
+        can,
+        base,
+        bitrate,
+        slot,
+        poll_hz,
+        tare,
+    } = &cfg.sensor;
+    let base = ati_can::Base::new(*base)
+        .ok_or_else(|| anyhow!("sensor.base must be 0..=0x7F, got {base:#x}"))?;
+    let ati_cfg = ati_can::Config {
+        base,
+        bitrate: *bitrate,
+        slot: *slot,
+        ..ati_can::Config::default()
+    };
+    let transport = ati_can::SocketCanTransport::open(can)?;
+    let mut driver = ati_can::Driver::new(transport, ati_cfg)?;
+    let info = driver
+        .start()
+        .with_context(|| format!("ATI sensor at base {base} on {can}"))?;
+    println!("sensor: {info:?}");
+    if *tare {
+        let bias = driver.tare(crate::ati::bias_config())?;
+        println!("bias taken (counts): {bias:.1?}");
+    }
+    let sensor = ati_can::AtiSensor::spawn(driver, *poll_hz)?;
+    let link = kuka_rsi::RsiLink::bind(link_cfg).context("RSI link")?;
+    println!(
+        "listening on {} for the robot at {} ({} ms cycle, tuning {}); start RSI on the robot now, Ctrl-C ends with a clean Stop",
+        cfg.robot.listen, cfg.robot.robot_ip, cfg.robot.cycle_ms, tuning.name
+    );
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
+        .context("cannot install the Ctrl-C handler")?;
+    let out = run_cell(&cfg, &tuning, link, sensor, &stop)?;
+    println!(
+        "{}; {} cycles, {} sensor faults, {} limited; Stop {}",
+        out.ended,
+        out.stats.cycles,
+        out.stats.sensor_faults,
+        out.stats.limited,
+        if out.stopped {
+            "sent"
+        } else {
+            "not sent (the link was gone)"
+        }
+    );
+    write_recording(&cfg.record, &out.rows)
+}
+
+fn write_recording(dir: &Path, rows: &[Row]) -> Result<()> {
+    if rows.is_empty() {
+        println!("nothing to record: no cycle was answered");
+        return Ok(());
+    }
+    let stamp = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let csv = dir.join(format!("run-{stamp}.csv"));
+    let png = csv.with_extension("png");
+    crate::record::write_csv_file(&csv, rows)?;
+    crate::plot::write_png(&png, &format!("forcecell run {stamp}"), rows)?;
+    println!("wrote {} and {}", csv.display(), png.display());
+    Ok(())
+}

@@ -1,0 +1,173 @@
+//! `forcecell run`'s wiring from a cell file: the RSI link bound as configured, the simulated KUKA
+//! controller in lockstep on loopback standing in for the robot, the control loop with gravity
+//! compensation in between, and a clean `Stop` at the end.
+
+use std::sync::atomic::AtomicBool;
+use std::thread;
+use std::time::Duration;
+
+use forcecell::cell::{CellConfig, run_cell};
+use kuka_rsi::{EthernetConfig, RsiLink};
+use sim::krc::{Krc, KrcConfig, KrcEnd, Timing};
+use sim::{ContactPlant, InProcSensor, InnerLoopModel, SensorParams, SharedWorld, World};
+
+const CELL: &str = r#"
+tuning = "robust"
+duration = 1.5
+
+[robot]
+listen = "127.0.0.1:0"
+robot_ip = "127.0.0.1"
+
+[sensor]
+kind = "ati"
+can = "vcan0"
+"#;
+
+#[test]
+fn a_cell_file_runs_the_loop_over_rsi_and_ends_with_stop() {
+    let cfg = CellConfig::from_toml(CELL, "cell.toml").unwrap();
+    let tuning = cfg.tuning().unwrap();
+    let lc = cfg.link_config(&tuning).unwrap();
+    // The driver's envelope lies inside the robot's POSCORR (5 mm default), whatever the tuning allows.
+    assert!(lc.limits.max_translation <= 0.0045 + 1e-12);
+    let link = RsiLink::bind(lc).unwrap();
+    let addr = link.local_addr().unwrap();
+
+    // A real cell starts on its programmed path (correction 0); the surface lies 1 mm below it.
+    let world: SharedWorld = World::new(
+        ContactPlant::spring(70_000.0, 0.001),
+        InnerLoopModel::P2,
+        SensorParams::default(),
+        0.0,
+    )
+    .shared();
+    let mut kc = KrcConfig::new(
+        EthernetConfig::forcecell([127, 0, 0, 1].into(), addr.port(), false),
+        addr,
+    );
+    kc.timing = Timing::Lockstep {
+        deadline: Duration::from_millis(500),
+    };
+    kc.cycles = Some(2_000); // a bound in case no Stop comes: the test would then fail, not hang
+    let mut krc = Krc::new(kc).unwrap();
+    let mut mech = world.clone();
+    let robot = thread::spawn(move || krc.run(&mut mech));
+
+    let stop = AtomicBool::new(false);
+    let out = run_cell(&cfg, &tuning, link, InProcSensor::new(world.clone()), &stop).unwrap();
+    let report = robot.join().unwrap();
+
+    assert!(out.stopped, "{}", out.ended);
+    assert_eq!(
+        report.end,
+        KrcEnd::Stopped,
+        "the robot saw Stop: {report:?}"
+    );
+    assert_eq!(report.late, 0);
+    let last = out.rows.last().unwrap();
+    assert!(last.t >= 1.5, "ran {} s", last.t);
+    assert!((last.f - 5.0).abs() < 0.1, "held {} N at the end", last.f);
+    let w = sim::world::lock(&world);
+    assert!(
+        (w.true_force() - 5.0).abs() < 0.1,
+        "true force {}",
+        w.true_force()
+    );
+}
+
+#[test]
+fn a_set_stop_flag_ends_the_run_with_stop_before_any_control() {
+    let cfg = CellConfig::from_toml(CELL, "cell.toml").unwrap();
+    let tuning = cfg.tuning().unwrap();
+    let link = RsiLink::bind(cfg.link_config(&tuning).unwrap()).unwrap();
+    let addr = link.local_addr().unwrap();
+    let world = World::new(
+        ContactPlant::spring(70_000.0, 0.001),
+        InnerLoopModel::P2,
+        SensorParams::default(),
+        0.0,
+    )
+    .shared();
+    let mut kc = KrcConfig::new(
+        EthernetConfig::forcecell([127, 0, 0, 1].into(), addr.port(), false),
+        addr,
+    );
+    kc.cycles = Some(100);
+    let mut krc = Krc::new(kc).unwrap();
+    let mut mech = world.clone();
+    let robot = thread::spawn(move || krc.run(&mut mech));
+    let out = run_cell(
+        &cfg,
+        &tuning,
+        link,
+        InProcSensor::new(world),
+        &AtomicBool::new(true),
+    )
+    .unwrap();
+    assert!(out.stopped && out.rows.is_empty(), "{out:?}");
+    assert_eq!(robot.join().unwrap().end, KrcEnd::Stopped);
+}
+
+#[test]
+fn bad_cell_files_are_refused_with_the_reason() {
+    let cases = [
+        (
+            CELL.replace("robot_ip = \"127.0.0.1\"", "robot_ip = \"nope\""),
+            "IP address",
+        ),
+        (format!("{CELL}\n[extra]\n"), "extra"),
+        (
+            CELL.replace("duration = 1.5", "duration = -1.0"),
+            "duration",
+        ),
+        (CELL.replace("[robot]", "[robot]\ncycle_ms = 5"), "cycle_ms"),
+        (
+            CELL.replace("kind = \"ati\"", "kind = \"ati\"\nbase = 200"),
+            "base",
+        ),
+        (
+            CELL.replace("kind = \"ati\"", "kind = \"robotiq\""),
+            "robotiq",
+        ),
+        (
+            format!("{CELL}\n[gravity]\nsigned_mass = nan\nmass_moment = [0.0, 0.0, 0.0]\n"),
+            "gravity",
+        ),
+    ];
+    for (text, needle) in cases {
+        let e = format!(
+            "{:#}",
+            CellConfig::from_toml(&text, "cell.toml").unwrap_err()
+        );
+        assert!(e.contains(needle), "{needle}: {e}");
+        assert!(!e.contains('\n'), "one line: {e}");
+    }
+    let cfg = CellConfig::from_toml(&CELL.replace("robust", "nope"), "cell.toml").unwrap();
+    assert!(format!("{:#}", cfg.tuning().unwrap_err()).contains("unknown tuning"));
+}
+
+#[test]
+fn run_refuses_a_missing_config_file_cleanly() {
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_forcecell"))
+        .args(["run", "--config", "/nonexistent/cell.toml"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("cannot read cell config") && !err.contains("panicked"),
+        "{err}"
+    );
+}
+
+#[test]
+fn the_example_cell_file_is_valid() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/cell.toml");
+    let cfg = CellConfig::load(&path).unwrap();
+    let tuning = cfg.tuning().unwrap();
+    let lc = cfg.link_config(&tuning).unwrap();
+    assert_eq!(lc.period, Duration::from_millis(4));
+    assert!(cfg.gravity.is_some());
+    assert!((cfg.compensator().model.mass() - 2.0).abs() < 1e-12);
+}
