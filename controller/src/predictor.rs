@@ -207,6 +207,38 @@ mod tests {
     }
 
     #[test]
+    fn noise_lowers_the_bandwidth() {
+        // The same white noise (σ = 7 µm: 0.5 N at 70 kN/m) on a still surface, told as it is and told
+        // as if the sensor were clean: the velocity estimate must be much quieter when R is right.
+        let sigma = 7e-6;
+        let velocity_std = |r: f64| {
+            let mut p = SurfacePredictor::new();
+            let mut seed: u64 = 12345;
+            let (mut sum, mut n) = (0.0, 0.0);
+            for k in 0..20_000 {
+                // Sum of uniforms: roughly Gaussian, deterministic.
+                let mut u = 0.0;
+                for _ in 0..12 {
+                    seed = seed
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
+                    u += (seed >> 11) as f64 / (1u64 << 53) as f64;
+                }
+                p.update(sigma * (u - 6.0), r, 1e-3, 1e-3, 6.0, 1e-3);
+                if k > 2000 {
+                    sum += p.state()[1].powi(2);
+                    n += 1.0;
+                }
+            }
+            (sum / n).sqrt()
+        };
+        let told = velocity_std(sigma * sigma);
+        let untold = velocity_std((0.02f64 / 70_000.0).powi(2));
+        assert!(told < 0.25 * untold, "told {told} m/s, untold {untold} m/s");
+        assert!(told < 2e-4, "velocity noise {told} m/s");
+    }
+
+    #[test]
     fn a_step_is_a_jump_not_a_velocity() {
         let mut p = SurfacePredictor::new();
         for _ in 0..100 {
