@@ -34,8 +34,12 @@
 //! with the robot (`(1 − k_c/k̂_c)·ẋ`) and a predictor would feed that back. So the weight `w` is 0
 //! until the estimator's motion test ([`surface_moving`]: observed motion that leads or exceeds the
 //! robot's, on the conditioned pair, or on the raw pair for 8 ms without a break) has
-//! seen real surface motion within the last 0.5 s, and it is then `m²/(m² + 1)` with `m` the
-//! estimated velocity and acceleration in units of their own uncertainty (noise is not motion).
+//! seen real surface motion within the last 0.5 s (or the predicted surface velocity has kept its sign
+//! while the robot moved both with it and against it — which the apparent motion of a stale `k̂_c`,
+//! tied to the robot's, never does; that also keeps the estimator off the moving surface, whose
+//! transients after a re-contact otherwise drag `k̂_c` down until the loop bounces), and it is then
+//! `m²/(m² + 1)` with `m` the estimated velocity and acceleration in units of their own uncertainty
+//! (noise is not motion).
 //! While `w < 1` the rest of `FF` is the older fallback: the conditioned observer's velocity over the
 //! whole lead time, outside a noise dead-band. The small integral `I` removes what a wrong model of the
 //! inner loop leaves.
@@ -260,6 +264,10 @@ const MOTION_HOLD: f64 = 0.5;
 /// How long the predictor must see surface motion without a break before it is believed, s.
 const MOTION_CONFIRM: f64 = 0.008;
 
+/// How long the robot must have moved both with and against one run of surface velocity for that
+/// run to count as real motion, s.
+const OPPOSED_CONFIRM: f64 = 0.01;
+
 /// Significance, in standard deviations of the predictor's estimate, at which the fed-forward motion
 /// gets half its weight.
 const MOTION_SIGNIFICANCE: f64 = 3.0;
@@ -297,6 +305,13 @@ pub struct RobustLaw {
     motion_hold: f64,
     /// How long the predictor has seen surface motion without a break, s.
     motion_time: f64,
+    /// Sign of the predictor's current run of surface velocity (0: none), and how long within it the
+    /// robot moved with it and against it, s.
+    run_sign: f64,
+    run_with: f64,
+    run_against: f64,
+    /// Time left during which the estimator takes the surface for a moving one, s.
+    est_hold: f64,
     integ: f64,
     /// Last command, m, and its velocity, m/s.
     u: f64,
@@ -342,6 +357,10 @@ impl RobustLaw {
             pred_jump_time: 0.0,
             motion_hold: 0.0,
             motion_time: 0.0,
+            run_sign: 0.0,
+            run_with: 0.0,
+            run_against: 0.0,
+            est_hold: 0.0,
             integ: 0.0,
             u: 0.0,
             v: 0.0,
@@ -417,6 +436,7 @@ impl RobustLaw {
         self.pred.clear();
         self.pred_jump_time = 0.0;
         self.motion_time = 0.0;
+        self.run_sign = 0.0;
         self.integ = 0.0;
         self.below = 0.0;
         self.in_contact = 0.0;
@@ -567,6 +587,32 @@ impl RobustLaw {
                 } else {
                     self.motion_time = 0.0;
                 }
+                // The apparent motion of a stale k̂_c is tied to the robot's: with it (k̂_c too high)
+                // or against it (too low), turning when the robot turns. A surface velocity that keeps
+                // its sign while the robot has moved both with it and against it is real motion.
+                let thr = self.p.estimator.max_surface_speed;
+                if !jumped {
+                    if v.abs() > thr {
+                        if v.signum() != self.run_sign {
+                            self.run_sign = v.signum();
+                            self.run_with = 0.0;
+                            self.run_against = 0.0;
+                        }
+                        if self.v_raw.abs() > thr {
+                            if self.v_raw * v > 0.0 {
+                                self.run_with += dt;
+                            } else {
+                                self.run_against += dt;
+                            }
+                        }
+                        if self.run_with >= OPPOSED_CONFIRM && self.run_against >= OPPOSED_CONFIRM {
+                            self.est_hold = MOTION_HOLD;
+                            self.motion_hold = MOTION_HOLD;
+                        }
+                    } else {
+                        self.run_sign = 0.0;
+                    }
+                }
                 let sv = MOTION_SIGNIFICANCE * self.pred.velocity_std();
                 let sa = MOTION_SIGNIFICANCE * self.pred.acceleration_std();
                 let m2 = v * v / (sv * sv + 1e-30) + a * a / (sa * sa + 1e-30);
@@ -651,6 +697,8 @@ impl ForceLaw for RobustLaw {
         self.pred_jump_time = 0.0;
         self.motion_hold = 0.0;
         self.motion_time = 0.0;
+        self.run_sign = 0.0;
+        self.est_hold = 0.0;
         self.integ = 0.0;
         self.u = if x.is_finite() { x } else { 0.0 };
         self.v = 0.0;
@@ -703,6 +751,8 @@ impl ForceLaw for RobustLaw {
         } else {
             (self.motion_hold - dt).max(0.0)
         };
+        self.est_hold = (self.est_hold - dt).max(0.0);
+        let moving = moving || self.est_hold > 0.0;
         if self.state == ContactState::Contact && self.est.update(x, f, ff, dt, moving).projected {
             ev.estimator_bound = true;
         }
