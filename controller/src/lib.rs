@@ -6,6 +6,7 @@
 //!   gating bad input so it never reaches the command;
 //! * [`robust`] — forcecell's robust law (with [`estimator`] and [`conditioning`]): what holds the force
 //!   on a cell with sampling, lag, delay and a noisy sensor;
+//! * [`predictor`] — the surface predictor the robust law feeds forward through the inverted inner loop;
 //! * [`tune`] — damping ratio and delay margin of impedance parameters, proposals, verdicts;
 //! * [`gravity`] — tool weight and sensor bias: least-squares identification and run-time compensation.
 #![cfg_attr(not(test), warn(missing_docs))]
@@ -17,6 +18,7 @@ pub mod control_loop;
 pub mod estimator;
 pub mod gravity;
 pub mod law;
+pub mod predictor;
 pub mod robust;
 pub mod tune;
 

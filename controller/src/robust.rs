@@ -4,7 +4,7 @@
 //! With the measured position `x`, the conditioned force `f̃`, the stiffness estimate `k̂_c` and the
 //! force set-point `f_r`, the command is
 //!
-//! `x_cmd = x + κ·(f_r − f̃)/k̂_c + T_lead·v̂_c + I`, `İ = k_i·(f_r − f̃)/k̂_c` (clamped),
+//! `x_cmd = x + κ·(f_r − f̃)/k̂_c + FF + I`, `İ = k_i·(f_r − f̃)/k̂_c` (clamped),
 //!
 //! i.e. "go to where the spring would give `f_r`", anchored on the position the robot *reports* rather
 //! than on an internal integrator. Written as the paper's eq. 23, it is `x_cmd = x̃_c + [κ·f_r +
@@ -20,9 +20,29 @@
 //! what covers them.) The proportional correction is also weighted by `e²/(e² + (gate·σ)²)` — `e` the
 //! force error, `σ` the sensor noise measured online — which only lowers `g`.
 //!
-//! Moving surfaces: the observed surface `x̃_c` goes through a second-order tracking observer whose
-//! velocity `v̂_c` is fed forward over the inner loop's lead time `T_lead` (delay + lag); the small integral
-//! `I` removes what a wrong `T_lead` leaves.
+//! Moving surfaces (the feed-forward `FF`): with everything filtered alike, the proportional path
+//! stands on the conditioned surface `x̃_c`, which lags the true one by the conditioning, and the robot
+//! adds its delay `T_d` and lag `τ`; on a surface moving at `v_c` that costs `k_c·v_c·(lag)` of force
+//! (440 N per second of lag at 1 mm, 1 Hz). A Kalman filter on the surface's position, velocity and
+//! acceleration ([`crate::predictor`]) is run on the *raw* pseudo-measurement `x − f/k̂_c` (no
+//! conditioning lag), with the measured sensor noise as its measurement noise (a clean sensor gives a
+//! fast predictor, a noisy one a slow one); `FF` is the command that puts the tool on the surface
+//! predicted `T_d` ahead through the inverted lag, less `x̃_c`:
+//! `FF = w·(x̂_c(t + T_d) + [x̂_c(t + T_d + dt) − x̂_c(t + T_d)]/α − x̃_c)`, `α = 1 − e^{−dt/τ}`.
+//! With a perfect prediction the loop's characteristic equation is the one above, so the feed-forward
+//! does not change stability; what it changes is what a *wrong* `k̂_c` does: then `x − f/k̂_c` moves
+//! with the robot (`(1 − k_c/k̂_c)·ẋ`) and a predictor would feed that back. So the weight `w` is 0
+//! until the estimator's motion test ([`surface_moving`]: observed motion that leads or exceeds the
+//! robot's, on the conditioned pair, or on the raw pair for 8 ms without a break) has
+//! seen real surface motion within the last 0.5 s (or the predicted surface velocity has kept its sign
+//! while the robot moved both with it and against it — which the apparent motion of a stale `k̂_c`,
+//! tied to the robot's, never does; that also keeps the estimator off the moving surface, whose
+//! transients after a re-contact otherwise drag `k̂_c` down until the loop bounces), and it is then
+//! `m²/(m² + 1)` with `m` the estimated velocity and acceleration in units of their own uncertainty
+//! (noise is not motion).
+//! While `w < 1` the rest of `FF` is the older fallback: the conditioned observer's velocity over the
+//! whole lead time, outside a noise dead-band. The small integral `I` removes what a wrong model of the
+//! inner loop leaves.
 //!
 //! # Contact state machine
 //! `Approach` (bounded speed, anchored to the measured position) → `Contact` when the conditioned force
@@ -40,6 +60,7 @@ use serde::{Deserialize, Serialize};
 use crate::conditioning::{ConditioningParams, SignalFilter};
 use crate::estimator::{EstimatorParams, StiffnessEstimator, surface_moving};
 use crate::law::{ContactState, EventCounts, Events, ForceLaw, Output};
+use crate::predictor::SurfacePredictor;
 
 /// How the law responds in contact.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -48,22 +69,30 @@ pub struct ResponseParams {
     /// Fraction `κ` of the force error, converted to a position by `k̂_c`, corrected per command. In
     /// (0, 1]; the loop stays stable while `κ·k_c/k̂_c < 2`.
     pub kappa: f64,
-    /// Lead time `T_lead` of the inner loop (delay + lag) over which the surface velocity is fed forward, s.
-    pub lead: f64,
-    /// Further lead in control periods (robot interfaces delay by whole cycles: one tuning then fits a
-    /// 1 kHz and a 250 Hz cell), periods.
+    /// First-order lag `τ` of the robot's inner position loop, s (inverted by the feed-forward).
+    pub lag: f64,
+    /// Pure delay of the inner loop and the interface, s: the surface is predicted this far ahead …
+    pub delay: f64,
+    /// … plus this many control periods (robot interfaces delay by whole cycles; with the fixed part
+    /// one tuning then fits a 1 kHz and a 250 Hz cell), periods.
     #[serde(default)]
-    pub lead_cycles: f64,
+    pub delay_cycles: f64,
     /// Integral gain `k_i`, 1/s (0: none).
     pub integral: f64,
     /// Largest magnitude of the integral term, m.
     pub integral_limit: f64,
-    /// Natural frequency of the surface observer, Hz.
+    /// Natural frequency of the surface observer the estimator's motion test and the reported `x̂_c`
+    /// use, Hz.
     pub surface_bandwidth: f64,
-    /// Dead-band on the fed-forward surface velocity per newton of sensor noise, (m/s)/N: the law
-    /// measures the noise online, and inside `σ·feedforward_deadband` the observed velocity is taken for
-    /// differentiated noise rather than motion (above it only the excess is fed forward). A noise-free
-    /// sensor gets no dead-band.
+    /// Spectral density of the surface's jerk in the surface predictor's model, m²/s⁵. With the
+    /// measured sensor noise it sets the predictor's bandwidth (see [`crate::predictor`]).
+    pub surface_jerk: f64,
+    /// Floor of the force noise the predictor assumes, N (quantisation, model error).
+    pub noise_floor: f64,
+    /// Dead-band of the fallback feed-forward per newton of sensor noise, (m/s)/N. While no real
+    /// surface motion is established (see [`crate::estimator::surface_moving`]) the law feeds the
+    /// conditioned observer's velocity forward over the loop's lead time instead of the prediction;
+    /// inside `σ·feedforward_deadband` that velocity is taken for differentiated noise.
     pub feedforward_deadband: f64,
     /// Largest rate of change of the set-point when it is changed, N/s (bumpless changes).
     pub set_point_rate: f64,
@@ -153,11 +182,14 @@ impl RobustParams {
         if r.kappa > 1.0 {
             return Err(format!("response.kappa must be <= 1, got {}", r.kappa));
         }
-        non_negative("response.lead", r.lead)?;
-        non_negative("response.lead_cycles", r.lead_cycles)?;
+        non_negative("response.lag", r.lag)?;
+        non_negative("response.delay", r.delay)?;
+        non_negative("response.delay_cycles", r.delay_cycles)?;
         non_negative("response.integral", r.integral)?;
         non_negative("response.integral_limit", r.integral_limit)?;
         positive("response.surface_bandwidth", r.surface_bandwidth)?;
+        positive("response.surface_jerk", r.surface_jerk)?;
+        positive("response.noise_floor", r.noise_floor)?;
         non_negative("response.feedforward_deadband", r.feedforward_deadband)?;
         positive("response.set_point_rate", r.set_point_rate)?;
         non_negative("response.noise_gate", r.noise_gate)?;
@@ -218,8 +250,27 @@ const NOISE_FLOOR: f64 = 0.05;
 /// A loss of contact sooner than this after contact was detected is a bounce, s.
 const BOUNCE_TIME: f64 = 0.5;
 
-/// Smallest dead-band on the fed-forward surface velocity, m/s (transients of the observer).
+/// Innovation of the surface predictor, in its own standard deviations, beyond which (and beyond the
+/// jump floor [`STEP_INNOVATION`]) a measurement is a jump.
+const JUMP_GATE: f64 = 6.0;
+
+/// Smallest dead-band on the fallback feed-forward velocity, m/s (transients of the observer).
 const DEADBAND_FLOOR: f64 = 0.0001;
+
+/// How long the feed-forward stays on after the estimator's motion test last saw real surface motion, s
+/// (it passes through zero velocity at every turn of a curved surface).
+const MOTION_HOLD: f64 = 0.5;
+
+/// How long the predictor must see surface motion without a break before it is believed, s.
+const MOTION_CONFIRM: f64 = 0.008;
+
+/// How long the robot must have moved both with and against one run of surface velocity for that
+/// run to count as real motion, s.
+const OPPOSED_CONFIRM: f64 = 0.01;
+
+/// Significance, in standard deviations of the predictor's estimate, at which the fed-forward motion
+/// gets half its weight.
+const MOTION_SIGNIFICANCE: f64 = 3.0;
 
 /// An observed-surface innovation above this fraction of the set-point's penetration `f_r/k̂_c` in one
 /// step is a jump, not motion.
@@ -247,6 +298,20 @@ pub struct RobustLaw {
     /// Observed surface, m, and its velocity, m/s.
     zc: f64,
     vc: f64,
+    /// Surface predictor on the raw pseudo-measurement, and how long its innovation has been a jump, s.
+    pred: SurfacePredictor,
+    pred_jump_time: f64,
+    /// Time left during which the surface counts as moving, s.
+    motion_hold: f64,
+    /// How long the predictor has seen surface motion without a break, s.
+    motion_time: f64,
+    /// Sign of the predictor's current run of surface velocity (0: none), and how long within it the
+    /// robot moved with it and against it, s.
+    run_sign: f64,
+    run_with: f64,
+    run_against: f64,
+    /// Time left during which the estimator takes the surface for a moving one, s.
+    est_hold: f64,
     integ: f64,
     /// Last command, m, and its velocity, m/s.
     u: f64,
@@ -264,6 +329,9 @@ pub struct RobustLaw {
     /// Previous conditioned position, m, and its velocity, m/s.
     xf_prev: Option<f64>,
     v_x: f64,
+    /// Previous measured position, m, and the velocity from it, m/s.
+    x_prev: Option<f64>,
+    v_raw: f64,
     noise_var: f64,
     counts: EventCounts,
 }
@@ -285,6 +353,14 @@ impl RobustLaw {
             jump_time: 0.0,
             zc: f64::NAN,
             vc: 0.0,
+            pred: SurfacePredictor::new(),
+            pred_jump_time: 0.0,
+            motion_hold: 0.0,
+            motion_time: 0.0,
+            run_sign: 0.0,
+            run_with: 0.0,
+            run_against: 0.0,
+            est_hold: 0.0,
             integ: 0.0,
             u: 0.0,
             v: 0.0,
@@ -295,6 +371,8 @@ impl RobustLaw {
             f_prev: None,
             xf_prev: None,
             v_x: 0.0,
+            x_prev: None,
+            v_raw: 0.0,
             noise_var: 0.0,
             counts: EventCounts::default(),
             p,
@@ -355,6 +433,10 @@ impl RobustLaw {
         self.est.begin_contact(x, f);
         self.zc = xf - ff / self.est.kc();
         self.vc = 0.0;
+        self.pred.clear();
+        self.pred_jump_time = 0.0;
+        self.motion_time = 0.0;
+        self.run_sign = 0.0;
         self.integ = 0.0;
         self.below = 0.0;
         self.in_contact = 0.0;
@@ -412,13 +494,13 @@ impl RobustLaw {
     }
 
     /// The command the state wants before limits.
-    fn desired(&mut self, x: f64, ff: f64, xf: f64, dt: f64) -> f64 {
+    fn desired(&mut self, x: f64, f: f64, ff: f64, xf: f64, dt: f64) -> f64 {
         let c = self.p.contact;
         let r = self.p.response;
         match self.state {
             ContactState::Approach => {
                 // Anchored: never more than a few lead times of approach ahead of the robot.
-                let gap = c.approach_speed * (4.0 * r.lead).max(0.05);
+                let gap = c.approach_speed * self.anchor_time(dt);
                 (self.u + c.approach_speed * dt).min(x + gap)
             }
             ContactState::Reacquire => {
@@ -430,7 +512,7 @@ impl RobustLaw {
                     (c.approach_speed + 1.5 * self.v_lost).min(c.reacquire_speed)
                 };
                 self.travelled += speed * dt;
-                let gap = c.reacquire_distance + c.approach_speed * (4.0 * r.lead).max(0.05);
+                let gap = c.reacquire_distance + c.approach_speed * self.anchor_time(dt);
                 (self.u + speed * dt).min(x + gap)
             }
             ContactState::Retract => {
@@ -468,12 +550,100 @@ impl RobustLaw {
                     let lim = r.integral_limit;
                     self.integ = (self.integ + dt * r.integral * delta).clamp(-lim, lim);
                 }
+                // Feed-forward: the predicted surface through the inverted inner loop, less the
+                // conditioned surface the proportional path already stands on.
+                let floor = r.noise_floor;
+                let var = (self.noise_var + floor * floor) / (k * k);
+                let jump_floor = STEP_INNOVATION * self.f_r.max(self.p.contact.contact_force) / k;
+                let jump_floor = if self.pred_jump_time <= JUMP_TIME {
+                    jump_floor
+                } else {
+                    f64::INFINITY
+                };
+                let jumped =
+                    self.pred
+                        .update(x - f / k, var, r.surface_jerk, dt, JUMP_GATE, jump_floor);
+                self.pred_jump_time = if jumped {
+                    self.pred_jump_time + dt
+                } else {
+                    0.0
+                };
+                let delay = r.delay + r.delay_cycles * dt;
+                let ahead = self.pred.command(0.0, delay, r.lag, dt, 1.0, 1.0);
+                let z_f = xf - ff / k;
+                // Only real surface motion (not the apparent one of a stale k̂_c), and only as far as it
+                // stands out of the predictor's own uncertainty (not noise).
+                let [_, v, a] = self.pred.state();
+                // The same test on the unfiltered pair sees motion without the conditioning's lag.
+                // It must hold for a while: the apparent motion of a stale k̂_c passes it briefly where
+                // the robot turns.
+                if jumped {
+                    // A jump says nothing about motion either way.
+                } else if surface_moving(v, self.v_raw, self.p.estimator.max_surface_speed) {
+                    self.motion_time += dt;
+                    if self.motion_time >= MOTION_CONFIRM {
+                        self.motion_hold = MOTION_HOLD;
+                    }
+                } else {
+                    self.motion_time = 0.0;
+                }
+                // The apparent motion of a stale k̂_c is tied to the robot's: with it (k̂_c too high)
+                // or against it (too low), turning when the robot turns. A surface velocity that keeps
+                // its sign while the robot has moved both with it and against it is real motion.
+                let thr = self.p.estimator.max_surface_speed;
+                if !jumped {
+                    if v.abs() > thr {
+                        if v.signum() != self.run_sign {
+                            self.run_sign = v.signum();
+                            self.run_with = 0.0;
+                            self.run_against = 0.0;
+                        }
+                        if self.v_raw.abs() > thr {
+                            if self.v_raw * v > 0.0 {
+                                self.run_with += dt;
+                            } else {
+                                self.run_against += dt;
+                            }
+                        }
+                        if self.run_with >= OPPOSED_CONFIRM && self.run_against >= OPPOSED_CONFIRM {
+                            self.est_hold = MOTION_HOLD;
+                            self.motion_hold = MOTION_HOLD;
+                        }
+                    } else {
+                        self.run_sign = 0.0;
+                    }
+                }
+                let sv = MOTION_SIGNIFICANCE * self.pred.velocity_std();
+                let sa = MOTION_SIGNIFICANCE * self.pred.acceleration_std();
+                let m2 = v * v / (sv * sv + 1e-30) + a * a / (sa * sa + 1e-30);
+                let w_ff = if self.motion_hold > 0.0 {
+                    m2 / (m2 + 1.0)
+                } else {
+                    0.0
+                };
+                // Fallback: the conditioned observer's velocity over the whole lead time.
                 let deadband = (r.feedforward_deadband * self.noise_var.sqrt()).max(DEADBAND_FLOOR);
                 let v_ff = self.vc.signum() * (self.vc.abs() - deadband).max(0.0);
-                let lead = r.lead + r.lead_cycles * dt;
-                xf + weight * r.kappa * delta + lead * v_ff + self.integ
+                let lead = r.lag + delay + self.conditioning_delay(dt);
+                let fallback = lead * v_ff;
+                xf + weight * r.kappa * delta
+                    + w_ff * (ahead - z_f)
+                    + (1.0 - w_ff) * fallback
+                    + self.integ
             }
         }
+    }
+
+    /// How far ahead of the robot the approach may command, in time at approach speed, s.
+    fn anchor_time(&self, dt: f64) -> f64 {
+        let r = &self.p.response;
+        (4.0 * (r.lag + r.delay + r.delay_cycles * dt + self.conditioning_delay(dt))).max(0.05)
+    }
+
+    /// Low-frequency group delay of the force and position conditioning, s.
+    fn conditioning_delay(&self, dt: f64) -> f64 {
+        core::f64::consts::SQRT_2
+            / (core::f64::consts::TAU * self.p.conditioning.cutoff.min(0.45 / dt))
     }
 
     /// Apply deviation, velocity and acceleration limits to `want`, flagging each one that acts.
@@ -523,6 +693,12 @@ impl ForceLaw for RobustLaw {
         self.zc = f64::NAN;
         self.jump_time = 0.0;
         self.vc = 0.0;
+        self.pred.clear();
+        self.pred_jump_time = 0.0;
+        self.motion_hold = 0.0;
+        self.motion_time = 0.0;
+        self.run_sign = 0.0;
+        self.est_hold = 0.0;
         self.integ = 0.0;
         self.u = if x.is_finite() { x } else { 0.0 };
         self.v = 0.0;
@@ -533,6 +709,8 @@ impl ForceLaw for RobustLaw {
         self.f_prev = None;
         self.xf_prev = None;
         self.v_x = 0.0;
+        self.x_prev = None;
+        self.v_raw = 0.0;
         self.noise_var = 0.0;
         self.counts = EventCounts::default();
     }
@@ -564,12 +742,21 @@ impl ForceLaw for RobustLaw {
         let v_x = self.xf_prev.map_or(0.0, |p| (xf - p) / dt);
         self.xf_prev = Some(xf);
         self.v_x = v_x;
+        self.v_raw = self.x_prev.map_or(0.0, |p| (x - p) / dt);
+        self.x_prev = Some(x);
         self.transitions(x, f, ff, xf, dt, &mut ev);
         let moving = surface_moving(self.vc, v_x, self.p.estimator.max_surface_speed);
+        self.motion_hold = if moving && self.state == ContactState::Contact {
+            MOTION_HOLD
+        } else {
+            (self.motion_hold - dt).max(0.0)
+        };
+        self.est_hold = (self.est_hold - dt).max(0.0);
+        let moving = moving || self.est_hold > 0.0;
         if self.state == ContactState::Contact && self.est.update(x, f, ff, dt, moving).projected {
             ev.estimator_bound = true;
         }
-        let want = self.desired(x, ff, xf, dt);
+        let want = self.desired(x, f, ff, xf, dt);
         let u = if want.is_finite() {
             self.limit(want, dt, &mut ev)
         } else {
