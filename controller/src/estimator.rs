@@ -135,6 +135,8 @@ pub struct StiffnessEstimator {
     x_slow: f64,
     /// Slow average of the force, N.
     f_slow: f64,
+    /// `θ₀` at the contact onset: the prior [`seed`](Self::seed) combines a fit with, N.
+    prior: f64,
 }
 
 /// Covariance given to the intercept and the surface-velocity term at each contact onset.
@@ -157,6 +159,7 @@ impl StiffnessEstimator {
             t: 0.0,
             x_slow: 0.0,
             f_slow: 0.0,
+            prior: p.kc0 * scale,
             p,
         }
     }
@@ -183,12 +186,48 @@ impl StiffnessEstimator {
         self.f_slow = f;
         self.theta[1] = f;
         self.theta[2] = 0.0;
+        self.prior = self.theta[0];
         let u = self.p.initial_uncertainty * self.theta[0];
         self.cov = [
             [u * u, 0.0, 0.0],
             [0.0, INTERCEPT_UNCERTAINTY, 0.0],
             [0.0, 0.0, INTERCEPT_UNCERTAINTY],
         ];
+    }
+
+    /// Take a line fit `f = a + b·(x − x₀)/s` of the current contact (anchored where
+    /// [`begin_contact`](Self::begin_contact) anchored it, same scale `s`) as the estimate, combined with
+    /// the current stiffness estimate at its initial uncertainty; `x` (m) and `f_gate` (N) restart the
+    /// excitation averages. Returns whether `k̂_c` had to be projected into its bounds.
+    pub fn seed(&mut self, fit: &crate::onset::LineFit, x: f64, f_gate: f64) -> bool {
+        let prior = self.prior;
+        let u = self.p.initial_uncertainty * prior;
+        let var_prior = (u * u).max(1e-30);
+        let w = var_prior / (var_prior + fit.var_b);
+        let b = prior + w * (fit.b - prior);
+        let var_b = w * fit.var_b;
+        // The intercept moves with the slope along the fit's own correlation.
+        let a = fit.a + fit.cov_ab / fit.var_b.max(1e-30) * (b - fit.b);
+        let k = (b / self.scale).clamp(self.p.kc_min, self.p.kc_max);
+        let projected = k * self.scale != b;
+        if !(b.is_finite() && a.is_finite() && var_b.is_finite()) {
+            return false;
+        }
+        self.theta = [k * self.scale, a, 0.0];
+        self.t = 0.0;
+        // The covariance stays the one of a contact onset: the fit sets the estimate, the recursion
+        // keeps its agility for what changes later (a stiffness step must not meet a confident
+        // estimator).
+        let _ = var_b;
+        let u = self.p.initial_uncertainty * self.theta[0];
+        self.cov = [
+            [u * u, 0.0, 0.0],
+            [0.0, INTERCEPT_UNCERTAINTY, 0.0],
+            [0.0, 0.0, INTERCEPT_UNCERTAINTY],
+        ];
+        self.x_slow = x;
+        self.f_slow = f_gate;
+        projected
     }
 
     /// Stiffness estimate, N/m.

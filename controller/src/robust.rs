@@ -44,6 +44,18 @@
 //! whole lead time, outside a noise dead-band. The small integral `I` removes what a wrong model of the
 //! inner loop leaves.
 //!
+//! # Identification at first contact
+//! The approach into a still surface is the one excitation the law can count on: the force rises from
+//! zero while the position moves in. Contact is declared on the conditioned force, after most of that
+//! rise, so the raw samples of the approach are kept and, at a contact made from `Approach`, a hinge
+//! least-squares fit on them and on the first 0.1 s of contact sets `k̂_c`
+//! ([`crate::onset`]), combined with the previous estimate at the estimator's initial uncertainty. During
+//! that window the recursive estimator is not run and the surface observers restart at rest on every new
+//! `k̂_c` (through a changing `k̂_c` a still surface would look as if it moved), so the law is the
+//! proportional path and the integral; afterwards the estimator goes on from the fitted values with the
+//! covariance of a contact onset. A contact re-acquired after a loss is not fitted: the surface may be
+//! the one moving away.
+//!
 //! # Contact state machine
 //! `Approach` (bounded speed, anchored to the measured position) → `Contact` when the conditioned force
 //! reaches `contact_force` (or one raw sample three times that) → `Reacquire` when the raw force stays
@@ -60,6 +72,7 @@ use serde::{Deserialize, Serialize};
 use crate::conditioning::{ConditioningParams, SignalFilter};
 use crate::estimator::{EstimatorParams, StiffnessEstimator, surface_moving};
 use crate::law::{ContactState, EventCounts, Events, ForceLaw, Output};
+use crate::onset::OnsetFit;
 use crate::predictor::SurfacePredictor;
 
 /// How the law responds in contact.
@@ -280,6 +293,9 @@ const STEP_INNOVATION: f64 = 0.25;
 /// to pass the force conditioning).
 const JUMP_TIME: f64 = 0.03;
 
+/// How long after contact is declared the contact transient is identified by least squares, s.
+const ONSET_WINDOW: f64 = 0.1;
+
 /// Relative force error within which the integral acts.
 const INTEGRATION_BAND: f64 = 0.3;
 
@@ -293,6 +309,8 @@ pub struct RobustLaw {
     force: SignalFilter,
     position: SignalFilter,
     est: StiffnessEstimator,
+    /// Stiffness from the contact transient (see [`crate::onset`]).
+    onset: OnsetFit,
     /// How long the observer's innovation has been a jump, s.
     jump_time: f64,
     /// Observed surface, m, and its velocity, m/s.
@@ -350,6 +368,7 @@ impl RobustLaw {
             force: SignalFilter::new(p.conditioning),
             position: SignalFilter::new(position_params),
             est: StiffnessEstimator::new(p.estimator, p.scale()),
+            onset: OnsetFit::new(),
             jump_time: 0.0,
             zc: f64::NAN,
             vc: 0.0,
@@ -429,8 +448,16 @@ impl RobustLaw {
     }
 
     fn enter_contact(&mut self, x: f64, f: f64, ff: f64, xf: f64, ev: &mut Events) {
-        self.state = ContactState::Contact;
         self.est.begin_contact(x, f);
+        // A contact made from the approach is made on a still surface; one re-acquired after a loss
+        // of contact may be on a surface that is moving away (the loss says so): the recursion alone
+        // learns from that one, behind its motion gate.
+        if self.state == ContactState::Approach {
+            self.onset.begin(x, self.p.scale(), ONSET_WINDOW);
+        } else {
+            self.onset.clear();
+        }
+        self.state = ContactState::Contact;
         self.zc = xf - ff / self.est.kc();
         self.vc = 0.0;
         self.pred.clear();
@@ -477,6 +504,7 @@ impl RobustLaw {
                             c.reacquire_distance
                         };
                         ev.lift_off = true;
+                        self.onset.stop();
                         self.v_lost = self.vc.max(0.0);
                         // The force is gone: forget the filter's memory of it.
                         self.force.reset_to(f);
@@ -690,6 +718,7 @@ impl ForceLaw for RobustLaw {
         self.force.clear();
         self.position.clear();
         self.est.reset();
+        self.onset.clear();
         self.zc = f64::NAN;
         self.jump_time = 0.0;
         self.vc = 0.0;
@@ -744,6 +773,9 @@ impl ForceLaw for RobustLaw {
         self.v_x = v_x;
         self.v_raw = self.x_prev.map_or(0.0, |p| (x - p) / dt);
         self.x_prev = Some(x);
+        if matches!(self.state, ContactState::Approach | ContactState::Reacquire) {
+            self.onset.remember(x, f);
+        }
         self.transitions(x, f, ff, xf, dt, &mut ev);
         let moving = surface_moving(self.vc, v_x, self.p.estimator.max_surface_speed);
         self.motion_hold = if moving && self.state == ContactState::Contact {
@@ -753,8 +785,40 @@ impl ForceLaw for RobustLaw {
         };
         self.est_hold = (self.est_hold - dt).max(0.0);
         let moving = moving || self.est_hold > 0.0;
-        if self.state == ContactState::Contact && self.est.update(x, f, ff, dt, moving).projected {
-            ev.estimator_bound = true;
+        if self.state == ContactState::Contact {
+            // The transient identifies the stiffness on a still surface only.
+            if moving {
+                self.onset.stop();
+            }
+            let onset = self.onset.active();
+            if onset && !ev.contact {
+                self.onset.add(x, f, dt);
+            }
+            let fit = if onset {
+                self.onset.fit(self.noise_var)
+            } else {
+                None
+            };
+            let projected = match fit {
+                Some(fit) => {
+                    let projected = self.est.seed(&fit, x, ff);
+                    // The observed surface is x − f/k̂_c: a k̂_c that moves would show it moving.
+                    // While the transient is identified the observers restart on every new k̂_c, at
+                    // rest; the law is the proportional path and the integral alone.
+                    self.zc = xf - ff / self.est.kc();
+                    self.vc = 0.0;
+                    self.jump_time = 0.0;
+                    self.pred.clear();
+                    self.pred_jump_time = 0.0;
+                    self.motion_time = 0.0;
+                    self.run_sign = 0.0;
+                    projected
+                }
+                None => self.est.update(x, f, ff, dt, moving).projected,
+            };
+            if projected {
+                ev.estimator_bound = true;
+            }
         }
         let want = self.desired(x, f, ff, xf, dt);
         let u = if want.is_finite() {
