@@ -56,6 +56,14 @@
 //! covariance of a contact onset. A contact re-acquired after a loss is not fitted: the surface may be
 //! the one moving away.
 //!
+//! In a steady contact a second, slow least-squares fit ([`crate::estimator::SteadyEstimator`]) learns
+//! from the only motion there is, the loop's answer to sensor noise (the position measured at an instant
+//! does not depend on that instant's noise, so the fit is unbiased; a linearly drifting bias is one of
+//! its terms). It starts from the transient's estimate and uncertainty, runs only while nothing moves,
+//! jumps or excites the recursive estimator (any of these restarts it), stops learning once its relative
+//! standard deviation is 2 %, and, once below 10 %, moves `k̂_c` to its estimate at no more than 2 %/s.
+//! Without noise it learns nothing and leaves `k̂_c` alone.
+//!
 //! # Contact state machine
 //! `Approach` (bounded speed, anchored to the measured position) → `Contact` when the conditioned force
 //! reaches `contact_force` (or one raw sample three times that) → `Reacquire` when the raw force stays
@@ -70,7 +78,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::conditioning::{ConditioningParams, SignalFilter};
-use crate::estimator::{EstimatorParams, StiffnessEstimator, surface_moving};
+use crate::estimator::{EstimatorParams, SteadyEstimator, StiffnessEstimator, surface_moving};
 use crate::law::{ContactState, EventCounts, Events, ForceLaw, Output};
 use crate::onset::OnsetFit;
 use crate::predictor::SurfacePredictor;
@@ -296,6 +304,17 @@ const JUMP_TIME: f64 = 0.03;
 /// How long after contact is declared the contact transient is identified by least squares, s.
 const ONSET_WINDOW: f64 = 0.1;
 
+/// Forgetting time of the steady-contact estimator, s.
+const STEADY_MEMORY: f64 = 3600.0;
+/// How long the steady-contact estimator must have run before it is used, s.
+const STEADY_MIN_AGE: f64 = 1.0;
+/// Relative standard deviation below which the steady-contact estimate is used.
+const STEADY_CONFIDENCE: f64 = 0.1;
+/// Relative standard deviation at which the steady-contact estimator stops learning.
+const STEADY_DONE: f64 = 0.02;
+/// Largest relative rate at which the steady-contact estimate moves `k̂_c`, 1/s.
+const STEADY_RATE: f64 = 0.02;
+
 /// Relative force error within which the integral acts.
 const INTEGRATION_BAND: f64 = 0.3;
 
@@ -311,6 +330,9 @@ pub struct RobustLaw {
     est: StiffnessEstimator,
     /// Stiffness from the contact transient (see [`crate::onset`]).
     onset: OnsetFit,
+    /// Stiffness from a steady contact under sensor noise, and the variance it starts with, N².
+    steady: SteadyEstimator,
+    steady_var0: f64,
     /// How long the observer's innovation has been a jump, s.
     jump_time: f64,
     /// Observed surface, m, and its velocity, m/s.
@@ -369,6 +391,8 @@ impl RobustLaw {
             position: SignalFilter::new(position_params),
             est: StiffnessEstimator::new(p.estimator, p.scale()),
             onset: OnsetFit::new(),
+            steady: SteadyEstimator::new(STEADY_MEMORY),
+            steady_var0: f64::INFINITY,
             jump_time: 0.0,
             zc: f64::NAN,
             vc: 0.0,
@@ -457,6 +481,8 @@ impl RobustLaw {
         } else {
             self.onset.clear();
         }
+        self.steady.stop();
+        self.steady_var0 = f64::INFINITY;
         self.state = ContactState::Contact;
         self.zc = xf - ff / self.est.kc();
         self.vc = 0.0;
@@ -662,6 +688,51 @@ impl RobustLaw {
         }
     }
 
+    /// The steady-contact estimator (see [`SteadyEstimator`]): runs while nothing moves, nothing jumps
+    /// and the recursive estimator does not adapt, and once confident moves `k̂_c` to its estimate
+    /// at a bounded rate.
+    fn steady_step(&mut self, x: f64, f: f64, dt: f64, disturbed: bool) {
+        let disturbed = disturbed
+            || self.motion_hold > 0.0
+            || self.est_hold > 0.0
+            || self.jump_time > 0.0
+            || self.pred_jump_time > 0.0;
+        if disturbed {
+            self.steady.stop();
+            self.steady_var0 = f64::INFINITY;
+            return;
+        }
+        if !self.steady.active() {
+            let s = self.est.scale();
+            let theta0 = self.est.kc() * s;
+            let u = self.p.estimator.initial_uncertainty * theta0;
+            let var0 = self.steady_var0.min(u * u);
+            self.steady.start(x, self.est.predict(x), theta0, var0, s);
+            self.steady_var0 = f64::INFINITY;
+            return;
+        }
+        // Learnt: a steady contact has nothing more to teach, and a sensor bias that has drifted as
+        // far as the set-point lifts the tool off unseen (the law holds the measured force), which
+        // would teach it wrong.
+        let learnt = self
+            .steady
+            .estimate()
+            .is_some_and(|(_, rel)| rel <= STEADY_DONE);
+        if !learnt {
+            let floor = self.p.response.noise_floor;
+            self.steady
+                .update(x, f, self.noise_var.max(floor * floor), dt);
+        }
+        if let Some((k, rel)) = self.steady.estimate()
+            && self.steady.age() >= STEADY_MIN_AGE
+            && rel <= STEADY_CONFIDENCE
+        {
+            let now = self.est.kc();
+            let step = STEADY_RATE * dt * now;
+            self.est.set_kc(now + (k - now).clamp(-step, step), x);
+        }
+    }
+
     /// How far ahead of the robot the approach may command, in time at approach speed, s.
     fn anchor_time(&self, dt: f64) -> f64 {
         let r = &self.p.response;
@@ -719,6 +790,8 @@ impl ForceLaw for RobustLaw {
         self.position.clear();
         self.est.reset();
         self.onset.clear();
+        self.steady.stop();
+        self.steady_var0 = f64::INFINITY;
         self.zc = f64::NAN;
         self.jump_time = 0.0;
         self.vc = 0.0;
@@ -812,9 +885,15 @@ impl ForceLaw for RobustLaw {
                     self.pred_jump_time = 0.0;
                     self.motion_time = 0.0;
                     self.run_sign = 0.0;
+                    self.steady.stop();
+                    self.steady_var0 = self.est.seed_variance();
                     projected
                 }
-                None => self.est.update(x, f, ff, dt, moving).projected,
+                None => {
+                    let up = self.est.update(x, f, ff, dt, moving);
+                    self.steady_step(x, f, dt, moving || up.adapted);
+                    up.projected
+                }
             };
             if projected {
                 ev.estimator_bound = true;
