@@ -577,4 +577,46 @@ mod tests {
         }
         assert!(projected);
     }
+    #[test]
+    fn steady_contact_learns_from_noise_driven_motion_despite_drift() {
+        // A micrometre of position wander (the loop's answer to earlier noise), 0.5 N of white sensor
+        // noise and a bias drifting 0.5 N/min; the prior is 20 % low.
+        let (k, xc, s, dt) = (70_000.0, 0.010, 1e-4, 1e-3);
+        let mut e = SteadyEstimator::new(3600.0);
+        let prior = 0.8 * k * s;
+        e.start(0.010071, 5.0, prior, (0.2 * prior) * (0.2 * prior), s);
+        let mut seed: u64 = 7;
+        let mut uniform = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let mut wander = 0.0;
+        for i in 0..200_000 {
+            let t = i as f64 * dt;
+            wander = 0.99 * wander + 5e-7 * uniform();
+            let x = 0.010071 + wander;
+            let noise = 0.5 * 12f64.sqrt() * uniform();
+            let f = k * (x - xc) + noise + 0.5 / 60.0 * t;
+            e.update(x, f, 0.25, dt);
+        }
+        let (kc, rel) = e.estimate().unwrap();
+        assert!((kc - k).abs() / k < 0.03, "k̂ {kc} ± {rel}");
+        assert!(rel < 0.03, "relative std {rel}");
+    }
+
+    #[test]
+    fn steady_contact_without_motion_keeps_its_prior() {
+        let (s, dt) = (1e-4, 1e-3);
+        let mut e = SteadyEstimator::new(3600.0);
+        let prior = 50_000.0 * s;
+        e.start(0.0101, 5.0, prior, prior * prior, s);
+        for _ in 0..10_000 {
+            e.update(0.0101, 5.0, 4e-4, dt);
+        }
+        let (kc, rel) = e.estimate().unwrap();
+        assert!((kc - 50_000.0).abs() < 1.0, "k̂ {kc}");
+        assert!(rel > 0.9, "relative std {rel}");
+    }
 }
