@@ -521,3 +521,11 @@ fn b6_stiffness_over_sensor_seeds() {
     }
     verdict(fails);
 }
+
+/// … and far off: 57 % low, 186 % high.
+#[test]
+fn every_target_with_the_initial_stiffness_far_off() {
+    let mut fails = every_target(&with_kc0(30_000.0), "k̂(0) 30 kN/m");
+    fails.extend(every_target(&with_kc0(200_000.0), "k̂(0) 200 kN/m"));
+    verdict(fails);
+}
