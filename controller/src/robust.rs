@@ -477,7 +477,7 @@ impl RobustLaw {
         // of contact may be on a surface that is moving away (the loss says so): the recursion alone
         // learns from that one, behind its motion gate.
         if self.state == ContactState::Approach {
-            self.onset.begin(x, self.p.scale(), ONSET_WINDOW);
+            self.onset.begin(x, self.est.scale(), ONSET_WINDOW);
         } else {
             self.onset.clear();
         }
@@ -1025,6 +1025,22 @@ mod tests {
         assert!((law.active_set_point() - 10.0).abs() < 1e-12);
         let f = 70_000.0 * (x - 0.010);
         assert!((f - 10.0).abs() < 0.05, "force {f} N");
+    }
+
+    #[test]
+    fn the_approach_identifies_the_stiffness_whatever_the_guess_and_set_point() {
+        for (kc0, f_r) in [(50_000.0, 5.0), (200_000.0, 5.0), (30_000.0, 12.0)] {
+            let mut p = params();
+            p.estimator.kc0 = kc0;
+            let mut law = RobustLaw::new(p).unwrap();
+            let mut x = 0.0095;
+            law.start(x);
+            // A set-point changed before contact must not confuse the fit's position scale.
+            law.set_set_point(f_r).unwrap();
+            drive(&mut law, &mut x, 2000, 70_000.0, |_| 0.010);
+            let k = law.step(x, 70_000.0 * (x - 0.010), 1e-3).kc_hat;
+            assert!((k - 70_000.0).abs() < 700.0, "k̂(0) {kc0}, f_r {f_r}: k̂ {k}");
+        }
     }
 
     #[test]
