@@ -18,6 +18,7 @@ pub mod control_loop;
 pub mod estimator;
 pub mod gravity;
 pub mod law;
+pub mod onset;
 pub mod predictor;
 pub mod robust;
 pub mod tune;

@@ -44,6 +44,26 @@
 //! whole lead time, outside a noise dead-band. The small integral `I` removes what a wrong model of the
 //! inner loop leaves.
 //!
+//! # Identification at first contact
+//! The approach into a still surface is the one excitation the law can count on: the force rises from
+//! zero while the position moves in. Contact is declared on the conditioned force, after most of that
+//! rise, so the raw samples of the approach are kept and, at a contact made from `Approach`, a hinge
+//! least-squares fit on them and on the first 0.1 s of contact sets `k̂_c`
+//! ([`crate::onset`]), combined with the previous estimate at the estimator's initial uncertainty. During
+//! that window the recursive estimator is not run and the surface observers restart at rest on every new
+//! `k̂_c` (through a changing `k̂_c` a still surface would look as if it moved), so the law is the
+//! proportional path and the integral; afterwards the estimator goes on from the fitted values with the
+//! covariance of a contact onset. A contact re-acquired after a loss is not fitted: the surface may be
+//! the one moving away.
+//!
+//! In a steady contact a second, slow least-squares fit ([`crate::estimator::SteadyEstimator`]) learns
+//! from the only motion there is, the loop's answer to sensor noise (the position measured at an instant
+//! does not depend on that instant's noise, so the fit is unbiased; a linearly drifting bias is one of
+//! its terms). It starts from the transient's estimate and uncertainty, runs only while nothing moves,
+//! jumps or excites the recursive estimator (any of these restarts it), stops learning once its relative
+//! standard deviation is 2 %, and, once below 10 %, moves `k̂_c` to its estimate at no more than 2 %/s.
+//! Without noise it learns nothing and leaves `k̂_c` alone.
+//!
 //! # Contact state machine
 //! `Approach` (bounded speed, anchored to the measured position) → `Contact` when the conditioned force
 //! reaches `contact_force` (or one raw sample three times that) → `Reacquire` when the raw force stays
@@ -58,8 +78,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::conditioning::{ConditioningParams, SignalFilter};
-use crate::estimator::{EstimatorParams, StiffnessEstimator, surface_moving};
+use crate::estimator::{EstimatorParams, SteadyEstimator, StiffnessEstimator, surface_moving};
 use crate::law::{ContactState, EventCounts, Events, ForceLaw, Output};
+use crate::onset::OnsetFit;
 use crate::predictor::SurfacePredictor;
 
 /// How the law responds in contact.
@@ -280,6 +301,20 @@ const STEP_INNOVATION: f64 = 0.25;
 /// to pass the force conditioning).
 const JUMP_TIME: f64 = 0.03;
 
+/// How long after contact is declared the contact transient is identified by least squares, s.
+const ONSET_WINDOW: f64 = 0.1;
+
+/// Forgetting time of the steady-contact estimator, s.
+const STEADY_MEMORY: f64 = 3600.0;
+/// How long the steady-contact estimator must have run before it is used, s.
+const STEADY_MIN_AGE: f64 = 1.0;
+/// Relative standard deviation below which the steady-contact estimate is used.
+const STEADY_CONFIDENCE: f64 = 0.1;
+/// Relative standard deviation at which the steady-contact estimator stops learning.
+const STEADY_DONE: f64 = 0.02;
+/// Largest relative rate at which the steady-contact estimate moves `k̂_c`, 1/s.
+const STEADY_RATE: f64 = 0.02;
+
 /// Relative force error within which the integral acts.
 const INTEGRATION_BAND: f64 = 0.3;
 
@@ -293,6 +328,11 @@ pub struct RobustLaw {
     force: SignalFilter,
     position: SignalFilter,
     est: StiffnessEstimator,
+    /// Stiffness from the contact transient (see [`crate::onset`]).
+    onset: OnsetFit,
+    /// Stiffness from a steady contact under sensor noise, and the variance it starts with, N².
+    steady: SteadyEstimator,
+    steady_var0: f64,
     /// How long the observer's innovation has been a jump, s.
     jump_time: f64,
     /// Observed surface, m, and its velocity, m/s.
@@ -350,6 +390,9 @@ impl RobustLaw {
             force: SignalFilter::new(p.conditioning),
             position: SignalFilter::new(position_params),
             est: StiffnessEstimator::new(p.estimator, p.scale()),
+            onset: OnsetFit::new(),
+            steady: SteadyEstimator::new(STEADY_MEMORY),
+            steady_var0: f64::INFINITY,
             jump_time: 0.0,
             zc: f64::NAN,
             vc: 0.0,
@@ -429,8 +472,18 @@ impl RobustLaw {
     }
 
     fn enter_contact(&mut self, x: f64, f: f64, ff: f64, xf: f64, ev: &mut Events) {
-        self.state = ContactState::Contact;
         self.est.begin_contact(x, f);
+        // A contact made from the approach is made on a still surface; one re-acquired after a loss
+        // of contact may be on a surface that is moving away (the loss says so): the recursion alone
+        // learns from that one, behind its motion gate.
+        if self.state == ContactState::Approach {
+            self.onset.begin(x, self.est.scale(), ONSET_WINDOW);
+        } else {
+            self.onset.clear();
+        }
+        self.steady.stop();
+        self.steady_var0 = f64::INFINITY;
+        self.state = ContactState::Contact;
         self.zc = xf - ff / self.est.kc();
         self.vc = 0.0;
         self.pred.clear();
@@ -477,6 +530,7 @@ impl RobustLaw {
                             c.reacquire_distance
                         };
                         ev.lift_off = true;
+                        self.onset.stop();
                         self.v_lost = self.vc.max(0.0);
                         // The force is gone: forget the filter's memory of it.
                         self.force.reset_to(f);
@@ -634,6 +688,51 @@ impl RobustLaw {
         }
     }
 
+    /// The steady-contact estimator (see [`SteadyEstimator`]): runs while nothing moves, nothing jumps
+    /// and the recursive estimator does not adapt, and once confident moves `k̂_c` to its estimate
+    /// at a bounded rate.
+    fn steady_step(&mut self, x: f64, f: f64, dt: f64, disturbed: bool) {
+        let disturbed = disturbed
+            || self.motion_hold > 0.0
+            || self.est_hold > 0.0
+            || self.jump_time > 0.0
+            || self.pred_jump_time > 0.0;
+        if disturbed {
+            self.steady.stop();
+            self.steady_var0 = f64::INFINITY;
+            return;
+        }
+        if !self.steady.active() {
+            let s = self.est.scale();
+            let theta0 = self.est.kc() * s;
+            let u = self.p.estimator.initial_uncertainty * theta0;
+            let var0 = self.steady_var0.min(u * u);
+            self.steady.start(x, self.est.predict(x), theta0, var0, s);
+            self.steady_var0 = f64::INFINITY;
+            return;
+        }
+        // Learnt: a steady contact has nothing more to teach, and a sensor bias that has drifted as
+        // far as the set-point lifts the tool off unseen (the law holds the measured force), which
+        // would teach it wrong.
+        let learnt = self
+            .steady
+            .estimate()
+            .is_some_and(|(_, rel)| rel <= STEADY_DONE);
+        if !learnt {
+            let floor = self.p.response.noise_floor;
+            self.steady
+                .update(x, f, self.noise_var.max(floor * floor), dt);
+        }
+        if let Some((k, rel)) = self.steady.estimate()
+            && self.steady.age() >= STEADY_MIN_AGE
+            && rel <= STEADY_CONFIDENCE
+        {
+            let now = self.est.kc();
+            let step = STEADY_RATE * dt * now;
+            self.est.set_kc(now + (k - now).clamp(-step, step), x);
+        }
+    }
+
     /// How far ahead of the robot the approach may command, in time at approach speed, s.
     fn anchor_time(&self, dt: f64) -> f64 {
         let r = &self.p.response;
@@ -690,6 +789,9 @@ impl ForceLaw for RobustLaw {
         self.force.clear();
         self.position.clear();
         self.est.reset();
+        self.onset.clear();
+        self.steady.stop();
+        self.steady_var0 = f64::INFINITY;
         self.zc = f64::NAN;
         self.jump_time = 0.0;
         self.vc = 0.0;
@@ -744,6 +846,9 @@ impl ForceLaw for RobustLaw {
         self.v_x = v_x;
         self.v_raw = self.x_prev.map_or(0.0, |p| (x - p) / dt);
         self.x_prev = Some(x);
+        if matches!(self.state, ContactState::Approach | ContactState::Reacquire) {
+            self.onset.remember(x, f);
+        }
         self.transitions(x, f, ff, xf, dt, &mut ev);
         let moving = surface_moving(self.vc, v_x, self.p.estimator.max_surface_speed);
         self.motion_hold = if moving && self.state == ContactState::Contact {
@@ -753,8 +858,46 @@ impl ForceLaw for RobustLaw {
         };
         self.est_hold = (self.est_hold - dt).max(0.0);
         let moving = moving || self.est_hold > 0.0;
-        if self.state == ContactState::Contact && self.est.update(x, f, ff, dt, moving).projected {
-            ev.estimator_bound = true;
+        if self.state == ContactState::Contact {
+            // The transient identifies the stiffness on a still surface only.
+            if moving {
+                self.onset.stop();
+            }
+            let onset = self.onset.active();
+            if onset && !ev.contact {
+                self.onset.add(x, f, dt);
+            }
+            let fit = if onset {
+                self.onset.fit(self.noise_var)
+            } else {
+                None
+            };
+            let projected = match fit {
+                Some(fit) => {
+                    let projected = self.est.seed(&fit, x, ff);
+                    // The observed surface is x − f/k̂_c: a k̂_c that moves would show it moving.
+                    // While the transient is identified the observers restart on every new k̂_c, at
+                    // rest; the law is the proportional path and the integral alone.
+                    self.zc = xf - ff / self.est.kc();
+                    self.vc = 0.0;
+                    self.jump_time = 0.0;
+                    self.pred.clear();
+                    self.pred_jump_time = 0.0;
+                    self.motion_time = 0.0;
+                    self.run_sign = 0.0;
+                    self.steady.stop();
+                    self.steady_var0 = self.est.seed_variance();
+                    projected
+                }
+                None => {
+                    let up = self.est.update(x, f, ff, dt, moving);
+                    self.steady_step(x, f, dt, moving || up.adapted);
+                    up.projected
+                }
+            };
+            if projected {
+                ev.estimator_bound = true;
+            }
         }
         let want = self.desired(x, f, ff, xf, dt);
         let u = if want.is_finite() {
@@ -882,6 +1025,22 @@ mod tests {
         assert!((law.active_set_point() - 10.0).abs() < 1e-12);
         let f = 70_000.0 * (x - 0.010);
         assert!((f - 10.0).abs() < 0.05, "force {f} N");
+    }
+
+    #[test]
+    fn the_approach_identifies_the_stiffness_whatever_the_guess_and_set_point() {
+        for (kc0, f_r) in [(50_000.0, 5.0), (200_000.0, 5.0), (30_000.0, 12.0)] {
+            let mut p = params();
+            p.estimator.kc0 = kc0;
+            let mut law = RobustLaw::new(p).unwrap();
+            let mut x = 0.0095;
+            law.start(x);
+            // A set-point changed before contact must not confuse the fit's position scale.
+            law.set_set_point(f_r).unwrap();
+            drive(&mut law, &mut x, 2000, 70_000.0, |_| 0.010);
+            let k = law.step(x, 70_000.0 * (x - 0.010), 1e-3).kc_hat;
+            assert!((k - 70_000.0).abs() < 700.0, "k̂(0) {kc0}, f_r {f_r}: k̂ {k}");
+        }
     }
 
     #[test]

@@ -6,10 +6,24 @@ use std::alloc::System;
 use controller::{
     ForceLaw, ImpedanceLaw, ImpedanceParams, LawConfig, Reference, RobustLaw, Tuning,
 };
-use stats_alloc::{INSTRUMENTED_SYSTEM, Region, StatsAlloc};
+use stats_alloc::{INSTRUMENTED_SYSTEM, Region, Stats, StatsAlloc};
 
 #[global_allocator]
 static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;
+
+/// Allocations during `run`, the least of three runs: a deterministic step that allocates does so on
+/// every run, while the test harness's own thread allocates now and then while a region is open (seen
+/// as 4 allocations, 900 bytes, in about a third of the runs, before and after this law changed).
+fn allocations(mut run: impl FnMut()) -> Stats {
+    (0..3)
+        .map(|_| {
+            let region = Region::new(GLOBAL);
+            run();
+            region.change()
+        })
+        .min_by_key(|c| c.allocations + c.reallocations)
+        .expect("three runs")
+}
 
 #[test]
 fn robust_step_does_not_allocate() {
@@ -18,26 +32,26 @@ fn robust_step_does_not_allocate() {
         panic!("robust tuning")
     };
     let mut law = RobustLaw::new(*p).unwrap();
-    law.start(0.009);
-    // Drive it through approach, contact, lift-off, re-acquire and back against a spring.
-    let (k, mut xc): (f64, f64) = (70_000.0, 0.010);
-    let mut x = 0.009;
     let mut states = 0u32;
-    let region = Region::new(GLOBAL);
-    for i in 0..20_000 {
-        if i == 8_000 {
-            xc += 0.001;
+    let change = allocations(|| {
+        law.start(0.009);
+        // Drive it through approach, contact, lift-off, re-acquire and back against a spring.
+        let (k, mut xc): (f64, f64) = (70_000.0, 0.010);
+        let mut x = 0.009;
+        for i in 0..20_000 {
+            if i == 8_000 {
+                xc += 0.001;
+            }
+            if i == 14_000 {
+                xc -= 0.0015;
+            }
+            let f = (k * (x - xc)).max(0.0);
+            let out = law.step(x, f, 1e-3);
+            states |= 1 << out.state.map_or(7, |s| s.code());
+            x += 0.1 * (out.x_cmd - x);
         }
-        if i == 14_000 {
-            xc -= 0.0015;
-        }
-        let f = (k * (x - xc)).max(0.0);
-        let out = law.step(x, f, 1e-3);
-        states |= 1 << out.state.map_or(7, |s| s.code());
-        x += 0.1 * (out.x_cmd - x);
-    }
-    let _ = law.step(f64::NAN, 1.0, 1e-3);
-    let change = region.change();
+        let _ = law.step(f64::NAN, 1.0, 1e-3);
+    });
     assert_eq!(
         change.allocations + change.reallocations,
         0,
@@ -56,17 +70,18 @@ fn paper_and_fixed_laws_step_without_allocating() {
     let mut paper = ImpedanceLaw::paper();
     let mut fixed =
         ImpedanceLaw::new(ImpedanceParams::PAPER, Reference::Fixed { x_r: 0.0101 }).unwrap();
-    paper.start(0.0091);
-    fixed.start(0.0091);
     let mut x = 0.0091;
-    let region = Region::new(GLOBAL);
-    for k in 0..10_000 {
-        let k_c = if k < 5_000 { 70_000.0 } else { 40_000.0 };
-        let f = (k_c * (x - 0.01f64)).max(0.0);
-        x = paper.step(x, f, 1e-3).x_cmd;
-        std::hint::black_box(fixed.step(x, f, 1e-3));
-    }
-    let change = region.change();
+    let change = allocations(|| {
+        paper.start(0.0091);
+        fixed.start(0.0091);
+        x = 0.0091;
+        for k in 0..10_000 {
+            let k_c = if k < 5_000 { 70_000.0 } else { 40_000.0 };
+            let f = (k_c * (x - 0.01f64)).max(0.0);
+            x = paper.step(x, f, 1e-3).x_cmd;
+            std::hint::black_box(fixed.step(x, f, 1e-3));
+        }
+    });
     assert_eq!(change.allocations + change.reallocations, 0, "{change:?}");
     assert!(x.is_finite());
 }

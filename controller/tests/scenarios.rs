@@ -5,6 +5,7 @@
 mod common;
 
 use common::{Cell, PLANTS, Trace, robust, run_tuning};
+use controller::Tuning;
 use sim::{Event, InnerLoopModel, Schedule, SensorParams, Window};
 
 /// Record a failed target instead of stopping, so a run prints every number before it fails.
@@ -27,15 +28,20 @@ fn show(id: &str, plant: &str, what: &str, value: f64, target: &str) {
 }
 
 // ---------------------------------------------------------------- B1
-fn b1(plant: InnerLoopModel) -> Trace {
-    run_tuning(&robust(), &Cell::nominal(plant, 3.0))
+fn b1(t: &Tuning, plant: InnerLoopModel) -> Trace {
+    run_tuning(t, &Cell::nominal(plant, 3.0))
 }
 
 #[test]
 fn b1_approach_contact_hold() {
     let mut fails: Vec<String> = Vec::new();
+    b1_targets(&robust(), &mut fails);
+    verdict(fails);
+}
+
+fn b1_targets(t: &Tuning, fails: &mut Vec<String>) {
     for (name, plant) in PLANTS {
-        let tr = b1(plant);
+        let tr = b1(t, plant);
         let t0 = tr.first_contact();
         let peak = tr.peak(0.0, 10.0);
         let settle = tr.settle(0.0, 10.0);
@@ -52,22 +58,26 @@ fn b1_approach_contact_hold() {
         check!(fails, overshoot <= 10.0, "{name}: overshoot {overshoot} %");
         check!(fails, ss <= 0.01, "{name}: steady-state error {ss} N");
     }
-    verdict(fails);
 }
 
 // ---------------------------------------------------------------- B2
-fn stiffness_change(plant: InnerLoopModel, factor: f64) -> Trace {
+fn stiffness_change(t: &Tuning, plant: InnerLoopModel, factor: f64) -> Trace {
     let mut cell = Cell::nominal(plant, 5.0);
     cell.k_c = Schedule::constant(70_000.0).with(Event::Scale { at: 3.0, factor });
-    run_tuning(&robust(), &cell)
+    run_tuning(t, &cell)
 }
 
 #[test]
 fn b2_stiffness_halves_and_doubles() {
     let mut fails: Vec<String> = Vec::new();
+    b2_targets(&robust(), &mut fails);
+    verdict(fails);
+}
+
+fn b2_targets(t: &Tuning, fails: &mut Vec<String>) {
     for (name, plant) in PLANTS {
         for factor in [0.5, 2.0] {
-            let tr = stiffness_change(plant, factor);
+            let tr = stiffness_change(t, plant, factor);
             let settle = tr.settle(3.0, 10.0);
             let (losses, _) = tr.contact_losses(1.0, 10.0);
             show(
@@ -88,17 +98,21 @@ fn b2_stiffness_halves_and_doubles() {
             check!(fails, losses == 0, "{name} x{factor}: contact lost");
         }
     }
-    verdict(fails);
 }
 
 #[test]
 fn b2_stable_for_any_stiffness_in_10_to_500_kn_per_m() {
     let mut fails: Vec<String> = Vec::new();
+    b2_range_targets(&robust(), &mut fails);
+    verdict(fails);
+}
+
+fn b2_range_targets(t: &Tuning, fails: &mut Vec<String>) {
     for (name, plant) in PLANTS {
         for k in [10e3, 20e3, 40e3, 70e3, 150e3, 300e3, 500e3] {
             let mut cell = Cell::nominal(plant, 4.0);
             cell.k_c = Schedule::constant(k);
-            let tr = run_tuning(&robust(), &cell);
+            let tr = run_tuning(t, &cell);
             let err = tr.max_error(3.0, 4.0);
             let settle = tr.settle(0.0, 10.0);
             show(
@@ -115,21 +129,25 @@ fn b2_stable_for_any_stiffness_in_10_to_500_kn_per_m() {
             );
         }
     }
-    verdict(fails);
 }
 
 // ---------------------------------------------------------------- B3
-fn surface_step(plant: InnerLoopModel, delta: f64) -> Trace {
+fn surface_step(t: &Tuning, plant: InnerLoopModel, delta: f64) -> Trace {
     let mut cell = Cell::nominal(plant, 5.0);
     cell.x_c = Schedule::constant(0.010).with(Event::Step { at: 3.0, delta });
-    run_tuning(&robust(), &cell)
+    run_tuning(t, &cell)
 }
 
 #[test]
 fn b3_surface_steps() {
     let mut fails: Vec<String> = Vec::new();
+    b3_targets(&robust(), &mut fails);
+    verdict(fails);
+}
+
+fn b3_targets(t: &Tuning, fails: &mut Vec<String>) {
     for (name, plant) in PLANTS {
-        let tr = surface_step(plant, 0.001);
+        let tr = surface_step(t, plant, 0.001);
         let settle = tr.settle(3.0, 10.0);
         let (_, lost) = tr.contact_losses(3.0, 10.0);
         show("B3", name, "retreat 1 mm settle s", settle, "<= 0.5");
@@ -144,7 +162,7 @@ fn b3_surface_steps() {
         check!(fails, settle <= 0.5, "{name} retreat: settle {settle} s");
         check!(fails, lost <= 0.05, "{name} retreat: contact lost {lost} s");
 
-        let tr = surface_step(plant, -0.0005);
+        let tr = surface_step(t, plant, -0.0005);
         let settle = tr.settle(3.0, 10.0);
         show("B3", name, "advance 0.5 mm settle s", settle, "<= 0.5");
         show(
@@ -156,13 +174,17 @@ fn b3_surface_steps() {
         );
         check!(fails, settle <= 0.5, "{name} advance: settle {settle} s");
     }
-    verdict(fails);
 }
 
 // ---------------------------------------------------------------- B4
 #[test]
 fn b4_incline() {
     let mut fails: Vec<String> = Vec::new();
+    b4_targets(&robust(), &mut fails);
+    verdict(fails);
+}
+
+fn b4_targets(t: &Tuning, fails: &mut Vec<String>) {
     for (name, plant) in PLANTS {
         for rate in [0.002, -0.002] {
             let mut cell = Cell::nominal(plant, 6.0);
@@ -171,7 +193,7 @@ fn b4_incline() {
                 end: None,
                 rate,
             });
-            let tr = run_tuning(&robust(), &cell);
+            let tr = run_tuning(t, &cell);
             let rms = tr.rms_error(2.5, 6.0);
             let max = tr.max_error(2.5, 6.0);
             let (losses, _) = tr.contact_losses(1.0, 6.0);
@@ -194,13 +216,17 @@ fn b4_incline() {
             check!(fails, losses == 0, "{name} {rate}: contact lost");
         }
     }
-    verdict(fails);
 }
 
 // ---------------------------------------------------------------- B5
 #[test]
 fn b5_curved_surface() {
     let mut fails: Vec<String> = Vec::new();
+    b5_targets(&robust(), &mut fails);
+    verdict(fails);
+}
+
+fn b5_targets(t: &Tuning, fails: &mut Vec<String>) {
     for (name, plant) in PLANTS {
         for (amp, freq, target) in [(0.0005, 0.5, 0.25), (0.001, 1.0, 1.0)] {
             let mut cell = Cell::nominal(plant, 8.0);
@@ -209,7 +235,7 @@ fn b5_curved_surface() {
                 amplitude: amp,
                 frequency: freq,
             });
-            let tr = run_tuning(&robust(), &cell);
+            let tr = run_tuning(t, &cell);
             let rms = tr.rms_error(3.0, 8.0);
             show(
                 "B5",
@@ -221,7 +247,6 @@ fn b5_curved_surface() {
             check!(fails, rms <= target, "{name} {freq} Hz: rms {rms} N");
         }
     }
-    verdict(fails);
 }
 
 // ---------------------------------------------------------------- B7
@@ -236,6 +261,11 @@ fn with_delay(delay: f64) -> InnerLoopModel {
 #[test]
 fn b7_delay_sweep() {
     let mut fails: Vec<String> = Vec::new();
+    b7_targets(&robust(), &mut fails);
+    verdict(fails);
+}
+
+fn b7_targets(t: &Tuning, fails: &mut Vec<String>) {
     for delay in [0.0, 0.004, 0.008, 0.016, 0.024, 0.032, 0.048] {
         let mut cell = Cell::nominal(with_delay(delay), 4.0);
         // A stiffness step as well, so the loop is exercised in contact and not only at the approach.
@@ -243,7 +273,7 @@ fn b7_delay_sweep() {
             at: 2.5,
             factor: 2.0,
         });
-        let tr = run_tuning(&robust(), &cell);
+        let tr = run_tuning(t, &cell);
         let t0 = tr.first_contact();
         let overshoot = ((tr.peak(0.0, 2.4) - 5.0) / 5.0 * 100.0).max(0.0);
         let settle = tr.settle(0.0, 2.4);
@@ -276,20 +306,23 @@ fn b7_delay_sweep() {
             );
         }
     }
-    verdict(fails);
 }
 
 // ---------------------------------------------------------------- B8
 #[test]
 fn b8_identification() {
     let mut fails: Vec<String> = Vec::new();
-    let t = robust();
+    b8_targets(&robust(), &mut fails);
+    verdict(fails);
+}
+
+fn b8_targets(t: &Tuning, fails: &mut Vec<String>) {
     let controller::LawConfig::Robust(p) = &t.law else {
         panic!("robust tuning is robust")
     };
     let bounds = (p.estimator.kc_min, p.estimator.kc_max);
     for (name, plant) in PLANTS {
-        // The workpiece is 2.3 times stiffer than the tuning's initial guess; two surface transients (0.05 mm
+        // The workpiece is 3.2 times stiffer than the tuning's initial guess (50 kN/m); two surface transients (0.05 mm
         // towards the tool and back, 8 N each) follow the approach, all within 2 s of first contact.
         let k = 160_000.0;
         let mut cell = Cell::nominal(plant, 4.0);
@@ -303,7 +336,7 @@ fn b8_identification() {
                 at: 1.8,
                 delta: 0.00005,
             });
-        let tr = run_tuning(&t, &cell);
+        let tr = run_tuning(t, &cell);
         let t0 = tr.first_contact();
         let kc = tr.at(t0 + 2.0).kc_hat;
         let rel = (kc - k).abs() / k;
@@ -318,13 +351,17 @@ fn b8_identification() {
             );
         }
     }
-    verdict(fails);
 }
 
 // ---------------------------------------------------------------- B6 (long)
 #[test]
 fn b6_noise_and_drift_ten_minutes() {
     let mut fails: Vec<String> = Vec::new();
+    b6_targets(&robust(), &mut fails);
+    verdict(fails);
+}
+
+fn b6_targets(t: &Tuning, fails: &mut Vec<String>) {
     for (name, plant) in PLANTS {
         let mut cell = Cell::nominal(plant, 600.0);
         cell.sensor = SensorParams {
@@ -333,7 +370,7 @@ fn b6_noise_and_drift_ten_minutes() {
             seed: 6,
             ..SensorParams::default()
         };
-        let tr = run_tuning(&robust(), &cell);
+        let tr = run_tuning(t, &cell);
         let (std, slope) = tr.force_std_detrended(5.0, 600.0);
         let raw_std = tr.force_std(5.0, 600.0);
         let end = tr.at(599.0);
@@ -365,13 +402,17 @@ fn b6_noise_and_drift_ten_minutes() {
         check!(fails, kc_rel <= 0.05, "{name}: k̂ off by {kc_rel}");
         check!(fails, xc_dev <= 2e-4, "{name}: x̂_c off by {xc_dev} m");
     }
-    verdict(fails);
 }
 
 // ---------------------------------------------------------------- B9
 #[test]
 fn b9_faults_nan_dropout() {
     let mut fails: Vec<String> = Vec::new();
+    b9_targets(&robust(), &mut fails);
+    verdict(fails);
+}
+
+fn b9_targets(t: &Tuning, fails: &mut Vec<String>) {
     for (name, plant) in PLANTS {
         let mut cell = Cell::nominal(plant, 4.0);
         cell.sensor = SensorParams {
@@ -382,10 +423,9 @@ fn b9_faults_nan_dropout() {
             }],
             ..SensorParams::default()
         };
-        let tr = run_tuning(&robust(), &cell);
+        let tr = run_tuning(t, &cell);
         assert!(tr.commands_finite(), "{name}: NaN reached the command");
         let step = tr.max_command_step();
-        let t = robust();
         let controller::LawConfig::Robust(p) = &t.law else {
             panic!()
         };
@@ -403,5 +443,89 @@ fn b9_faults_nan_dropout() {
         check!(fails, err <= 1.0, "{name}: error {err} N");
         assert!(tr.stats.sensor_faults >= 1 && tr.stats.nonfinite_inputs == 1);
     }
+}
+
+// ---------------------------------------------------------------- initial stiffness estimate
+/// The shipped tuning with another initial stiffness estimate `k̂_c(0)`, N/m.
+fn with_kc0(kc0: f64) -> Tuning {
+    let mut t = robust();
+    let controller::LawConfig::Robust(p) = &mut t.law else {
+        panic!("robust tuning is robust")
+    };
+    p.estimator.kc0 = kc0;
+    t
+}
+
+/// Every B target of one tuning, each failure labelled with `label`.
+fn every_target(t: &Tuning, label: &str) -> Vec<String> {
+    let mut fails: Vec<String> = Vec::new();
+    b1_targets(t, &mut fails);
+    b2_targets(t, &mut fails);
+    b2_range_targets(t, &mut fails);
+    b3_targets(t, &mut fails);
+    b4_targets(t, &mut fails);
+    b5_targets(t, &mut fails);
+    b6_targets(t, &mut fails);
+    b7_targets(t, &mut fails);
+    b8_targets(t, &mut fails);
+    b9_targets(t, &mut fails);
+    fails.into_iter().map(|f| format!("{label}: {f}")).collect()
+}
+
+/// The paper starts its estimate 29 % low (50 kN/m against 70): the targets must not depend on the
+/// tuning's guess being the scenarios' true stiffness.
+#[test]
+fn every_target_with_the_initial_stiffness_29_pct_low() {
+    verdict(every_target(&with_kc0(50_000.0), "k̂(0) 50 kN/m"));
+}
+
+/// … nor on a guess 43 % high, and the true value.
+#[test]
+fn every_target_with_the_initial_stiffness_43_pct_high_or_exact() {
+    let mut fails = every_target(&with_kc0(100_000.0), "k̂(0) 100 kN/m");
+    fails.extend(every_target(&with_kc0(70_000.0), "k̂(0) 70 kN/m"));
+    verdict(fails);
+}
+
+/// B6's stiffness target is not one lucky noise sequence: eight sensor seeds, both plants, the shipped
+/// tuning.
+#[test]
+fn b6_stiffness_over_sensor_seeds() {
+    let mut fails: Vec<String> = Vec::new();
+    for (name, plant) in PLANTS {
+        for seed in 1..=8 {
+            let mut cell = Cell::nominal(plant, 600.0);
+            cell.sensor = SensorParams {
+                noise: 0.5,
+                drift_per_min: 0.5,
+                seed,
+                ..SensorParams::default()
+            };
+            let tr = run_tuning(&robust(), &cell);
+            let (std, _) = tr.force_std_detrended(5.0, 600.0);
+            let kc_rel = (tr.at(599.0).kc_hat - 70_000.0).abs() / 70_000.0;
+            show(
+                "B6",
+                name,
+                &format!("seed {seed} |k̂−k|/k"),
+                kc_rel,
+                "<= 0.05",
+            );
+            check!(fails, std <= 0.1, "{name} seed {seed}: std {std} N");
+            check!(
+                fails,
+                kc_rel <= 0.05,
+                "{name} seed {seed}: k̂ off by {kc_rel}"
+            );
+        }
+    }
+    verdict(fails);
+}
+
+/// … and far off: 57 % low, 186 % high.
+#[test]
+fn every_target_with_the_initial_stiffness_far_off() {
+    let mut fails = every_target(&with_kc0(30_000.0), "k̂(0) 30 kN/m");
+    fails.extend(every_target(&with_kc0(200_000.0), "k̂(0) 200 kN/m"));
     verdict(fails);
 }
