@@ -48,7 +48,7 @@ use hal::{ForceSensor, RobotLink, UnitQuaternion, Vector3};
 use kuka_rsi::{CorrectionMode, EthernetConfig, Limits, LinkConfig, PoscorrLimits, RobotFilter};
 use serde::Deserialize;
 
-use crate::record::{Row, fault_code};
+use crate::record::Row;
 use crate::scenario::load_tuning;
 
 /// The robot side of a cell.
@@ -375,20 +375,7 @@ where
         }
         match lp.cycle() {
             Ok(r) => {
-                rows.push(Row {
-                    t: r.cycle.t,
-                    f: r.f.unwrap_or(f64::NAN),
-                    f_true: f64::NAN,
-                    f_r,
-                    x: r.x,
-                    x_cmd: r.command.translation.z,
-                    x_r: r.out.x_r,
-                    kc_hat: r.out.kc_hat,
-                    xc_hat: r.out.xc_hat,
-                    k_c: f64::NAN,
-                    x_c: f64::NAN,
-                    fault: fault_code(r.fault),
-                });
+                rows.push(Row::from_report(&r, f_r));
                 if cfg.duration.is_some_and(|d| r.cycle.t >= d) {
                     break format!("{} s of robot time done", r.cycle.t);
                 }

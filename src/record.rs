@@ -34,6 +34,27 @@ pub struct Row {
     pub fault: u8,
 }
 
+impl Row {
+    /// The row of an answered cycle with set-point `f_r`; the truth columns (`f_true`, `k_c`, `x_c`) are
+    /// NaN until a simulation fills them in.
+    pub fn from_report(r: &controller::CycleReport, f_r: f64) -> Self {
+        Self {
+            t: r.cycle.t,
+            f: r.f.unwrap_or(f64::NAN),
+            f_true: f64::NAN,
+            f_r,
+            x: r.x,
+            x_cmd: r.command.translation.z,
+            x_r: r.out.x_r,
+            kc_hat: r.out.kc_hat,
+            xc_hat: r.out.xc_hat,
+            k_c: f64::NAN,
+            x_c: f64::NAN,
+            fault: fault_code(r.fault),
+        }
+    }
+}
+
 /// The CSV header, in column order.
 pub const HEADER: &str = "t,f,f_true,f_r,x,x_cmd,x_r,kc_hat,xc_hat,k_c,x_c,fault";
 

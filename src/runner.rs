@@ -9,7 +9,7 @@ use hal::{ForceSensor, RobotLink};
 use sim::{InProcRobot, InProcSensor, InnerLoopModel, SharedWorld, World};
 
 use crate::metrics::Metrics;
-use crate::record::{Row, fault_code};
+use crate::record::Row;
 use crate::scenario::{PlantSpec, Scenario, Target, load_tuning};
 
 /// A scenario with its plant and tuning resolved.
@@ -153,20 +153,7 @@ where
     let every = (steps / 200).max(1);
     for k in 0..steps {
         match lp.cycle() {
-            Ok(r) => rows.push(Row {
-                t: r.cycle.t,
-                f: r.f.unwrap_or(f64::NAN),
-                f_true: f64::NAN,
-                f_r,
-                x: r.x,
-                x_cmd: r.command.translation.z,
-                x_r: r.out.x_r,
-                kc_hat: r.out.kc_hat,
-                xc_hat: r.out.xc_hat,
-                k_c: f64::NAN,
-                x_c: f64::NAN,
-                fault: fault_code(r.fault),
-            }),
+            Ok(r) => rows.push(Row::from_report(&r, f_r)),
             Err(e) => {
                 ended_early = Some(describe(&e));
                 break;

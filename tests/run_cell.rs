@@ -6,9 +6,9 @@ use std::sync::atomic::AtomicBool;
 use std::thread;
 use std::time::Duration;
 
-use forcecell::cell::{CellConfig, run_cell};
+use forcecell::cell::{CellConfig, CellOutcome, run_cell};
 use kuka_rsi::{EthernetConfig, RsiLink};
-use sim::krc::{Krc, KrcConfig, KrcEnd, Timing};
+use sim::krc::{Krc, KrcConfig, KrcEnd, KrcReport, Timing};
 use sim::{ContactPlant, InProcSensor, InnerLoopModel, SensorParams, SharedWorld, World};
 
 const CELL: &str = r#"
@@ -24,8 +24,10 @@ kind = "ati"
 can = "vcan0"
 "#;
 
-#[test]
-fn a_cell_file_runs_the_loop_over_rsi_and_ends_with_stop() {
+/// The cell of `CELL` against the simulated KUKA controller in lockstep on loopback, on a world whose
+/// tool starts on its programmed path (correction 0, as at a real `RSI_ON`) with the surface 1 mm below.
+/// The controller sends at most `cycles` datagrams, so a missing `Stop` fails the test instead of hanging it.
+fn run_against_sim_krc(cycles: u64, stop: bool) -> (CellOutcome, KrcReport, SharedWorld) {
     let cfg = CellConfig::from_toml(CELL, "cell.toml").unwrap();
     let tuning = cfg.tuning().unwrap();
     let lc = cfg.link_config(&tuning).unwrap();
@@ -33,8 +35,6 @@ fn a_cell_file_runs_the_loop_over_rsi_and_ends_with_stop() {
     assert!(lc.limits.max_translation <= 0.0045 + 1e-12);
     let link = RsiLink::bind(lc).unwrap();
     let addr = link.local_addr().unwrap();
-
-    // A real cell starts on its programmed path (correction 0); the surface lies 1 mm below it.
     let world: SharedWorld = World::new(
         ContactPlant::spring(70_000.0, 0.001),
         InnerLoopModel::P2,
@@ -49,15 +49,18 @@ fn a_cell_file_runs_the_loop_over_rsi_and_ends_with_stop() {
     kc.timing = Timing::Lockstep {
         deadline: Duration::from_millis(500),
     };
-    kc.cycles = Some(2_000); // a bound in case no Stop comes: the test would then fail, not hang
+    kc.cycles = Some(cycles);
     let mut krc = Krc::new(kc).unwrap();
     let mut mech = world.clone();
     let robot = thread::spawn(move || krc.run(&mut mech));
+    let flag = AtomicBool::new(stop);
+    let out = run_cell(&cfg, &tuning, link, InProcSensor::new(world.clone()), &flag).unwrap();
+    (out, robot.join().unwrap(), world)
+}
 
-    let stop = AtomicBool::new(false);
-    let out = run_cell(&cfg, &tuning, link, InProcSensor::new(world.clone()), &stop).unwrap();
-    let report = robot.join().unwrap();
-
+#[test]
+fn a_cell_file_runs_the_loop_over_rsi_and_ends_with_stop() {
+    let (out, report, world) = run_against_sim_krc(2_000, false);
     assert!(out.stopped, "{}", out.ended);
     assert_eq!(
         report.end,
@@ -78,35 +81,9 @@ fn a_cell_file_runs_the_loop_over_rsi_and_ends_with_stop() {
 
 #[test]
 fn a_set_stop_flag_ends_the_run_with_stop_before_any_control() {
-    let cfg = CellConfig::from_toml(CELL, "cell.toml").unwrap();
-    let tuning = cfg.tuning().unwrap();
-    let link = RsiLink::bind(cfg.link_config(&tuning).unwrap()).unwrap();
-    let addr = link.local_addr().unwrap();
-    let world = World::new(
-        ContactPlant::spring(70_000.0, 0.001),
-        InnerLoopModel::P2,
-        SensorParams::default(),
-        0.0,
-    )
-    .shared();
-    let mut kc = KrcConfig::new(
-        EthernetConfig::forcecell([127, 0, 0, 1].into(), addr.port(), false),
-        addr,
-    );
-    kc.cycles = Some(100);
-    let mut krc = Krc::new(kc).unwrap();
-    let mut mech = world.clone();
-    let robot = thread::spawn(move || krc.run(&mut mech));
-    let out = run_cell(
-        &cfg,
-        &tuning,
-        link,
-        InProcSensor::new(world),
-        &AtomicBool::new(true),
-    )
-    .unwrap();
+    let (out, report, _) = run_against_sim_krc(100, true);
     assert!(out.stopped && out.rows.is_empty(), "{out:?}");
-    assert_eq!(robot.join().unwrap().end, KrcEnd::Stopped);
+    assert_eq!(report.end, KrcEnd::Stopped);
 }
 
 #[test]
