@@ -399,20 +399,20 @@ where
     })
 }
 
-/// `forcecell run --config FILE`: bind the robot link, start the sensor, run, record, plot.
-pub fn run(path: &Path) -> Result<()> {
-    let cfg = CellConfig::load(path)?;
-    let tuning = cfg.tuning()?;
-    let link_cfg = cfg.link_config(&tuning)?;
-    std::fs::create_dir_all(&cfg.record)
-        .with_context(|| format!("cannot create {}", cfg.record.display()))?;
+/// Start the configured sensor (optionally taking a bias) and bind the robot link.
+fn open_devices(
+    cfg: &CellConfig,
+    tuning: &Tuning,
+    tare: bool,
+) -> Result<(kuka_rsi::RsiLink, ati_can::AtiSensor)> {
+    let link_cfg = cfg.link_config(tuning)?;
     let SensorConfig::Ati {
         can,
         base,
         bitrate,
         slot,
         poll_hz,
-        tare,
+        ..
     } = &cfg.sensor;
     let base = ati_can::Base::new(*base)
         .ok_or_else(|| anyhow!("sensor.base must be 0..=0x7F, got {base:#x}"))?;
@@ -428,12 +428,23 @@ pub fn run(path: &Path) -> Result<()> {
         .start()
         .with_context(|| format!("ATI sensor at base {base} on {can}"))?;
     println!("sensor: {info:?}");
-    if *tare {
+    if tare {
         let bias = driver.tare(crate::ati::bias_config())?;
         println!("bias taken (counts): {bias:.1?}");
     }
     let sensor = ati_can::AtiSensor::spawn(driver, *poll_hz)?;
     let link = kuka_rsi::RsiLink::bind(link_cfg).context("RSI link")?;
+    Ok((link, sensor))
+}
+
+/// `forcecell run --config FILE`: bind the robot link, start the sensor, run, record, plot.
+pub fn run(path: &Path) -> Result<()> {
+    let cfg = CellConfig::load(path)?;
+    let tuning = cfg.tuning()?;
+    std::fs::create_dir_all(&cfg.record)
+        .with_context(|| format!("cannot create {}", cfg.record.display()))?;
+    let SensorConfig::Ati { tare, .. } = cfg.sensor;
+    let (link, sensor) = open_devices(&cfg, &tuning, tare)?;
     println!(
         "listening on {} for the robot at {} ({} ms cycle, tuning {}); start RSI on the robot now, Ctrl-C ends with a clean Stop",
         cfg.robot.listen, cfg.robot.robot_ip, cfg.robot.cycle_ms, tuning.name
@@ -456,6 +467,60 @@ pub fn run(path: &Path) -> Result<()> {
         }
     );
     write_recording(&cfg.record, &out.rows)
+}
+
+/// `forcecell calibrate --config FILE --poses N`: while the robot's program holds the tool still in free
+/// air in N orientations (answered with zero corrections), fit the tool model and print the `[gravity]`
+/// section for the cell file.
+pub fn calibrate(path: &Path, poses: usize) -> Result<()> {
+    if !(3..=64).contains(&poses) {
+        bail!("--poses must be 3..=64 (the fit needs at least 3 orientations), got {poses}");
+    }
+    let cfg = CellConfig::load(path)?;
+    let tuning = cfg.tuning()?;
+    let (mut link, mut sensor) = open_devices(&cfg, &tuning, false)?;
+    let mount = cfg
+        .gravity
+        .as_ref()
+        .map_or(UnitQuaternion::identity(), |g| {
+            UnitQuaternion::from_scaled_axis(Vector3::from(g.mount_rotation))
+        });
+    println!(
+        "listening on {} for the robot at {}: run a program that holds the tool still (≥ 0.5 s, in free air) in {poses} orientations at least 10° apart, turning about two axes",
+        cfg.robot.listen, cfg.robot.robot_ip
+    );
+    let c = controller::calibration::calibrate(
+        &mut link,
+        &mut sensor,
+        mount,
+        poses,
+        controller::calibration::CollectorConfig::default(),
+        &mut |n| println!("pose {n} of {poses}"),
+    )
+    .map_err(|e| anyhow!("{e}"))?;
+    let m = c.model;
+    println!(
+        "fitted over {} poses: mass {:.4} kg, worst force residual {:.3} N\n",
+        c.poses.len(),
+        m.mass(),
+        c.worst_force_residual
+    );
+    print!("{}", gravity_section(&m, mount));
+    Ok(())
+}
+
+/// The `[gravity]` section of a cell file for a fitted model.
+pub fn gravity_section(m: &GravityModel, mount: UnitQuaternion<f64>) -> String {
+    let v = |a: &Vector3<f64>| format!("[{:.6}, {:.6}, {:.6}]", a.x, a.y, a.z);
+    format!(
+        "[gravity]\nsigned_mass = {:.6}\nmass_moment = {}\nforce_bias = {}\ntorque_bias = {}\nmount_rotation = {}\nmax_age = {}\n",
+        m.signed_mass,
+        v(&m.mass_moment),
+        v(&m.force_bias),
+        v(&m.torque_bias),
+        v(&mount.scaled_axis()),
+        default_max_age()
+    )
 }
 
 fn write_recording(dir: &Path, rows: &[Row]) -> Result<()> {

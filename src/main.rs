@@ -27,6 +27,8 @@ struct Cli {
 enum Command {
     /// Run the controller on a real cell from a config file (KUKA RSI + ATI CAN): record and plot.
     Run(RunArgs),
+    /// Fit the tool's weight and the sensor bias from static poses the robot holds (for the cell file's [gravity]).
+    Calibrate(CalibrateArgs),
     /// Simulate a cell: run a scenario, print a summary, write DIR/NAME.csv and DIR/NAME.png.
     Sim(SimArgs),
     /// Write the robot-side KUKA RSI files (Ethernet config XML, KRL template) for this configuration.
@@ -159,6 +161,16 @@ struct RunArgs {
 }
 
 #[derive(Args)]
+struct CalibrateArgs {
+    /// The cell configuration (TOML), as for `run`.
+    #[arg(long, short)]
+    config: PathBuf,
+    /// Static orientations to collect.
+    #[arg(long, default_value_t = 8)]
+    poses: usize,
+}
+
+#[derive(Args)]
 struct PlotArgs {
     /// The trace, CSV.
     csv: PathBuf,
@@ -210,6 +222,9 @@ fn main() -> ExitCode {
         }),
         Command::Plot(a) => plot_trace(a),
         Command::Run(a) => forcecell::cell::run(&a.config).map(|()| ExitCode::SUCCESS),
+        Command::Calibrate(a) => {
+            forcecell::cell::calibrate(&a.config, a.poses).map(|()| ExitCode::SUCCESS)
+        }
         Command::Tune(a) => tune(a),
         Command::BenchScenarios(a) => bench_scenarios(a),
         Command::SimSensor(a) => forcecell::ati::sim_sensor(

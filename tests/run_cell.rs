@@ -148,3 +148,41 @@ fn the_example_cell_file_is_valid() {
     assert!(cfg.gravity.is_some());
     assert!((cfg.compensator().model.mass() - 2.0).abs() < 1e-12);
 }
+
+#[test]
+fn the_printed_gravity_section_reads_back_as_the_same_model() {
+    use controller::gravity::GravityModel;
+    use hal::{UnitQuaternion, Vector3};
+    let m = GravityModel {
+        signed_mass: -1.75,
+        mass_moment: Vector3::new(0.001, -0.002, 0.14),
+        force_bias: Vector3::new(0.5, -1.25, 3.0),
+        torque_bias: Vector3::new(0.01, 0.0, -0.02),
+    };
+    let mount = UnitQuaternion::from_euler_angles(0.0, 0.0, 0.5);
+    let text = format!("{CELL}\n{}", forcecell::cell::gravity_section(&m, mount));
+    let cfg = CellConfig::from_toml(&text, "cell.toml").unwrap();
+    let c = cfg.compensator();
+    assert!((c.model.signed_mass - m.signed_mass).abs() < 1e-6);
+    assert!((c.model.mass_moment - m.mass_moment).norm() < 1e-6);
+    assert!((c.model.force_bias - m.force_bias).norm() < 1e-6);
+    assert!(c.mount.angle_to(&mount) < 1e-6);
+}
+
+#[test]
+fn calibrate_refuses_too_few_poses_before_touching_any_device() {
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_forcecell"))
+        .args([
+            "calibrate",
+            "--config",
+            "examples/cell.toml",
+            "--poses",
+            "2",
+        ])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("--poses must be 3..=64"), "{err}");
+}

@@ -11,6 +11,7 @@
 //! * [`gravity`] — tool weight and sensor bias: least-squares identification and run-time compensation.
 #![cfg_attr(not(test), warn(missing_docs))]
 
+pub mod calibration;
 pub mod compensated;
 pub mod conditioning;
 pub mod config;
