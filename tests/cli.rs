@@ -173,3 +173,36 @@ fn plot_replots_a_recording_and_refuses_garbage() {
     let o = forcecell(&["plot", "junk.csv"], dir.path());
     assert_clean_failure(&o, "not a forcecell trace");
 }
+
+#[test]
+fn bench_scenarios_prints_one_table_and_writes_the_plots() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = forcecell(
+        &["bench-scenarios", "b01", "b09", "--out", "b", "--check"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let s = String::from_utf8_lossy(&o.stdout);
+    for needle in [
+        "b01-approach",
+        "b09-faults",
+        "robust",
+        "paper",
+        "FAIL",
+        "pass",
+    ] {
+        assert!(s.contains(needle), "{needle} missing: {s}");
+    }
+    // Two scenarios × two plants × two tunings.
+    let pngs = std::fs::read_dir(dir.path().join("b"))
+        .unwrap()
+        .filter(|e| {
+            e.as_ref()
+                .unwrap()
+                .path()
+                .extension()
+                .is_some_and(|x| x == "png")
+        })
+        .count();
+    assert_eq!(pngs, 8);
+}
