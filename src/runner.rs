@@ -4,7 +4,7 @@
 use std::time::{Duration, Instant};
 
 use anyhow::{Result, anyhow};
-use controller::{ControlLoop, EventCounts, ForceLaw, LoopError, LoopStats, Tuning};
+use controller::{ControlLoop, EventCounts, ForceLaw, LoopStats, Tuning};
 use hal::{ForceSensor, RobotLink};
 use sim::{InProcRobot, InProcSensor, InnerLoopModel, SharedWorld, World};
 
@@ -155,7 +155,7 @@ where
         match lp.cycle() {
             Ok(r) => rows.push(Row::from_report(&r, f_r)),
             Err(e) => {
-                ended_early = Some(describe(&e));
+                ended_early = Some(e.to_string());
                 break;
             }
         }
@@ -189,10 +189,6 @@ where
         wall,
         ended_early,
     })
-}
-
-fn describe<RE: std::fmt::Display, SE: std::fmt::Display>(e: &LoopError<RE, SE>) -> String {
-    e.to_string()
 }
 
 /// Run with the in-process robot and sensor (no wire).

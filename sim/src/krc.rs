@@ -641,16 +641,7 @@ impl Run {
             k.sock.set_read_timeout(Some(deadline - now))?;
             let (len, from) = match k.sock.recv_from(&mut self.rx_buf) {
                 Ok(r) => r,
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        io::ErrorKind::WouldBlock
-                            | io::ErrorKind::TimedOut
-                            | io::ErrorKind::Interrupted
-                            | io::ErrorKind::ConnectionRefused
-                            | io::ErrorKind::ConnectionReset
-                    ) =>
-                {
+                Err(e) if kuka_rsi::link::is_transient(&e) => {
                     continue;
                 }
                 Err(e) => return Err(e),

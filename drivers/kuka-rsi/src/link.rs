@@ -536,7 +536,9 @@ fn pose(v: [f64; 6]) -> Pose {
     wire::pose_from_wire(v)
 }
 
-fn is_transient(e: &io::Error) -> bool {
+/// A UDP receive error that only means "nothing usable arrived yet" (timeout, signal, or an ICMP
+/// port-unreachable echoed back by the kernel); shared with the simulated controller.
+pub fn is_transient(e: &io::Error) -> bool {
     matches!(
         e.kind(),
         io::ErrorKind::WouldBlock

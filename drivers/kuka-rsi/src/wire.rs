@@ -18,10 +18,10 @@ pub fn pose_from_wire(v: [f64; 6]) -> Pose {
     }
 }
 
-/// A pose in m → `[X, Y, Z, A, B, C]` in mm and degrees.
-pub fn pose_to_wire(p: &Pose) -> [f64; 6] {
-    let (c, b, a) = p.orientation.euler_angles();
-    let x = p.position * MM_PER_M;
+/// Translation in m and orientation → `[X, Y, Z, A, B, C]` in mm and degrees (A about Z, B about Y, C about X).
+fn to_wire(translation: &Vector3<f64>, orientation: &UnitQuaternion<f64>) -> [f64; 6] {
+    let (c, b, a) = orientation.euler_angles();
+    let x = translation * MM_PER_M;
     [
         x.x,
         x.y,
@@ -32,18 +32,14 @@ pub fn pose_to_wire(p: &Pose) -> [f64; 6] {
     ]
 }
 
+/// A pose in m → `[X, Y, Z, A, B, C]` in mm and degrees.
+pub fn pose_to_wire(p: &Pose) -> [f64; 6] {
+    to_wire(&p.position, &p.orientation)
+}
+
 /// A correction offset (translation m, rotation vector rad) → `[X, Y, Z, A, B, C]` in mm and degrees.
 pub fn offset_to_wire(translation: &Vector3<f64>, rotation: &Vector3<f64>) -> [f64; 6] {
-    let (c, b, a) = UnitQuaternion::from_scaled_axis(*rotation).euler_angles();
-    let x = translation * MM_PER_M;
-    [
-        x.x,
-        x.y,
-        x.z,
-        a.to_degrees(),
-        b.to_degrees(),
-        c.to_degrees(),
-    ]
+    to_wire(translation, &UnitQuaternion::from_scaled_axis(*rotation))
 }
 
 /// `[X, Y, Z, A, B, C]` in mm and degrees → a correction offset (translation m, rotation vector rad).
