@@ -23,5 +23,5 @@ cargo clippy --workspace --all-targets --release -- -D warnings
 step "cargo test (unit, integration, loopback UDP, in-memory CAN; release build: closed-loop simulations are long)"
 cargo test --workspace --release
 
-step "real-vcan tests (ATI CAN driver; native vcan0 or User-Mode Linux)"
+step "real-vcan tests (ATI CAN driver; native vcan0, else User-Mode Linux, else QEMU)"
 bash scripts/vcan-tests.sh

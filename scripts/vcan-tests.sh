@@ -1,21 +1,37 @@
 #!/usr/bin/env bash
-# Runs the ATI CAN driver's integration tests on a real SocketCAN interface (vcan0):
-# natively when this kernel has CAN support, otherwise inside User-Mode Linux (see
-# shared/specs/vcan-in-uml.md). The test binary is built on the host and run in the guest via hostfs.
+# Runs the ATI CAN driver's integration tests on a real SocketCAN interface (vcan0). It picks the first
+# of these that works on this machine, and says which it picked and why:
+#   1. native  - this kernel has CAN (a developer's Linux box): vcan0 on the host;
+#   2. uml     - User-Mode Linux (shared/specs/vcan-in-uml.md), only after a short boot probe shows that
+#                its init runs (it cannot on a CPU with AMX: "ptrace set fp regs failed");
+#   3. qemu    - Debian's own kernel under QEMU's software emulation (shared/specs/vcan-in-qemu.md), the
+#                host's root filesystem shared over virtio-9p. The kernel is unpacked from its .deb into
+#                target/vcan-qemu/ (never installed into /boot) and the initramfs is built there from
+#                busybox-static, both cached. KVM is not used: /dev/kvm exists on the build machines but
+#                hangs there, and software emulation needs no probe.
+# The test binaries are built on the host and run unchanged in the guest, which sees the host's files.
 #
-# Usage: scripts/vcan-tests.sh            (auto: native if possible, else UML)
-#        FORCECELL_VCAN_MODE=uml|native scripts/vcan-tests.sh
-# Exits non-zero, with a message that says why, when a prerequisite is missing or any test fails.
+# Usage: scripts/vcan-tests.sh                         (auto: native, else UML, else QEMU)
+#        FORCECELL_VCAN_MODE=native|uml|qemu scripts/vcan-tests.sh   (force one; fails if it cannot run)
+# Prerequisites are installed with apt-get when missing. Exits non-zero, with the guest's output, when a
+# prerequisite is missing, the guest does not boot or finish, or any test fails. Never a silent skip.
 set -euo pipefail
 
 cd "$(dirname "$0")/.."
 root=$PWD
 mode=${FORCECELL_VCAN_MODE:-auto}
+case "$mode" in auto | native | uml | qemu) ;; *)
+  echo "vcan-tests: FORCECELL_VCAN_MODE must be native, uml or qemu (or unset for auto), not '$mode'" >&2
+  exit 2
+  ;;
+esac
+started=$SECONDS
 
 die() {
   echo "vcan-tests: $*" >&2
   exit 1
 }
+say() { echo "vcan-tests: $*"; }
 
 as_root() {
   if [ "$(id -u)" -eq 0 ]; then "$@"; elif command -v sudo >/dev/null; then sudo "$@"; else
@@ -23,27 +39,33 @@ as_root() {
   fi
 }
 
-# ---- prerequisites ---------------------------------------------------------------------------
-missing=()
-command -v candump >/dev/null || missing+=(can-utils)
-command -v ip >/dev/null || missing+=(iproute2)
-if [ "$mode" != native ]; then
-  command -v linux.uml >/dev/null || missing+=(user-mode-linux)
-  # The guest loads the CAN modules with insmod (kmod), from the host's root filesystem.
-  [ -x /usr/sbin/insmod ] || [ -x /sbin/insmod ] || missing+=(kmod)
-fi
-if ((${#missing[@]})); then
-  command -v apt-get >/dev/null || die "missing ${missing[*]} and no apt-get to install them"
-  echo "vcan-tests: installing ${missing[*]}"
+apt_updated=0
+apt_update() {
+  [ "$apt_updated" = 1 ] && return 0
   as_root apt-get update -qq || die "apt-get update failed"
-  as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null ||
-    die "apt-get install ${missing[*]} failed"
-fi
+  apt_updated=1
+}
+
+# install PACKAGE... : installs the Debian packages that are not installed yet.
+install() {
+  local missing=() p
+  for p in "$@"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || missing+=("$p")
+  done
+  ((${#missing[@]})) || return 0
+  command -v apt-get >/dev/null || die "missing ${missing[*]} and no apt-get to install them"
+  say "installing ${missing[*]}"
+  apt_update
+  as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}" \
+    >/dev/null || die "apt-get install ${missing[*]} failed"
+}
+
+install can-utils iproute2 kmod
 
 # ---- build on the host -----------------------------------------------------------------------
 # The driver-vs-node scenarios and can-utils interop (sim/tests/ati_vcan.rs) and the CLI's ATI commands
 # (tests/ati_cli_vcan.rs). Their vcan tests are #[ignore]d in a plain `cargo test`.
-echo "vcan-tests: building the test binaries"
+say "building the test binaries"
 # Release profile: scripts/test.sh has just built it, so this reuses its artifacts.
 build_test() { # package test-name -> path of the test executable
   cargo test --release -p "$1" --test "$2" --no-run --message-format=json 2>/dev/null |
@@ -60,7 +82,53 @@ for spec in forcecell-sim:ati_vcan forcecell:ati_cli_vcan; do
 done
 test_args=(--ignored --test-threads=1)
 
-# ---- native ----------------------------------------------------------------------------------
+mkdir -p "$root/target"
+work=$(mktemp -d "$root/target/vcan-run.XXXXXX")
+trap '[ -n "${KEEP_VCAN_WORK:-}" ] || rm -rf "$work"' EXIT
+status_file=$work/status
+output_file=$work/output
+
+# The guest's test run, written for a POSIX shell with the host's tools on PATH. $1: what to run before
+# the tests (load the CAN modules), $2: the deadline scale for the tests, $3: how to power off.
+write_guest_tests() {
+  cat <<EOF
+PATH=/sbin:/usr/sbin:/bin:/usr/bin
+export PATH
+fail() { echo "\$*" >>"$output_file"; echo 97 >"$status_file"; sync; $3; }
+$1
+ip link set lo up
+ip link add dev vcan0 type vcan && ip link set vcan0 up || fail "guest: cannot create vcan0"
+cd "$root"
+status=0
+for bin in ${bins[*]}; do
+  FORCECELL_VCAN=vcan0 FORCECELL_VCAN_TIME_SCALE=$2 RUST_BACKTRACE=1 "\$bin" ${test_args[*]} >>"$output_file" 2>&1 || status=1
+done
+echo \$status >"$status_file"
+sync
+$3
+EOF
+}
+
+# Reads the status the guest wrote; fails with its output (and the console's tail) otherwise.
+finish() { # where console-log
+  local where=$1 console=$2
+  [ -f "$output_file" ] && cat "$output_file"
+  if [ ! -s "$status_file" ]; then
+    echo "---- last lines of the $where console ----" >&2
+    tail -n 40 "$console" >&2 || true
+    die "the $where guest wrote no status (it did not boot or did not finish): see its console above"
+  fi
+  local status
+  status=$(cat "$status_file")
+  [ "$status" = 0 ] || die "vcan tests failed inside $where (exit status $status)"
+  # A pass must have run tests: each binary prints 'test result: ok. N passed'.
+  local ran
+  ran=$(grep -o 'test result: ok\. [0-9]* passed' "$output_file" | awk '{s += $4} END {print s + 0}')
+  [ "$ran" -gt 0 ] || die "the $where guest reported success but no test ran"
+  say "all $ran vcan tests passed inside $where ($((SECONDS - started)) s)"
+}
+
+# ---- 1. native -------------------------------------------------------------------------------
 native_ready() {
   ip link show vcan0 >/dev/null 2>&1 && return 0
   [ "$(id -u)" -eq 0 ] || return 1
@@ -68,62 +136,180 @@ native_ready() {
   ip link add dev vcan0 type vcan 2>/dev/null && ip link set vcan0 up 2>/dev/null
 }
 
-if [ "$mode" != uml ] && native_ready; then
-  echo "vcan-tests: running natively on vcan0"
-  ip link set vcan0 up 2>/dev/null || true
-  failed=0
-  for bin in "${bins[@]}"; do
-    FORCECELL_VCAN=vcan0 "$bin" "${test_args[@]}" || failed=1
-  done
-  [ "$failed" = 0 ] || die "vcan tests failed (natively on vcan0)"
-  echo "vcan-tests: all vcan tests passed natively on vcan0"
-  exit 0
+if [ "$mode" = auto ] || [ "$mode" = native ]; then
+  if native_ready; then
+    say "mode native: this kernel has CAN; running on the host's vcan0"
+    ip link set vcan0 up 2>/dev/null || true
+    failed=0
+    for bin in "${bins[@]}"; do
+      FORCECELL_VCAN=vcan0 "$bin" "${test_args[@]}" || failed=1
+    done
+    [ "$failed" = 0 ] || die "vcan tests failed (natively on vcan0)"
+    say "all vcan tests passed natively on vcan0 ($((SECONDS - started)) s)"
+    exit 0
+  fi
+  [ "$mode" = native ] && die "FORCECELL_VCAN_MODE=native but this kernel has no usable vcan0 (modprobe vcan failed; run as root on a kernel with CONFIG_CAN_VCAN)"
+  say "native vcan: not available (this kernel has no CAN support)"
 fi
-[ "$mode" = native ] && die "FORCECELL_VCAN_MODE=native but this kernel has no usable vcan0 (modprobe vcan failed)"
 
-# ---- User-Mode Linux -------------------------------------------------------------------------
-uml=$(command -v linux.uml) || die "linux.uml not found (apt-get install user-mode-linux)"
-work=$(mktemp -d "$root/target/vcan-uml.XXXXXX")
-trap '[ -n "${KEEP_UML:-}" ] || rm -rf "$work"' EXIT
-status_file=$work/status
-output_file=$work/output
-init=$work/init.sh
+# ---- 2. User-Mode Linux ----------------------------------------------------------------------
+uml_run() { # init-script console-log timeout-seconds
+  timeout "$3" linux.uml mem=512M root=/dev/root rootfstype=hostfs rootflags=/ rw init="$1" \
+    con=null con0=null,fd:1 </dev/null >"$2" 2>&1 || true
+}
 
-cat >"$init" <<EOF
-#!/bin/sh
-# PID 1 of the UML guest: load CAN, create vcan0, run the tests, write the status to the host, halt.
-PATH=/sbin:/usr/sbin:/bin:/usr/bin
-export PATH
-fail() { echo "\$*" >"$output_file"; echo 97 >"$status_file"; sync; halt -f; }
+uml_boots() {
+  local probe=$work/uml-probe.sh mark=$work/uml-probe.ok
+  printf '#!/bin/sh\necho ok >%s\nsync\nhalt -f\n' "$mark" >"$probe"
+  chmod +x "$probe"
+  uml_run "$probe" "$work/uml-probe.log" 60
+  [ -s "$mark" ]
+}
+
+if [ "$mode" = auto ] || [ "$mode" = uml ]; then
+  install user-mode-linux
+  if uml_boots; then
+    say "mode uml: User-Mode Linux boots here (probe passed); running inside it"
+    init=$work/init.sh
+    {
+      echo '#!/bin/sh'
+      echo '# PID 1 of the UML guest: load CAN, create vcan0, run the tests, write the status to the host, halt.'
+      write_guest_tests "$(
+        cat <<'EOF'
 mount -t proc proc /proc || fail "guest: cannot mount /proc"
 mount -t sysfs sysfs /sys 2>/dev/null
-m=/usr/lib/uml/modules/\$(uname -r)
-[ -d "\$m" ] || fail "guest: no modules for kernel \$(uname -r) under /usr/lib/uml/modules"
+m=/usr/lib/uml/modules/$(uname -r)
+[ -d "$m" ] || fail "guest: no modules for kernel $(uname -r) under /usr/lib/uml/modules"
 for k in kernel/net/can/can.ko kernel/net/can/can-raw.ko kernel/drivers/net/can/dev/can-dev.ko kernel/drivers/net/can/vcan.ko; do
-  insmod "\$m/\$k" || fail "guest: insmod \$k failed"
+  insmod "$m/$k" || fail "guest: insmod $k failed"
 done
-ip link set lo up
-ip link add dev vcan0 type vcan && ip link set vcan0 up || fail "guest: cannot create vcan0"
-cd "$root"
-status=0
-for bin in ${bins[*]}; do
-  FORCECELL_VCAN=vcan0 RUST_BACKTRACE=1 "\$bin" ${test_args[*]} >>"$output_file" 2>&1 || status=1
-done
-echo \$status >"$status_file"
-sync
-halt -f
 EOF
-chmod +x "$init"
-
-echo "vcan-tests: no usable vcan on this kernel; running inside User-Mode Linux"
-timeout 900 "$uml" mem=512M root=/dev/root rootfstype=hostfs rootflags=/ rw init="$init" \
-  con=null con0=null,fd:1 </dev/null >"$work/console.log" 2>&1 || true
-
-[ -f "$output_file" ] && cat "$output_file"
-if [ ! -s "$status_file" ]; then
-  tail -n 40 "$work/console.log" >&2 || true
-  die "the UML guest wrote no status (it did not boot or did not finish): see the console log above"
+      )" "${FORCECELL_VCAN_TIME_SCALE:-1}" "halt -f"
+    } >"$init"
+    chmod +x "$init"
+    uml_run "$init" "$work/console.log" 900
+    finish UML "$work/console.log"
+    exit 0
+  fi
+  reason="its init did not run within 60 s"
+  grep -q 'ptrace set fp regs failed' "$work/uml-probe.log" 2>/dev/null &&
+    reason="it panics before init ('ptrace set fp regs failed': this CPU's XSAVE area, e.g. AMX, is too large for it)"
+  if [ "$mode" = uml ]; then
+    tail -n 20 "$work/uml-probe.log" >&2 || true
+    die "FORCECELL_VCAN_MODE=uml but User-Mode Linux cannot boot here: $reason"
+  fi
+  say "User-Mode Linux: not usable here, $reason"
 fi
-status=$(cat "$status_file")
-[ "$status" = 0 ] || die "vcan tests failed inside UML (exit status $status)"
-echo "vcan-tests: all vcan tests passed inside UML"
+
+# ---- 3. QEMU (software emulation) ------------------------------------------------------------
+install qemu-system-x86 busybox-static cpio
+cache=$root/target/vcan-qemu
+mkdir -p "$cache"
+
+# The kernel: the version linux-image-amd64 names, downloaded as a .deb and unpacked into the cache.
+kpkg=$(apt-cache depends linux-image-amd64 2>/dev/null | awk '/Depends: linux-image-[0-9]/ {print $2; exit}')
+if [ -z "$kpkg" ]; then
+  apt_update
+  kpkg=$(apt-cache depends linux-image-amd64 2>/dev/null | awk '/Depends: linux-image-[0-9]/ {print $2; exit}')
+fi
+[ -n "$kpkg" ] || die "apt-cache cannot name the Debian kernel package (linux-image-amd64 has no linux-image-* dependency)"
+kdir=$cache/$kpkg
+if [ ! -f "$kdir/.unpacked" ]; then
+  say "fetching the kernel $kpkg with apt-get download (unpacked into $kdir, not installed)"
+  rm -rf "$kdir" "$cache"/dl && mkdir -p "$cache/dl"
+  (cd "$cache/dl" && apt-get download "$kpkg" >/dev/null 2>&1) ||
+    { apt_update && (cd "$cache/dl" && apt-get download "$kpkg" >/dev/null); } ||
+    die "apt-get download $kpkg failed"
+  dpkg-deb -x "$cache"/dl/"$kpkg"_*.deb "$kdir" || die "dpkg-deb could not unpack $kpkg"
+  rm -rf "$cache/dl"
+  touch "$kdir/.unpacked"
+fi
+vmlinuz=$(ls "$kdir"/boot/vmlinuz-* 2>/dev/null | head -n 1)
+[ -n "$vmlinuz" ] || die "no vmlinuz in $kpkg"
+kver=${vmlinuz##*/vmlinuz-}
+moddir=$kdir/lib/modules/$kver
+
+# modules_in_order NAME... : the module files for NAMEs, each after its dependencies (modinfo -F depends);
+# a module with no file is built into the kernel and skipped.
+declare -A seen=()
+ordered=()
+add_module() {
+  local name=${1//-/_} file dep
+  [ -n "${seen[$name]:-}" ] && return 0
+  seen[$name]=1
+  file=$(find "$moddir/kernel" \( -name "$name.ko*" -o -name "${name//_/-}.ko*" \) -print -quit)
+  [ -n "$file" ] || return 0
+  for dep in $(modinfo -F depends "$file" | tr ',' ' '); do add_module "$dep"; done
+  ordered+=("$file")
+}
+
+# A module as a plain .ko (busybox insmod in the initramfs reads no compressed modules).
+plain_ko() { # file dest-dir -> path of the plain .ko
+  local f=$1 out=$2/$(basename "${1%.xz}")
+  out=${out%.zst}
+  case "$f" in
+  *.ko.xz) xz -dc "$f" >"$out" ;;
+  *.ko.zst) zstd -qdc "$f" >"$out" ;;
+  *) cp "$f" "$out" ;;
+  esac
+  echo "$out"
+}
+
+initrd=$cache/initrd-$kver.gz
+if [ ! -s "$initrd" ]; then
+  say "building the initramfs (busybox-static + virtio/9p modules) in $cache"
+  ir=$work/initramfs
+  mkdir -p "$ir/bin" "$ir/mod" "$ir/proc" "$ir/dev" "$ir/host"
+  cp /bin/busybox "$ir/bin/busybox"
+  ordered=()
+  for m in virtio_pci 9pnet_virtio 9p; do add_module "$m"; done
+  : >"$ir/mod/order"
+  for f in "${ordered[@]}"; do basename "$(plain_ko "$f" "$ir/mod")" >>"$ir/mod/order"; done
+  cat >"$ir/init" <<'EOF'
+#!/bin/busybox sh
+# PID 1 of the initramfs: mount the host's root over virtio-9p and hand over to the test script in it.
+b=/bin/busybox
+off() { $b echo 1 >/proc/sys/kernel/sysrq; $b echo o >/proc/sysrq-trigger; $b sleep 30; }
+$b mount -t proc proc /proc
+$b mount -t devtmpfs dev /dev
+for m in $($b cat /mod/order); do $b insmod /mod/$m || $b echo "initramfs: insmod $m failed"; done
+$b mount -t 9p -o trans=virtio,version=9p2000.L,msize=512000 hostroot /host || { $b echo "initramfs: cannot mount the host's root over 9p"; off; }
+$b mount --move /dev /host/dev
+$b mount --move /proc /host/proc
+exec $b chroot /host /bin/sh -c "$guest_init"
+EOF
+  chmod +x "$ir/init"
+  (cd "$ir" && find . | cpio -o -H newc --quiet | gzip -1) >"$initrd.tmp" && mv "$initrd.tmp" "$initrd"
+fi
+
+# The CAN modules, loaded by the guest (with the host's insmod) from the unpacked kernel.
+candir=$cache/can-$kver
+if [ ! -f "$candir/order" ]; then
+  rm -rf "$candir" && mkdir -p "$candir"
+  ordered=()
+  seen=()
+  for m in can can_raw can_dev vcan; do add_module "$m"; done
+  for f in "${ordered[@]}"; do plain_ko "$f" "$candir" >>"$candir/order"; done
+fi
+
+guest=$work/guest.sh
+{
+  echo '#!/bin/sh'
+  echo '# Runs inside the QEMU guest, chrooted into the host filesystem: load CAN, create vcan0, run the tests.'
+  write_guest_tests "$(
+    cat <<EOF
+mount -t sysfs sysfs /sys 2>/dev/null
+mount -t tmpfs tmpfs /dev/shm 2>/dev/null
+for k in \$(cat "$candir/order"); do insmod "\$k" || fail "guest: insmod \$k failed"; done
+EOF
+  )" "${FORCECELL_VCAN_TIME_SCALE:-4}" 'echo 1 >/proc/sys/kernel/sysrq; echo o >/proc/sysrq-trigger; sleep 30'
+} >"$guest"
+chmod +x "$guest"
+
+say "mode qemu: Debian kernel $kver under QEMU software emulation (TCG), host root over virtio-9p"
+timeout 1800 qemu-system-x86_64 -accel tcg,thread=multi -cpu max -m 2048 -smp 2 -nographic -no-reboot \
+  -kernel "$vmlinuz" -initrd "$initrd" \
+  -append "console=ttyS0 quiet panic=-1 guest_init=$guest" \
+  -virtfs local,path=/,mount_tag=hostroot,security_model=passthrough,id=hostroot,multidevs=remap \
+  </dev/null >"$work/console.log" 2>&1 || true
+finish QEMU "$work/console.log"

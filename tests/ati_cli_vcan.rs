@@ -1,12 +1,27 @@
 //! The `forcecell` binary's ATI commands on a real vcan interface: `sim-sensor ati` serves a simulated
 //! node, `sensor ati info|read|tare` talks to it from another process, and `sim --can` runs a scenario
 //! through the driver over the interface. Ignored in a plain `cargo test`; `scripts/vcan-tests.sh`
-//! runs them natively or inside User-Mode Linux.
+//! runs them natively, inside User-Mode Linux or inside QEMU.
 
 use std::process::{Child, Command, Output, Stdio};
 
 fn iface() -> String {
     std::env::var("FORCECELL_VCAN").unwrap_or_else(|_| "vcan0".into())
+}
+
+/// Headroom for slow guests (`FORCECELL_VCAN_TIME_SCALE`, 1 to 100; `scripts/vcan-tests.sh` raises it
+/// under QEMU's software emulation): the sensor's turnaround is multiplied by it and the read rate
+/// divided by it, so the driver's own check (a poll must fit in one period) still holds.
+fn time_scale() -> u32 {
+    std::env::var("FORCECELL_VCAN_TIME_SCALE")
+        .ok()
+        .map(|s| {
+            s.parse::<u32>()
+                .ok()
+                .filter(|k| (1..=100).contains(k))
+                .unwrap_or_else(|| panic!("FORCECELL_VCAN_TIME_SCALE must be 1 to 100, not {s:?}"))
+        })
+        .unwrap_or(1)
 }
 
 fn forcecell() -> Command {
@@ -54,6 +69,8 @@ fn sensor_commands_talk_to_the_simulated_node_in_another_process() {
             .spawn()
             .expect("start sim-sensor"),
     );
+    let turnaround = (20_000 * time_scale()).to_string();
+    let rate = (20.0 / f64::from(time_scale())).to_string();
     let common = [
         "sensor",
         "ati",
@@ -62,7 +79,7 @@ fn sensor_commands_talk_to_the_simulated_node_in_another_process() {
         "--base",
         "0x31",
         "--turnaround-us",
-        "20000",
+        &turnaround,
     ];
 
     // The node binds its socket right after starting: retry `info` until it answers.
@@ -78,7 +95,7 @@ fn sensor_commands_talk_to_the_simulated_node_in_another_process() {
     assert!(info.contains("serial          FT-SIM01"), "{info}");
     assert!(info.contains("status          0x0000"), "{info}");
 
-    let (out, text) = run(&[&common[..], &["read", "--count", "3", "--rate", "20"]].concat());
+    let (out, text) = run(&[&common[..], &["read", "--count", "3", "--rate", &rate]].concat());
     assert!(out.status.success(), "{text}");
     let fz: Vec<f64> = text
         .lines()
@@ -90,7 +107,7 @@ fn sensor_commands_talk_to_the_simulated_node_in_another_process() {
 
     let (out, text) = run(&[
         &common[..],
-        &["read", "--count", "2", "--rate", "20", "--tare"],
+        &["read", "--count", "2", "--rate", &rate, "--tare"],
     ]
     .concat());
     assert!(out.status.success(), "{text}");

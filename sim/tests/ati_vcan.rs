@@ -1,10 +1,11 @@
 //! The ATI driver against the simulated node on a **real SocketCAN interface** (vcan), plus interop
 //! with can-utils. Ignored in a plain `cargo test` (most kernels of build machines have no CAN);
-//! `scripts/vcan-tests.sh` runs them on `vcan0` natively or inside User-Mode Linux.
+//! `scripts/vcan-tests.sh` runs them on `vcan0` natively, inside User-Mode Linux or inside QEMU.
 //!
 //! Each test uses its own base identifier, so tests may share the interface. The interface name comes
-//! from `FORCECELL_VCAN` (default `vcan0`). Deadlines are generous (system calls inside UML are slow);
-//! no test asserts on timing.
+//! from `FORCECELL_VCAN` (default `vcan0`). Deadlines are generous (system calls inside UML are slow)
+//! and are multiplied by `FORCECELL_VCAN_TIME_SCALE` (default 1; `scripts/vcan-tests.sh` raises it
+//! under QEMU's software emulation): headroom, never a weaker assertion. No test asserts on timing.
 
 mod ati_common;
 
@@ -27,6 +28,20 @@ const WHY: &str = "needs a vcan0 interface: run scripts/vcan-tests.sh";
 
 fn iface() -> String {
     std::env::var("FORCECELL_VCAN").unwrap_or_else(|_| "vcan0".into())
+}
+
+/// A deadline with the configured headroom for slow guests (`FORCECELL_VCAN_TIME_SCALE`, 1 to 100).
+fn deadline(d: Duration) -> Duration {
+    let scale = std::env::var("FORCECELL_VCAN_TIME_SCALE")
+        .ok()
+        .map(|s| {
+            s.parse::<u32>()
+                .ok()
+                .filter(|k| (1..=100).contains(k))
+                .unwrap_or_else(|| panic!("FORCECELL_VCAN_TIME_SCALE must be 1 to 100, not {s:?}"))
+        })
+        .unwrap_or(1);
+    d * scale
 }
 
 fn open() -> SocketCanTransport {
@@ -73,7 +88,7 @@ fn vcan_config(base: u8) -> Config {
         base: Base::new(base).unwrap(),
         // vcan has no bit rate; inside UML a system call takes ~0.1–0.5 ms and threads are scheduled
         // on a slow clock: give every answer 200 ms.
-        turnaround: Duration::from_millis(200),
+        turnaround: deadline(Duration::from_millis(200)),
         stale_after: Duration::from_secs(60),
         ..Config::default()
     }
@@ -100,7 +115,7 @@ impl Bus for Vcan {
             raise: Some(Box::new(move |e| {
                 raiser.inject_error(e).expect("inject error frame")
             })),
-            settle: || std::thread::sleep(Duration::from_millis(100)),
+            settle: || std::thread::sleep(deadline(Duration::from_millis(100))),
             keep: vec![Box::new(thread)],
         }
     }
@@ -344,7 +359,7 @@ fn vcan_cansend_frames_are_decoded_by_the_driver() {
     };
     let cfg = Config {
         // Each answer frame is a process start inside a slow guest.
-        turnaround: Duration::from_secs(3),
+        turnaround: deadline(Duration::from_secs(3)),
         ..vcan_config(base.get())
     };
     let mut driver = Driver::new(open(), cfg).unwrap();
