@@ -43,7 +43,7 @@ use std::time::Duration;
 use anyhow::{Context, Result, anyhow, bail};
 use controller::compensated::{CompensatedSensor, OrientationTap, shared_orientation};
 use controller::gravity::{Compensator, GravityModel};
-use controller::{ControlLoop, LoopStats, Tuning};
+use controller::{ControlLoop, LoopError, LoopStats, Tuning};
 use hal::{ForceSensor, RobotLink, UnitQuaternion, Vector3};
 use kuka_rsi::{CorrectionMode, EthernetConfig, Limits, LinkConfig, PoscorrLimits, RobotFilter};
 use serde::Deserialize;
@@ -381,11 +381,14 @@ where
                 }
             }
             Err(e) => {
+                // A sensor fault or a hold timeout has already backed the tool off: end the robot's
+                // correction cleanly. A failed robot link has no one left to tell.
+                let stopped = !matches!(e, LoopError::Robot(_)) && lp.stop().is_ok();
                 return Ok(CellOutcome {
                     rows,
                     stats: lp.stats(),
                     ended: format!("the loop ended: {e}"),
-                    stopped: false,
+                    stopped,
                 });
             }
         }

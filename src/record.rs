@@ -60,7 +60,7 @@ pub const HEADER: &str = "t,f,f_true,f_r,x,x_cmd,x_r,kc_hat,xc_hat,k_c,x_c,fault
 
 /// A compact code for a cycle's fault, as written in the CSV `fault` column:
 /// 0 none, 1 sensor error, 2 non-finite sample, 3 non-finite pose, 4 non-finite command,
-/// 5 step limited, 6 envelope limited.
+/// 5 step limited, 6 envelope limited, 7 backing off after a fault that ends the run.
 pub fn fault_code(f: Option<controller::Fault>) -> u8 {
     use controller::Fault::*;
     match f {
@@ -71,6 +71,7 @@ pub fn fault_code(f: Option<controller::Fault>) -> u8 {
         Some(NonFiniteCommand) => 4,
         Some(StepLimited) => 5,
         Some(EnvelopeLimited) => 6,
+        Some(Retracting) => 7,
     }
 }
 

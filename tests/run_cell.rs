@@ -9,7 +9,7 @@ use std::time::Duration;
 use forcecell::cell::{CellConfig, CellOutcome, run_cell};
 use kuka_rsi::{EthernetConfig, RsiLink};
 use sim::krc::{Krc, KrcConfig, KrcEnd, KrcReport, Timing};
-use sim::{ContactPlant, InProcSensor, InnerLoopModel, SensorParams, SharedWorld, World};
+use sim::{ContactPlant, InProcSensor, InnerLoopModel, SensorParams, SharedWorld, Window, World};
 
 const CELL: &str = r#"
 tuning = "robust"
@@ -28,6 +28,15 @@ can = "vcan0"
 /// tool starts on its programmed path (correction 0, as at a real `RSI_ON`) with the surface 1 mm below.
 /// The controller sends at most `cycles` datagrams, so a missing `Stop` fails the test instead of hanging it.
 fn run_against_sim_krc(cycles: u64, stop: bool) -> (CellOutcome, KrcReport, SharedWorld) {
+    run_with_sensor(cycles, stop, SensorParams::default())
+}
+
+/// As [`run_against_sim_krc`], with the given sensor model.
+fn run_with_sensor(
+    cycles: u64,
+    stop: bool,
+    sensor: SensorParams,
+) -> (CellOutcome, KrcReport, SharedWorld) {
     let cfg = CellConfig::from_toml(CELL, "cell.toml").unwrap();
     let tuning = cfg.tuning().unwrap();
     let lc = cfg.link_config(&tuning).unwrap();
@@ -38,7 +47,7 @@ fn run_against_sim_krc(cycles: u64, stop: bool) -> (CellOutcome, KrcReport, Shar
     let world: SharedWorld = World::new(
         ContactPlant::spring(70_000.0, 0.001),
         InnerLoopModel::P2,
-        SensorParams::default(),
+        sensor,
         0.0,
     )
     .shared();
@@ -77,6 +86,35 @@ fn a_cell_file_runs_the_loop_over_rsi_and_ends_with_stop() {
         "true force {}",
         w.true_force()
     );
+}
+
+#[test]
+fn a_sensor_silent_in_contact_ends_the_run_backed_off_with_stop() {
+    // The sensor gives nothing from 1.0 s on, while the tool presses 5 N: the loop may hold its last
+    // command for `max_hold` (0.1 s), then backs off and ends, and the robot is told `Stop`.
+    let silent = SensorParams {
+        dropouts: vec![Window {
+            at: 1.0,
+            duration: 10.0,
+        }],
+        ..SensorParams::default()
+    };
+    let (out, report, world) = run_with_sensor(2_000, false, silent);
+    assert!(out.ended.contains("held the last command"), "{}", out.ended);
+    assert!(out.stopped, "{}", out.ended);
+    assert_eq!(report.end, KrcEnd::Stopped, "{report:?}");
+    let held = out.rows.iter().filter(|r| r.fault == 1).count();
+    assert!(held > 0 && held <= 26, "held {held} cycles of 4 ms");
+    let pressing = out.rows.iter().rev().find(|r| r.fault != 7).unwrap();
+    let last = out.rows.last().unwrap();
+    assert!(
+        pressing.x_cmd - last.x_cmd >= 0.002 - 1e-9,
+        "backed off {} m",
+        pressing.x_cmd - last.x_cmd
+    );
+    // The tool is off the workpiece: no force, whatever the sensor would have said.
+    assert_eq!(sim::world::lock(&world).true_force(), 0.0);
+    assert!(last.t < 1.5, "ended at {} s", last.t);
 }
 
 #[test]

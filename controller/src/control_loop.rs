@@ -21,6 +21,15 @@ pub struct LoopConfig {
     /// Largest magnitude of the commanded normal offset from the programmed path, m; beyond it the
     /// command is limited and reported as [`Fault::EnvelopeLimited`].
     pub max_offset: f64,
+    /// Longest robot time, s, the loop may hold its last command without a usable sample or pose (a
+    /// silent, saturated or failing sensor). Beyond it the loop retracts and ends with
+    /// [`LoopError::HoldTimeout`]: it never presses blind for longer than this.
+    pub max_hold: f64,
+    /// How far, m, the tool backs off along −z from its last command when the loop ends on a fault
+    /// (hold timeout, failed sensor), before the loop reports the fault.
+    pub retract_distance: f64,
+    /// Speed of that back-off, m/s (never faster than `max_step` per cycle).
+    pub retract_speed: f64,
 }
 
 impl Default for LoopConfig {
@@ -29,6 +38,9 @@ impl Default for LoopConfig {
             force_sign: 1.0,
             max_step: 1e-3,
             max_offset: 0.005,
+            max_hold: 0.1,
+            retract_distance: 0.002,
+            retract_speed: 0.02,
         }
     }
 }
@@ -47,6 +59,25 @@ impl LoopConfig {
         }
         if !(self.max_offset.is_finite() && self.max_offset > 0.0) {
             return Err(format!("max_offset must be > 0 m, got {}", self.max_offset));
+        }
+        // A hold is pressing blind: beyond a second no force controller should keep a tool there.
+        if !(self.max_hold > 0.0 && self.max_hold <= 1.0) {
+            return Err(format!(
+                "max_hold must be > 0 and ≤ 1 s (holding the last command is pressing blind), got {}",
+                self.max_hold
+            ));
+        }
+        if !(self.retract_distance > 0.0 && self.retract_distance <= 0.05) {
+            return Err(format!(
+                "retract_distance must be > 0 and ≤ 0.05 m, got {}",
+                self.retract_distance
+            ));
+        }
+        if !(self.retract_speed > 0.0 && self.retract_speed <= 0.5) {
+            return Err(format!(
+                "retract_speed must be > 0 and ≤ 0.5 m/s, got {}",
+                self.retract_speed
+            ));
         }
         Ok(())
     }
@@ -67,6 +98,9 @@ pub enum Fault {
     StepLimited,
     /// The command left `±max_offset` and was limited.
     EnvelopeLimited,
+    /// The loop is backing off after a fault that ends it (hold timeout, failed sensor); the law is
+    /// no longer stepped.
+    Retracting,
 }
 
 /// Counters of the loop, for diagnostics.
@@ -86,6 +120,8 @@ pub struct LoopStats {
     pub robot_glitches: u64,
     /// New robot sessions (references captured again).
     pub sessions: u64,
+    /// Cycles answered while backing off after a fault.
+    pub retract_cycles: u64,
 }
 
 /// Everything about one answered cycle, for recording and plotting.
@@ -110,17 +146,55 @@ pub struct CycleReport {
 pub enum LoopError<RE, SE> {
     /// The robot link failed for good (lost, closed, misconfigured).
     Robot(RE),
-    /// The sensor failed for good (bus-off, link lost, misconfigured).
+    /// The sensor failed for good (bus-off, link lost, misconfigured); the loop has backed off first.
     Sensor(SE),
+    /// The loop held its last command longer than `max_hold` (no usable sample or pose); it has backed
+    /// off first. `last` is the fault of the last held cycle.
+    HoldTimeout {
+        /// Robot time held, s.
+        held: f64,
+        /// Why the last held cycle was held.
+        last: Fault,
+    },
 }
 
 impl<RE: fmt::Display, SE: fmt::Display> fmt::Display for LoopError<RE, SE> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::Robot(e) => write!(f, "robot link: {e}"),
-            Self::Sensor(e) => write!(f, "force sensor: {e}"),
+            Self::Sensor(e) => write!(f, "force sensor: {e} (the tool backed off)"),
+            Self::HoldTimeout { held, last } => write!(
+                f,
+                "held the last command for {:.0} ms without a usable input (last: {last:?}); the tool backed off",
+                held * 1e3
+            ),
         }
     }
+}
+
+/// A fault that ends the loop once the tool has backed off.
+enum Ending<SE> {
+    Sensor(SE),
+    HoldTimeout { held: f64, last: Fault },
+}
+
+impl<SE> Ending<SE> {
+    fn into_error<RE>(self) -> LoopError<RE, SE> {
+        match self {
+            Self::Sensor(e) => LoopError::Sensor(e),
+            Self::HoldTimeout { held, last } => LoopError::HoldTimeout { held, last },
+        }
+    }
+}
+
+/// What the loop is doing.
+enum Phase<SE> {
+    /// Force control (or holding within `max_hold`).
+    Control,
+    /// Backing off towards `target`; then the loop ends with `end`.
+    Retract { target: f64, end: Ending<SE> },
+    /// Backed off after a fault that was reported: every further cycle holds the backed-off command.
+    Halted,
 }
 
 impl<RE: fmt::Debug + fmt::Display, SE: fmt::Debug + fmt::Display> std::error::Error
@@ -129,7 +203,7 @@ impl<RE: fmt::Debug + fmt::Display, SE: fmt::Debug + fmt::Display> std::error::E
 }
 
 /// The loop: a robot, a sensor and a law.
-pub struct ControlLoop<R, S, L> {
+pub struct ControlLoop<R, S: ForceSensor, L> {
     robot: R,
     sensor: S,
     law: L,
@@ -138,6 +212,9 @@ pub struct ControlLoop<R, S, L> {
     started: bool,
     last_out: Output,
     last_cmd: f64,
+    /// Robot time held since the law's last step, s.
+    held: f64,
+    phase: Phase<S::Error>,
 }
 
 impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
@@ -152,6 +229,8 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             started: false,
             last_out: Output::default(),
             last_cmd: 0.0,
+            held: 0.0,
+            phase: Phase::Control,
         }
     }
 
@@ -188,9 +267,12 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
     /// Run one cycle: wait for the robot, read the newest sample, step the law (or hold), reply once.
     ///
     /// Bad input never reaches the command: on a sensor error, a non-finite sample or pose, the loop
-    /// answers with its last command and does not step the law. A robot error that is not transient
-    /// ([`ErrorKind::is_transient`]) ends the loop; so does a sensor error of kind `LinkLost`, `BusOff`
-    /// or `Config` — after the loop has answered the cycle with its last command.
+    /// answers with its last command and does not step the law — for at most `max_hold` of robot time.
+    /// A longer hold, or a sensor error of kind `LinkLost`, `BusOff` or `Config`, makes the loop back
+    /// off by `retract_distance` at `retract_speed` (answering every cycle meanwhile, reported as
+    /// [`Fault::Retracting`]) and then end with [`LoopError::HoldTimeout`] or [`LoopError::Sensor`].
+    /// A robot error that is not transient ([`ErrorKind::is_transient`]) ends the loop at once: there is
+    /// no link left to back off through.
     pub fn cycle(&mut self) -> Result<CycleReport, LoopError<R::Error, S::Error>> {
         let cycle = loop {
             match self.robot.next_cycle() {
@@ -200,6 +282,11 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             }
         };
         let x = cycle.tool_offset().z;
+        match self.phase {
+            Phase::Control => {}
+            Phase::Retract { target, .. } => return self.retract(cycle, x, target),
+            Phase::Halted => return self.retract(cycle, x, self.last_cmd),
+        }
         let pose_ok = cycle.actual.is_finite() && cycle.programmed.is_finite() && x.is_finite();
         if pose_ok && (!self.started || cycle.new_session) {
             if self.started {
@@ -247,21 +334,43 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             }
             _ => {}
         }
-        match fault {
-            Some(Fault::Sensor(_)) => self.stats.sensor_faults += 1,
-            Some(Fault::NonFiniteSample | Fault::NonFinitePose) => self.stats.nonfinite_inputs += 1,
-            Some(Fault::NonFiniteCommand) => self.stats.nonfinite_commands += 1,
-            Some(Fault::StepLimited | Fault::EnvelopeLimited) => self.stats.limited += 1,
-            None => {}
-        }
+        let held = match fault {
+            Some(Fault::Sensor(_)) => {
+                self.stats.sensor_faults += 1;
+                true
+            }
+            Some(Fault::NonFiniteSample | Fault::NonFinitePose) => {
+                self.stats.nonfinite_inputs += 1;
+                true
+            }
+            Some(Fault::NonFiniteCommand) => {
+                self.stats.nonfinite_commands += 1;
+                true
+            }
+            Some(Fault::StepLimited | Fault::EnvelopeLimited) => {
+                self.stats.limited += 1;
+                false
+            }
+            Some(Fault::Retracting) | None => false,
+        };
+        self.held = if held { self.held + cycle.period } else { 0.0 };
 
         let command = Correction::along_z(cmd);
         self.robot.reply(&command).map_err(LoopError::Robot)?;
         self.stats.cycles += 1;
         self.last_out = out;
         self.last_cmd = cmd;
-        if let Some(e) = fatal_sensor {
-            return Err(LoopError::Sensor(e));
+        let end = match (fatal_sensor, fault) {
+            (Some(e), _) => Some(Ending::Sensor(e)),
+            (None, Some(last)) if self.held > self.cfg.max_hold => Some(Ending::HoldTimeout {
+                held: self.held,
+                last,
+            }),
+            _ => None,
+        };
+        if let Some(end) = end {
+            let target = (cmd - self.cfg.retract_distance).max(-self.cfg.max_offset);
+            self.phase = Phase::Retract { target, end };
         }
         Ok(CycleReport {
             cycle,
@@ -290,6 +399,38 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         self.robot.reply(&command).map_err(LoopError::Robot)?;
         self.stats.cycles += 1;
         Ok(())
+    }
+
+    /// One cycle of the back-off after a fault: step the command towards `target` at `retract_speed`
+    /// (within `max_step`) and reply; once there, end the loop with the fault (reported once; later
+    /// cycles hold the backed-off command).
+    fn retract(
+        &mut self,
+        cycle: Cycle,
+        x: f64,
+        target: f64,
+    ) -> Result<CycleReport, LoopError<R::Error, S::Error>> {
+        let step = (self.cfg.retract_speed * cycle.period).min(self.cfg.max_step);
+        let cmd = (self.last_cmd - step).max(target);
+        let command = Correction::along_z(cmd);
+        self.robot.reply(&command).map_err(LoopError::Robot)?;
+        self.stats.cycles += 1;
+        self.stats.retract_cycles += 1;
+        self.last_cmd = cmd;
+        self.last_out.x_cmd = cmd;
+        if cmd <= target
+            && let Phase::Retract { end, .. } = core::mem::replace(&mut self.phase, Phase::Halted)
+        {
+            return Err(end.into_error());
+        }
+        Ok(CycleReport {
+            cycle,
+            x,
+            f: None,
+            out: self.last_out,
+            command,
+            fault: Some(Fault::Retracting),
+        })
     }
 
     /// Limit a finite command to the step and envelope limits, noting which one acted.
@@ -474,20 +615,162 @@ mod tests {
         assert_eq!(lp.stats().nonfinite_inputs, 2);
     }
 
-    #[test]
-    fn fatal_sensor_error_answers_then_ends() {
+    /// Runs cycles until the loop ends; returns the corrections sent and the error it ended with.
+    fn run_until_end(
+        lp: &mut MockLoop,
+        sent: &std::sync::Mutex<Vec<Correction>>,
+    ) -> (Vec<Correction>, LoopError<ErrorKind, ErrorKind>) {
+        for _ in 0..10_000 {
+            if let Err(e) = lp.cycle() {
+                return (sent.lock().unwrap().clone(), e);
+            }
+        }
+        panic!("the loop never ended")
+    }
+
+    type MockLoop = ControlLoop<MockRobot, MockSensor, ImpedanceLaw>;
+    type SentLog = std::sync::Arc<std::sync::Mutex<Vec<Correction>>>;
+
+    /// A robot at a fixed pose whose replies are logged, and a sensor that answers `read` in turn.
+    fn logged(
+        mut read: impl FnMut(u64) -> Result<Sample, ErrorKind> + Send + 'static,
+    ) -> (MockLoop, SentLog) {
         let mut robot = MockRobot::new();
         let mut sensor = MockSensor::new();
-        robot
-            .expect_next_cycle()
-            .returning(|| Ok(cycle_at(1, 0.001)));
-        sensor.expect_read().returning(|| Err(ErrorKind::BusOff));
-        robot.expect_reply().times(1).returning(|_| Ok(()));
-        let mut lp = ControlLoop::new(robot, sensor, fixed_law(0.002), LoopConfig::default());
-        assert!(matches!(
-            lp.cycle(),
-            Err(LoopError::Sensor(ErrorKind::BusOff))
-        ));
+        let mut k = 0;
+        robot.expect_next_cycle().returning(move || {
+            k += 1;
+            Ok(cycle_at(k, 0.001))
+        });
+        let mut n = 0;
+        sensor.expect_read().returning(move || {
+            n += 1;
+            read(n)
+        });
+        let sent = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let log = sent.clone();
+        robot.expect_reply().returning(move |c| {
+            log.lock().unwrap().push(*c);
+            Ok(())
+        });
+        let lp = ControlLoop::new(robot, sensor, fixed_law(0.001), LoopConfig::default());
+        (lp, sent)
+    }
+
+    /// The commands after `from` only ever back off (−z), by no more than the retract speed allows per
+    /// cycle, and end `retract_distance` below the command at `from`.
+    fn assert_backed_off(sent: &[Correction], from: usize) {
+        let cfg = LoopConfig::default();
+        let per_cycle = cfg.retract_speed * 0.004 + 1e-12;
+        let z: Vec<f64> = sent.iter().map(|c| c.translation.z).collect();
+        for w in z[from..].windows(2) {
+            assert!(w[1] <= w[0] && w[0] - w[1] <= per_cycle, "{w:?}");
+        }
+        let backed = z[from] - z[z.len() - 1];
+        assert!(
+            (backed - cfg.retract_distance).abs() < 1e-12,
+            "backed off {backed} m"
+        );
+    }
+
+    #[test]
+    fn fatal_sensor_error_backs_off_then_ends() {
+        let (mut lp, sent) = logged(|n| {
+            if n < 3 {
+                Ok(sample(0.0))
+            } else {
+                Err(ErrorKind::BusOff)
+            }
+        });
+        let (sent, end) = run_until_end(&mut lp, &sent);
+        assert!(
+            matches!(end, LoopError::Sensor(ErrorKind::BusOff)),
+            "{end:?}"
+        );
+        assert!(end.to_string().contains("backed off"), "{end}");
+        // The failing cycle (the third) is answered with the last command; then the back-off.
+        assert_eq!(sent[2], sent[1]);
+        assert_backed_off(&sent, 2);
+        assert_eq!(lp.stats().retract_cycles as usize, sent.len() - 3);
+    }
+
+    #[test]
+    fn a_hold_is_bounded_in_time_then_the_tool_backs_off() {
+        // Two good samples, then the sensor only times out: the loop may hold 0.1 s (25 cycles of 4 ms).
+        let (mut lp, sent) = logged(|n| {
+            if n <= 2 {
+                Ok(sample(0.0))
+            } else {
+                Err(ErrorKind::Timeout)
+            }
+        });
+        let (sent, end) = run_until_end(&mut lp, &sent);
+        let LoopError::HoldTimeout { held, last } = end else {
+            panic!("expected a hold timeout, got {end:?}")
+        };
+        assert_eq!(last, Fault::Sensor(ErrorKind::Timeout));
+        let cfg = LoopConfig::default();
+        assert!(
+            held > cfg.max_hold && held <= cfg.max_hold + 0.004 + 1e-9,
+            "{held}"
+        );
+        let held_cycles = (held / 0.004).round() as usize;
+        // Every held cycle repeated the last good command.
+        for c in &sent[2..2 + held_cycles] {
+            assert_eq!(c, &sent[1]);
+        }
+        assert_backed_off(&sent, 1 + held_cycles);
+        // After the fault was reported, the loop keeps answering at the backed-off position.
+        let r = lp.cycle().expect("a halted loop still answers");
+        assert_eq!(r.fault, Some(Fault::Retracting));
+        assert_eq!(r.command, *sent.last().unwrap());
+    }
+
+    #[test]
+    fn a_hold_shorter_than_max_hold_resumes_control() {
+        // A 20-cycle (80 ms) dropout, under the 100 ms bound: the law resumes, nothing backs off.
+        let (mut lp, sent) = logged(|n| {
+            if (3..23).contains(&n) {
+                Err(ErrorKind::Timeout)
+            } else {
+                Ok(sample(0.0))
+            }
+        });
+        for _ in 0..60 {
+            lp.cycle().expect("a short hold does not end the loop");
+        }
+        assert_eq!(lp.stats().retract_cycles, 0);
+        assert_eq!(lp.stats().sensor_faults, 20);
+        assert_eq!(sent.lock().unwrap().len(), 60);
+    }
+
+    #[test]
+    fn hold_and_retract_limits_are_validated() {
+        for bad in [
+            LoopConfig {
+                max_hold: 0.0,
+                ..LoopConfig::default()
+            },
+            LoopConfig {
+                max_hold: f64::NAN,
+                ..LoopConfig::default()
+            },
+            LoopConfig {
+                max_hold: 5.0,
+                ..LoopConfig::default()
+            },
+            LoopConfig {
+                retract_distance: -0.001,
+                ..LoopConfig::default()
+            },
+            LoopConfig {
+                retract_speed: f64::INFINITY,
+                ..LoopConfig::default()
+            },
+        ] {
+            assert!(bad.validate().is_err(), "{bad:?}");
+        }
+        assert!(LoopConfig::default().validate().is_ok());
     }
 
     #[test]
