@@ -320,6 +320,7 @@ fn bench_scenarios(a: BenchArgs) -> Result<ExitCode> {
         only: a.only,
         ..Default::default()
     };
+    println!("bench-scenarios {}", forcecell::bench::WIRES);
     let rows = forcecell::bench::run(&opts, &a.out, &mut |label| eprintln!("running {label}"))?;
     print!("{}", forcecell::bench::table(&rows));
     println!("plots and traces in {}", a.out.display());

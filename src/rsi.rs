@@ -45,6 +45,17 @@ pub struct RsiArgs {
     pub external_robot: Option<SocketAddr>,
 }
 
+/// The default wire: the RSI driver against the simulated KUKA controller over loopback UDP, in lockstep.
+impl Default for RsiArgs {
+    fn default() -> Self {
+        Self {
+            robot: RobotBackend::Rsi,
+            realtime: false,
+            external_robot: None,
+        }
+    }
+}
+
 impl RsiArgs {
     /// One line for the run's header.
     pub fn describe(&self) -> String {

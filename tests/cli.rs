@@ -184,6 +184,7 @@ fn bench_scenarios_prints_one_table_and_writes_the_plots() {
     assert!(o.status.success(), "{}", stderr(&o));
     let s = String::from_utf8_lossy(&o.stdout);
     for needle in [
+        "over the default wires",
         "b01-approach",
         "b09-faults",
         "robust",
@@ -205,4 +206,18 @@ fn bench_scenarios_prints_one_table_and_writes_the_plots() {
         })
         .count();
     assert_eq!(pngs, 8);
+    // B9 over the wires: the simulated node reports the injected NaN as a saturated gauge (unusable,
+    // as the board would), not as 0 N, so the robust law holds through it on both plants.
+    for line in s
+        .lines()
+        .filter(|l| l.starts_with("b09-faults") && l.contains("robust"))
+    {
+        assert!(line.trim_end().ends_with("pass"), "{line}");
+    }
+    assert_eq!(
+        s.lines()
+            .filter(|l| l.starts_with("b09-faults") && l.contains("robust"))
+            .count(),
+        2
+    );
 }

@@ -305,7 +305,14 @@ impl AtiNode {
         for (i, out) in g.iter_mut().enumerate() {
             let noise = self.noise.map_or(0.0, |n| n.sample(&mut self.rng));
             let v = exact[i] + self.cfg.drift_counts_per_s[i] * t.as_secs_f64() + noise;
-            *out = v.round().clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16;
+            // A reading the gauge cannot represent is a saturated gauge, as on the board (the spec:
+            // ±32767/−32768 marks the sample unusable) — never a plausible 0 N. An injected NaN
+            // sample has no sign: it saturates high.
+            *out = if v.is_nan() {
+                i16::MAX
+            } else {
+                v.round().clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
+            };
         }
         Gauges(g)
     }
@@ -579,6 +586,18 @@ mod tests {
             Duration::ZERO,
         );
         assert!(g.is_saturated(), "{g:?}");
+    }
+
+    #[test]
+    fn a_non_finite_reading_is_a_saturated_gauge_not_zero_newtons() {
+        let mut node = node_with(Wrench::default());
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            let g = node.gauges_for(
+                &Wrench::from_array([0.0, 0.0, bad, 0.0, 0.0, 0.0]),
+                Duration::ZERO,
+            );
+            assert!(g.is_saturated(), "{bad}: {g:?}");
+        }
     }
 
     #[test]
