@@ -187,7 +187,8 @@ struct SimArgs {
     /// Robot inner loop: p0 (ideal), p1 (1 kHz, 10 ms lag, 4 ms delay), p2 (RSI-like 4 ms, 12 ms delay).
     #[arg(long, value_parser = ["p0", "p1", "p2"])]
     plant: Option<String>,
-    /// Built-in tuning name or a tuning TOML file (default: the scenario's).
+    /// Built-in tuning name or a tuning TOML file (default: the scenario's; with `--external-robot`,
+    /// `robust`: a real robot's 4 or 12 ms cycle is no place for the paper's tuning).
     #[arg(long)]
     tuning: Option<String>,
     /// Output directory.
@@ -252,7 +253,12 @@ fn sim(a: SimArgs) -> Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     let scenario = Scenario::load(&a.scenario)?;
-    let spec = RunSpec::new(scenario, a.plant.as_deref(), a.tuning.as_deref())?;
+    let tuning = match (&a.tuning, a.robot.external_robot) {
+        (Some(t), _) => Some(t.as_str()),
+        (None, Some(_)) => Some("robust"),
+        (None, None) => None,
+    };
+    let spec = RunSpec::new(scenario, a.plant.as_deref(), tuning)?;
     println!(
         "forcecell sim: {} — {}",
         spec.scenario.name, spec.scenario.description

@@ -313,6 +313,8 @@ impl RobotSide {
                 let robot = ExternalRobot {
                     link: &mut link,
                     world: world.clone(),
+                    start: spec.scenario.start_position(),
+                    origin: None,
                 };
                 let run = run_with(&spec, &world, robot, sensor, progress)?;
                 Ok((
@@ -345,12 +347,28 @@ pub fn run(
     RobotSide::start(spec, args)?.run_inproc_sensor(progress)
 }
 
-/// An external RSI client drives a world whose robot follows the reported pose exactly: each cycle
-/// the normal offset the client reports becomes the world's position, and the simulated sensor
+/// An external RSI client drives a world whose robot follows the reported pose exactly. The virtual
+/// workpiece is placed relative to the pose the client reports when its session starts — a real robot's
+/// correction starts at zero after `RSI_ON` — so that pose is the scenario's start position: each cycle
+/// the world's position is `start + (x − x at the session's first cycle)`, and the simulated sensor
 /// measures there.
 struct ExternalRobot<'a> {
     link: &'a mut RsiLink,
     world: SharedWorld,
+    /// The scenario's start position in the world, m.
+    start: f64,
+    /// The normal offset the client reported on its session's first cycle, m.
+    origin: Option<f64>,
+}
+
+impl ExternalRobot<'_> {
+    /// Where the world's tool is for a reported normal offset `x` on cycle `c`.
+    fn world_position(&mut self, c: &Cycle, x: f64) -> f64 {
+        if c.new_session || self.origin.is_none() {
+            self.origin = Some(x);
+        }
+        self.start + (x - self.origin.unwrap_or(x))
+    }
 }
 
 impl RobotLink for ExternalRobot<'_> {
@@ -360,7 +378,8 @@ impl RobotLink for ExternalRobot<'_> {
         let c = self.link.next_cycle()?;
         let x = c.tool_offset().z;
         if x.is_finite() {
-            sim::world::lock(&self.world).advance(Some(&Correction::along_z(x)));
+            let at = self.world_position(&c, x);
+            sim::world::lock(&self.world).advance(Some(&Correction::along_z(at)));
         }
         Ok(c)
     }
