@@ -146,10 +146,9 @@ impl fmt::Display for FrameError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::Header(h) => write!(f, "frame header {:02X} {:02X}", h[0], h[1]),
-            Self::Crc { received, computed } => write!(
-                f,
-                "frame CRC 0x{received:04X}, computed 0x{computed:04X}"
-            ),
+            Self::Crc { received, computed } => {
+                write!(f, "frame CRC 0x{received:04X}, computed 0x{computed:04X}")
+            }
         }
     }
 }
@@ -491,10 +490,7 @@ mod tests {
         let mut d = StreamDecoder::new();
         let mut events = Vec::new();
         d.feed(&bytes, |e| events.push(e));
-        assert_eq!(
-            events,
-            vec![Event::CrcError, Event::Frame(golden_counts())]
-        );
+        assert_eq!(events, vec![Event::CrcError, Event::Frame(golden_counts())]);
         assert_eq!(d.counters().frames, 1);
         assert_eq!(d.counters().crc_errors, 1);
     }

@@ -331,7 +331,12 @@ impl<R: Read> RawReader<R> {
     pub fn poll(&mut self) -> std::io::Result<&[u8]> {
         match self.port.read(&mut self.buf) {
             Ok(n) => Ok(&self.buf[..n]),
-            Err(e) if matches!(e.kind(), IoKind::TimedOut | IoKind::WouldBlock | IoKind::Interrupted) => {
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    IoKind::TimedOut | IoKind::WouldBlock | IoKind::Interrupted
+                ) =>
+            {
                 Ok(&[])
             }
             Err(e) => Err(e),
@@ -365,7 +370,10 @@ mod tests {
         assert_eq!(smp.age, ms(3));
         assert!((smp.wrench.force.z - 5.0).abs() < 1e-12);
         assert_eq!(s.observe(ms(91)), Health::Stale);
-        assert_eq!(s.sample_at(ms(91)).unwrap_err().kind(), hal::ErrorKind::Stale);
+        assert_eq!(
+            s.sample_at(ms(91)).unwrap_err().kind(),
+            hal::ErrorKind::Stale
+        );
         assert_eq!(s.observe(ms(171)), Health::Lost);
         assert_eq!(
             s.sample_at(ms(171)).unwrap_err().kind(),
@@ -390,7 +398,10 @@ mod tests {
                 assert_eq!(h, Health::Ok, "t={t}");
             } else if t <= 160 {
                 assert_eq!(h, Health::Ok);
-                assert!(matches!(s.sample_at(ms(t)), Err(RobotiqError::Stale { .. })));
+                assert!(matches!(
+                    s.sample_at(ms(t)),
+                    Err(RobotiqError::Stale { .. })
+                ));
             } else {
                 assert_eq!(h, Health::Lost, "t={t}");
             }

@@ -297,8 +297,7 @@ fn reader_loop(
                 }
             }
             Err(e) => {
-                *shared.io_error.lock().unwrap_or_else(|p| p.into_inner()) =
-                    Some(e.to_string());
+                *shared.io_error.lock().unwrap_or_else(|p| p.into_inner()) = Some(e.to_string());
                 return;
             }
         }
