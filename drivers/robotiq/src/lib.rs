@@ -24,4 +24,4 @@ pub use codec::{Counts, DecoderCounters, Event, FrameError, Identity, StreamDeco
 pub use error::RobotiqError;
 pub use link::{Counters, Health, LinkConfig, LinkState, RawReader};
 pub use modbus::{ModbusError, Startup};
-pub use sensor::{Config, Ft300, ZeroConfig};
+pub use sensor::{Config, Ft300, Lockstep, ZeroConfig};

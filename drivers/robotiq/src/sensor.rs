@@ -327,6 +327,136 @@ impl Drop for Ft300 {
     }
 }
 
+/// Listen on `path` for `listen`: true when at least two valid frames arrive (the sensor is streaming).
+/// Nothing is written to the port.
+pub fn stream_running(path: &Path, listen: Duration) -> Result<bool, RobotiqError> {
+    let mut reader = RawReader::new(open_raw(path, Duration::from_millis(5))?);
+    let epoch = Instant::now();
+    let mut state = LinkState::new(LinkConfig::default(), Duration::ZERO);
+    while epoch.elapsed() < listen && state.seq() < 2 {
+        let bytes = reader
+            .poll()
+            .map_err(|e| RobotiqError::io("listening for a running stream", e))?;
+        state.on_bytes(bytes, epoch.elapsed());
+    }
+    Ok(state.seq() >= 2)
+}
+
+/// Send the stop bytes on `path` (a sensor that streams goes back to Modbus).
+pub fn stop_stream(path: &Path) -> Result<(), RobotiqError> {
+    let mut port = open_raw(path, Duration::from_millis(5))?;
+    modbus::send_stop(&mut port).map_err(|e| RobotiqError::io("sending the stop bytes", e))
+}
+
+/// The FT 300 in lockstep with a simulation that owns the clock: on each `read`, when the next 10 ms
+/// frame is due in simulated time, `trigger` asks the device for one frame and the read waits (bounded
+/// by `wait`, wall-clock) until it has come through the port and the decoder. Samples are stamped and
+/// aged in simulated time. The port, decoder and health are those of [`Ft300`].
+pub struct Lockstep<R, C, T> {
+    reader: RawReader<R>,
+    state: LinkState,
+    clock: C,
+    trigger: T,
+    period: Duration,
+    next_due: Duration,
+    wait: Duration,
+}
+
+impl<R, C, T> Lockstep<R, C, T>
+where
+    R: std::io::Read,
+    C: FnMut() -> Duration,
+    T: FnMut(),
+{
+    /// A lockstep sensor reading `port` (already streaming), with simulated time from `clock`.
+    pub fn new(port: R, link: LinkConfig, period: Duration, mut clock: C, trigger: T) -> Self {
+        let now = clock();
+        Self {
+            reader: RawReader::new(port),
+            state: LinkState::new(link, now),
+            clock,
+            trigger,
+            period,
+            next_due: now,
+            wait: Duration::from_secs(2),
+        }
+    }
+
+    /// The counters.
+    pub fn counters(&self) -> Counters {
+        self.state.counters()
+    }
+
+    /// The health at the simulation's present.
+    pub fn health(&mut self) -> Health {
+        let now = (self.clock)();
+        self.state.health_at(now)
+    }
+
+    /// Average the next `cfg.samples` frames into the zero (simulated time does not move meanwhile).
+    pub fn zero(&mut self, cfg: ZeroConfig) -> Result<Wrench, RobotiqError> {
+        let mut raw = Vec::with_capacity(cfg.samples);
+        while raw.len() < cfg.samples {
+            let seq = self.state.seq();
+            self.pull()?;
+            match self.state.latest_counts() {
+                Some((c, s)) if s > seq => raw.push(c),
+                _ => {
+                    return Err(RobotiqError::ZeroTimeout {
+                        got: raw.len(),
+                        wanted: cfg.samples,
+                    });
+                }
+            }
+        }
+        let bias = zero_from(&raw, &cfg)?;
+        self.state.set_bias(bias);
+        Ok(bias)
+    }
+
+    /// Ask for one frame and read until it has been decoded or `wait` has passed.
+    fn pull(&mut self) -> Result<(), RobotiqError> {
+        let now = (self.clock)();
+        let seq = self.state.seq();
+        (self.trigger)();
+        let deadline = Instant::now() + self.wait;
+        while self.state.seq() == seq && Instant::now() < deadline {
+            let bytes = self
+                .reader
+                .poll()
+                .map_err(|e| RobotiqError::io("reading the stream", e))?;
+            self.state.on_bytes(bytes, now);
+        }
+        self.state.observe(now);
+        Ok(())
+    }
+}
+
+impl<R, C, T> ForceSensor for Lockstep<R, C, T>
+where
+    R: std::io::Read,
+    C: FnMut() -> Duration,
+    T: FnMut(),
+{
+    type Error = RobotiqError;
+
+    fn read(&mut self) -> Result<Sample, RobotiqError> {
+        let now = (self.clock)();
+        if now >= self.next_due {
+            self.pull()?;
+            while self.next_due <= now {
+                self.next_due += self.period;
+            }
+        }
+        self.state.sample_at(now)
+    }
+}
+
+/// Open `path` for raw stream reading (for [`Lockstep`]).
+pub fn open_stream_port(path: &Path) -> Result<impl std::io::Read + Send, RobotiqError> {
+    open_raw(path, Duration::from_millis(5))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
