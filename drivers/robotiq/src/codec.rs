@@ -285,12 +285,37 @@ impl StreamDecoder {
         }
     }
 
-    /// Push many bytes, calling `on` for every event.
-    pub fn feed(&mut self, bytes: &[u8], mut on: impl FnMut(Event)) {
-        for &b in bytes {
-            if let Some(e) = self.push(b) {
+    /// Push many bytes, calling `on` for every event. Same events as pushing them one by one; a frame
+    /// that starts aligned in `bytes` is checked in place (the common case: whole frames per read).
+    pub fn feed(&mut self, mut bytes: &[u8], mut on: impl FnMut(Event)) {
+        while let Some((&first, rest)) = bytes.split_first() {
+            if self.len == 0
+                && let Some(f) = bytes.first_chunk::<FRAME_LEN>()
+                && f[..2] == HEADER
+            {
+                self.counters.bytes += FRAME_LEN as u64;
+                bytes = &bytes[FRAME_LEN..];
+                match decode_frame(f) {
+                    Ok(c) => {
+                        self.counters.frames += 1;
+                        on(Event::Frame(c));
+                    }
+                    Err(_) => {
+                        self.counters.crc_errors += 1;
+                        // As in `push`: the real frame may start inside this candidate.
+                        self.buf[..FRAME_LEN - 1].copy_from_slice(&f[1..]);
+                        self.len = FRAME_LEN - 1;
+                        self.skipped(1);
+                        self.realign(0);
+                        on(Event::CrcError);
+                    }
+                }
+                continue;
+            }
+            if let Some(e) = self.push(first) {
                 on(e);
             }
+            bytes = rest;
         }
     }
 }

@@ -165,22 +165,19 @@ impl LinkState {
         self.last_byte = Some(now);
         let mut frames = 0;
         let mut decoder = core::mem::take(&mut self.decoder);
-        for &b in bytes {
-            match decoder.push(b) {
-                Some(Event::Frame(counts)) => {
-                    frames += 1;
-                    self.record(false);
-                    let seq = self.latest.map_or(1, |l| l.seq + 1);
-                    self.latest = Some(Latest {
-                        counts,
-                        seq,
-                        stamp: now,
-                    });
-                }
-                Some(Event::CrcError) => self.record(true),
-                None => {}
+        decoder.feed(bytes, |e| match e {
+            Event::Frame(counts) => {
+                frames += 1;
+                self.record(false);
+                let seq = self.latest.map_or(1, |l| l.seq + 1);
+                self.latest = Some(Latest {
+                    counts,
+                    seq,
+                    stamp: now,
+                });
             }
-        }
+            Event::CrcError => self.record(true),
+        });
         self.decoder = decoder;
         let d = self.decoder.counters();
         self.counters.bytes = d.bytes;

@@ -96,3 +96,44 @@ proptest! {
         prop_assert!(got.len() <= 3);
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2000))]
+
+    /// `feed` (whole reads, aligned frames checked in place) gives exactly the events and counters of
+    /// pushing the same bytes one by one, however the stream is cut into reads.
+    #[test]
+    fn feeding_reads_equals_pushing_bytes(
+        noise in proptest::collection::vec(
+            prop_oneof![any::<u8>(), Just(0x20u8), Just(0x4Eu8)], 0..300),
+        frames in proptest::collection::vec((counts(), 0usize..300, any::<bool>()), 0..10),
+        cuts in proptest::collection::vec(1usize..40, 1..30),
+    ) {
+        let mut bytes = noise;
+        for (c, at, corrupt) in frames {
+            let at = at.min(bytes.len());
+            let mut f = encode_frame(c);
+            if corrupt {
+                f[3] ^= 0x08;
+            }
+            bytes.splice(at..at, f);
+        }
+        let mut one = StreamDecoder::new();
+        let mut by_byte = Vec::new();
+        for &b in &bytes {
+            by_byte.extend(one.push(b));
+        }
+        let mut fed = StreamDecoder::new();
+        let mut by_read = Vec::new();
+        let mut rest = &bytes[..];
+        let mut k = 0;
+        while !rest.is_empty() {
+            let n = cuts[k % cuts.len()].min(rest.len());
+            fed.feed(&rest[..n], |e| by_read.push(e));
+            rest = &rest[n..];
+            k += 1;
+        }
+        prop_assert_eq!(by_read, by_byte);
+        prop_assert_eq!(fed.counters(), one.counters());
+    }
+}
