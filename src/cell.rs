@@ -24,6 +24,7 @@
 //! slot = 0
 //! poll_hz = 1000.0
 //! tare = true                       # bias at start: the tool must be in free air and still
+//! # or: kind = "robotiq", port = "/dev/ttyUSB0", slave = 9, zero = true (Robotiq FT 300)
 //!
 //! [gravity]                         # optional: the tool model (least-squares fit, controller::gravity)
 //! signed_mass = 2.0                 # kg, sign as fitted
