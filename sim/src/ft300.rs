@@ -139,10 +139,13 @@ struct Ctl {
 }
 
 impl Ctl {
-    /// The wrench now, with noise, quantised. Holds the last value through a dropout.
+    /// The wrench now, with noise, quantised.
     fn counts(&mut self) -> Counts {
         let t = self.t0.elapsed();
-        if let Some(w) = self.source.wrench(t) {
+        // A dropout or a non-finite model value: the device has no such thing, it repeats its last value.
+        if let Some(w) = self.source.wrench(t)
+            && w.is_finite()
+        {
             self.last = w;
         }
         let mut a = self.last.to_array();
