@@ -122,7 +122,7 @@ fn bad_crc_frames_never_become_samples() {
 fn a_header_inside_the_payload_is_not_a_frame_boundary() {
     let (sim, mut ft) = start(false);
     let before = ft.counters();
-    for _ in 0..5 {
+    for _ in 0..10 {
         sim.inject(StreamFault::HeaderInPayload);
     }
     let samples = collect_until(&mut ft, |ft| {
@@ -176,8 +176,18 @@ fn a_garbage_burst_is_skipped() {
 fn a_stall_makes_the_link_stale_then_lost_and_it_recovers() {
     let (sim, mut ft) = start(false);
     sim.inject(StreamFault::Stall(Duration::from_millis(500)));
-    wait_until("stale", || ft.health() == Health::Stale);
-    assert!(matches!(ft.read(), Err(RobotiqError::Stale { .. })));
+    // Stale from 80 ms without a byte, lost from 160 ms without a frame. The exact boundaries are
+    // unit-tested on LinkState with given times; here a loaded machine may let a poll miss the short
+    // stale window, so only what is seen is checked.
+    wait_until("a fault state", || {
+        matches!(ft.health(), Health::Stale | Health::Lost)
+    });
+    if ft.health() == Health::Stale {
+        assert!(matches!(
+            ft.read(),
+            Err(RobotiqError::Stale { .. }) | Err(RobotiqError::LinkLost { .. })
+        ));
+    }
     wait_until("lost", || ft.health() == Health::Lost);
     assert_eq!(
         hal::Error::kind(&ft.read().unwrap_err()),
@@ -186,7 +196,8 @@ fn a_stall_makes_the_link_stale_then_lost_and_it_recovers() {
     wait_until("recovery", || ft.health() == Health::Ok);
     assert!(is_still(&ft.read().unwrap()));
     let c = ft.counters();
-    assert!(c.stale_events >= 1 && c.lost_events >= 1, "{c:?}");
+    assert!(c.lost_events >= 1, "{c:?}");
+    assert_eq!(c.crc_errors, 0);
 }
 
 #[test]
@@ -240,4 +251,28 @@ fn a_silent_port_is_a_clear_modbus_timeout_and_a_missing_one_an_io_error() {
         err.to_string().contains("/dev/forcecell-no-such-port"),
         "{err}"
     );
+}
+
+#[test]
+fn a_run_of_bad_frames_makes_the_link_corrupt_until_the_window_clears() {
+    let (sim, mut ft) = start(false);
+    let before = ft.counters();
+    for _ in 0..12 {
+        sim.inject(StreamFault::BadCrc);
+    }
+    let mut saw_corrupt = false;
+    let samples = collect_until(&mut ft, |ft| {
+        saw_corrupt |= ft.health() == Health::Corrupt;
+        sim.pending_faults() == 0 && saw_corrupt
+    });
+    assert!(matches!(ft.read(), Err(RobotiqError::Corrupt { .. })));
+    assert!(
+        samples.iter().all(is_still),
+        "a sample came from a bad frame"
+    );
+    wait_until("the CRC window to clear", || ft.health() == Health::Ok);
+    let c = ft.counters();
+    assert_eq!(c.crc_errors - before.crc_errors, 12);
+    assert_eq!(c.corrupt_events, 1);
+    assert!(is_still(&ft.read().unwrap()));
 }
