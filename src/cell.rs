@@ -24,6 +24,7 @@
 //! slot = 0
 //! poll_hz = 1000.0
 //! tare = true                       # bias at start: the tool must be in free air and still
+//! # or: kind = "robotiq", port = "/dev/ttyUSB0", slave = 9, zero = true (Robotiq FT 300)
 //!
 //! [gravity]                         # optional: the tool model (least-squares fit, controller::gravity)
 //! signed_mass = 2.0                 # kg, sign as fitted
@@ -127,6 +128,169 @@ pub enum SensorConfig {
         #[serde(default)]
         tare: bool,
     },
+    /// A Robotiq FT 300 (or FT 150) on a serial port: Modbus RTU start-up, then its 100 Hz stream.
+    Robotiq {
+        /// The serial device (never scanned for: this is the port).
+        port: PathBuf,
+        /// Modbus slave address.
+        #[serde(default = "default_slave")]
+        slave: u8,
+        /// Take a host-side zero at start (tool in free air, still).
+        #[serde(default)]
+        zero: bool,
+    },
+}
+
+fn default_slave() -> u8 {
+    robotiq::codec::SLAVE
+}
+
+impl SensorConfig {
+    /// Check the values of whichever sensor this is.
+    pub fn validate(&self) -> Result<()> {
+        match self {
+            Self::Ati {
+                base,
+                poll_hz,
+                slot,
+                ..
+            } => {
+                if *base > 0x7F {
+                    bail!("sensor.base must be a 7-bit identifier (0..=0x7F), got {base:#x}");
+                }
+                if *slot > 15 {
+                    bail!("sensor.slot must be 0..=15, got {slot}");
+                }
+                if !(poll_hz.is_finite() && *poll_hz > 0.0) {
+                    bail!("sensor.poll_hz must be > 0, got {poll_hz}");
+                }
+            }
+            Self::Robotiq { port, slave, .. } => {
+                if port.as_os_str().is_empty() {
+                    bail!("sensor.port must name the serial device");
+                }
+                if !(1..=247).contains(slave) {
+                    bail!("sensor.slave must be 1..=247, got {slave}");
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Start this sensor (taking a bias or zero at start when configured). The one place the app turns a
+    /// sensor kind into a running driver.
+    pub fn open(&self, zero_at_start: bool) -> Result<CellSensor> {
+        match self {
+            Self::Ati {
+                can,
+                base,
+                bitrate,
+                slot,
+                poll_hz,
+                ..
+            } => {
+                let base = ati_can::Base::new(*base)
+                    .ok_or_else(|| anyhow!("sensor.base must be 0..=0x7F, got {base:#x}"))?;
+                let ati_cfg = ati_can::Config {
+                    base,
+                    bitrate: *bitrate,
+                    slot: *slot,
+                    ..ati_can::Config::default()
+                };
+                let transport = ati_can::SocketCanTransport::open(can)?;
+                let mut driver = ati_can::Driver::new(transport, ati_cfg)?;
+                let info = driver
+                    .start()
+                    .with_context(|| format!("ATI sensor at base {base} on {can}"))?;
+                println!("sensor: {info:?}");
+                if zero_at_start {
+                    let bias = driver.tare(crate::ati::bias_config())?;
+                    println!("bias taken (counts): {bias:.1?}");
+                }
+                Ok(CellSensor::Ati(ati_can::AtiSensor::spawn(
+                    driver, *poll_hz,
+                )?))
+            }
+            Self::Robotiq { port, slave, .. } => {
+                let cfg = robotiq::Config {
+                    slave: *slave,
+                    ..robotiq::Config::new(port)
+                };
+                let ft = robotiq::Ft300::open(cfg)
+                    .with_context(|| format!("Robotiq FT 300 on {}", port.display()))?;
+                match ft.identity() {
+                    Some(id) => println!(
+                        "sensor: Robotiq {} serial {} ({})",
+                        id.firmware_text(),
+                        id.serial_text(),
+                        id.year
+                    ),
+                    None => println!("sensor: Robotiq FT 300, found streaming (identity not read)"),
+                }
+                if zero_at_start {
+                    let bias = ft.zero(crate::robotiq::zero_config())?;
+                    println!("zero taken (N, N·m): {:.3?}", bias.to_array());
+                }
+                Ok(CellSensor::Robotiq(Box::new(ft)))
+            }
+        }
+    }
+
+    /// True when the cell file asks for a bias/zero at start.
+    pub fn zero_at_start(&self) -> bool {
+        match self {
+            Self::Ati { tare, .. } => *tare,
+            Self::Robotiq { zero, .. } => *zero,
+        }
+    }
+}
+
+/// A running cell sensor, whichever kind.
+pub enum CellSensor {
+    /// ATI over CAN, polled in the background.
+    Ati(ati_can::AtiSensor),
+    /// Robotiq FT 300, its stream read in the background.
+    Robotiq(Box<robotiq::Ft300>),
+}
+
+/// The error of a [`CellSensor`].
+#[derive(Debug)]
+pub enum CellSensorError {
+    /// From the ATI driver.
+    Ati(ati_can::AtiError),
+    /// From the Robotiq driver.
+    Robotiq(robotiq::RobotiqError),
+}
+
+impl std::fmt::Display for CellSensorError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Ati(e) => write!(f, "ATI: {e}"),
+            Self::Robotiq(e) => write!(f, "Robotiq: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for CellSensorError {}
+
+impl hal::Error for CellSensorError {
+    fn kind(&self) -> hal::ErrorKind {
+        match self {
+            Self::Ati(e) => e.kind(),
+            Self::Robotiq(e) => e.kind(),
+        }
+    }
+}
+
+impl ForceSensor for CellSensor {
+    type Error = CellSensorError;
+
+    fn read(&mut self) -> Result<hal::Sample, CellSensorError> {
+        match self {
+            Self::Ati(s) => s.read().map_err(CellSensorError::Ati),
+            Self::Robotiq(s) => s.read().map_err(CellSensorError::Robotiq),
+        }
+    }
 }
 
 fn default_base() -> u8 {
@@ -228,21 +392,7 @@ impl CellConfig {
                 bail!("robot.{n} must be > 0 mm, got {v}");
             }
         }
-        let SensorConfig::Ati {
-            base,
-            poll_hz,
-            slot,
-            ..
-        } = &self.sensor;
-        if *base > 0x7F {
-            bail!("sensor.base must be a 7-bit identifier (0..=0x7F), got {base:#x}");
-        }
-        if *slot > 15 {
-            bail!("sensor.slot must be 0..=15, got {slot}");
-        }
-        if !(poll_hz.is_finite() && *poll_hz > 0.0) {
-            bail!("sensor.poll_hz must be > 0, got {poll_hz}");
-        }
+        self.sensor.validate()?;
         if let Some(g) = &self.gravity {
             let all = [g.signed_mass, g.max_age]
                 .into_iter()
@@ -406,36 +556,10 @@ where
 fn open_devices(
     cfg: &CellConfig,
     tuning: &Tuning,
-    tare: bool,
-) -> Result<(kuka_rsi::RsiLink, ati_can::AtiSensor)> {
+    zero_at_start: bool,
+) -> Result<(kuka_rsi::RsiLink, CellSensor)> {
     let link_cfg = cfg.link_config(tuning)?;
-    let SensorConfig::Ati {
-        can,
-        base,
-        bitrate,
-        slot,
-        poll_hz,
-        ..
-    } = &cfg.sensor;
-    let base = ati_can::Base::new(*base)
-        .ok_or_else(|| anyhow!("sensor.base must be 0..=0x7F, got {base:#x}"))?;
-    let ati_cfg = ati_can::Config {
-        base,
-        bitrate: *bitrate,
-        slot: *slot,
-        ..ati_can::Config::default()
-    };
-    let transport = ati_can::SocketCanTransport::open(can)?;
-    let mut driver = ati_can::Driver::new(transport, ati_cfg)?;
-    let info = driver
-        .start()
-        .with_context(|| format!("ATI sensor at base {base} on {can}"))?;
-    println!("sensor: {info:?}");
-    if tare {
-        let bias = driver.tare(crate::ati::bias_config())?;
-        println!("bias taken (counts): {bias:.1?}");
-    }
-    let sensor = ati_can::AtiSensor::spawn(driver, *poll_hz)?;
+    let sensor = cfg.sensor.open(zero_at_start)?;
     let link = kuka_rsi::RsiLink::bind(link_cfg).context("RSI link")?;
     Ok((link, sensor))
 }
@@ -446,8 +570,7 @@ pub fn run(path: &Path) -> Result<()> {
     let tuning = cfg.tuning()?;
     std::fs::create_dir_all(&cfg.record)
         .with_context(|| format!("cannot create {}", cfg.record.display()))?;
-    let SensorConfig::Ati { tare, .. } = cfg.sensor;
-    let (link, sensor) = open_devices(&cfg, &tuning, tare)?;
+    let (link, sensor) = open_devices(&cfg, &tuning, cfg.sensor.zero_at_start())?;
     println!(
         "listening on {} for the robot at {} ({} ms cycle, tuning {}); start RSI on the robot now, Ctrl-C ends with a clean Stop",
         cfg.robot.listen, cfg.robot.robot_ip, cfg.robot.cycle_ms, tuning.name

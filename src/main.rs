@@ -40,18 +40,79 @@ enum Command {
     Tune(TuneArgs),
     /// Run the B scenarios on P1 and P2 with the robust and the paper's tuning: one table, plots in OUT.
     BenchScenarios(BenchArgs),
-    /// Run a simulated sensor node alone on a CAN interface.
-    SimSensor(SimSensorArgs),
+    /// Run a simulated sensor alone: an ATI node on a CAN interface, or a Robotiq FT 300 on a
+    /// pseudo-terminal.
+    #[command(subcommand)]
+    SimSensor(SimSensorKind),
     /// Talk to a force/torque sensor: identity, readings, bias.
-    Sensor(SensorArgs),
+    #[command(subcommand)]
+    Sensor(SensorKind),
 }
 
-/// Which sensor on which CAN interface (shared by `sim-sensor` and `sensor`).
+#[derive(Subcommand)]
+enum SimSensorKind {
+    /// ATI NETCANOEM node on a SocketCAN interface.
+    Ati(SimSensorArgs),
+    /// Robotiq FT 300 on a new pseudo-terminal: prints the device path to connect to.
+    Robotiq(RobotiqSimArgs),
+}
+
+#[derive(Subcommand)]
+enum SensorKind {
+    /// ATI NETCANOEM over CAN.
+    Ati(SensorArgs),
+    /// Robotiq FT 300 over a serial port (Modbus RTU, then the 100 Hz stream).
+    Robotiq(RobotiqSensorArgs),
+}
+
+#[derive(Args)]
+struct RobotiqSimArgs {
+    /// Also make PATH a symbolic link to the device (removed at exit).
+    #[arg(long)]
+    link: Option<PathBuf>,
+    /// Constant Fz the sensor reports, N.
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
+    fz: f64,
+    /// Force noise, N (standard deviation; torque noise is a hundredth of it in N·m).
+    #[arg(long, default_value_t = 0.02)]
+    noise: f64,
+    /// Stream from the start, like a sensor left streaming at power-up.
+    #[arg(long)]
+    streaming: bool,
+    /// Stop after this many seconds (default: run until interrupted).
+    #[arg(long)]
+    seconds: Option<f64>,
+}
+
+#[derive(Args)]
+struct RobotiqSensorArgs {
+    /// The serial device (e.g. /dev/ttyUSB0, or the path `sim-sensor robotiq` printed). Never scanned for.
+    #[arg(long)]
+    port: PathBuf,
+    #[command(subcommand)]
+    action: RobotiqCommand,
+}
+
+#[derive(Subcommand)]
+enum RobotiqCommand {
+    /// Identity (firmware, serial number, year) and the wrench registers, over Modbus.
+    Info,
+    /// Start the stream and print readings (N, N·m, zero removed), ten per second.
+    Read {
+        /// Lines to print.
+        #[arg(long, default_value_t = 20)]
+        count: u32,
+        /// Take a zero first (hold the sensor still, unloaded).
+        #[arg(long)]
+        zero: bool,
+    },
+    /// Take a host-side zero over 50 frames and print it (refused while the wrench moves).
+    Zero,
+}
+
+/// Which sensor on which CAN interface (shared by `sim-sensor ati` and `sensor ati`).
 #[derive(Args)]
 struct CanSensorArgs {
-    /// Sensor family (only `ati`: ATI NETCANOEM over CAN).
-    #[arg(value_parser = ["ati"])]
-    kind: String,
     /// CAN interface, e.g. can0 or vcan0.
     #[arg(long)]
     can: String,
@@ -200,9 +261,10 @@ struct SimArgs {
     /// Exit with status 1 when a scenario target is missed.
     #[arg(long)]
     check: bool,
-    /// Force sensor: `ati` (the ATI CAN driver against a simulated node, in lockstep) or `inproc`
-    /// (the world's sensor model read directly, no wire).
-    #[arg(long, default_value = "ati", value_parser = ["ati", "inproc"])]
+    /// Force sensor: `ati` (the ATI CAN driver against a simulated node, in lockstep), `robotiq` (the FT 300
+    /// driver against a simulated sensor over a pseudo-terminal, one frame per 10 ms of simulated time)
+    /// or `inproc` (the world's sensor model read directly, no wire).
+    #[arg(long, default_value = "ati", value_parser = ["ati", "robotiq", "inproc"])]
     sensor: String,
     /// Run the ATI sensor over this SocketCAN interface (e.g. vcan0) instead of the in-memory bus.
     #[arg(long)]
@@ -228,7 +290,7 @@ fn main() -> ExitCode {
         }
         Command::Tune(a) => tune(a),
         Command::BenchScenarios(a) => bench_scenarios(a),
-        Command::SimSensor(a) => forcecell::ati::sim_sensor(
+        Command::SimSensor(SimSensorKind::Ati(a)) => forcecell::ati::sim_sensor(
             &a.bus.can,
             a.bus.base,
             hal::Wrench::from_array([0.0, 0.0, a.fz, 0.0, 0.0, 0.0]),
@@ -236,7 +298,25 @@ fn main() -> ExitCode {
             a.seconds,
         )
         .map(|()| ExitCode::SUCCESS),
-        Command::Sensor(a) => sensor(a),
+        Command::SimSensor(SimSensorKind::Robotiq(a)) => forcecell::robotiq::sim_sensor(
+            a.link,
+            hal::Wrench::from_array([0.0, 0.0, a.fz, 0.0, 0.0, 0.0]),
+            a.noise,
+            a.streaming,
+            a.seconds,
+        )
+        .map(|()| ExitCode::SUCCESS),
+        Command::Sensor(SensorKind::Ati(a)) => sensor(a),
+        Command::Sensor(SensorKind::Robotiq(a)) => {
+            let action = match a.action {
+                RobotiqCommand::Info => forcecell::robotiq::SensorAction::Info,
+                RobotiqCommand::Zero => forcecell::robotiq::SensorAction::Zero,
+                RobotiqCommand::Read { count, zero } => {
+                    forcecell::robotiq::SensorAction::Read { count, zero }
+                }
+            };
+            forcecell::robotiq::sensor(&a.port, action).map(|()| ExitCode::SUCCESS)
+        }
     };
     match result {
         Ok(code) => code,
@@ -275,23 +355,26 @@ fn sim(a: SimArgs) -> Result<ExitCode> {
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create output directory {}", a.out.display()))?;
     let mut bar = DelayedBar::new(Duration::from_millis(300));
-    if a.sensor == "inproc" && a.can.is_some() {
+    if a.sensor != "ati" && a.can.is_some() {
         anyhow::bail!("--can needs --sensor ati");
     }
     println!(
         "sensor: {}",
         match (a.sensor.as_str(), a.can.as_deref()) {
             ("inproc", _) => "in-process sensor model".to_string(),
+            ("robotiq", _) =>
+                "Robotiq FT 300 driver ↔ simulated sensor on a pseudo-terminal (100 Hz, lockstep)"
+                    .to_string(),
             (_, None) => "ATI driver ↔ simulated node, in-memory CAN bus".to_string(),
             (_, Some(iface)) => format!("ATI driver ↔ simulated node on {iface}"),
         }
     );
     println!("robot: {}", a.robot.describe());
     let robot = forcecell::rsi::RobotSide::start(&spec, &a.robot)?;
-    let (run, wire) = if a.sensor == "inproc" {
-        robot.run_inproc_sensor(&mut |frac| bar.update(frac))?
-    } else {
-        forcecell::ati::run_sim_with(robot, a.can.as_deref(), &mut |frac| bar.update(frac))?
+    let (run, wire) = match a.sensor.as_str() {
+        "inproc" => robot.run_inproc_sensor(&mut |frac| bar.update(frac))?,
+        "robotiq" => forcecell::robotiq::run_sim_with(robot, &mut |frac| bar.update(frac))?,
+        _ => forcecell::ati::run_sim_with(robot, a.can.as_deref(), &mut |frac| bar.update(frac))?,
     };
     bar.finish();
     if let Some(w) = &wire {

@@ -142,8 +142,13 @@ fn bad_cell_files_are_refused_with_the_reason() {
             "base",
         ),
         (
+            CELL.replace("kind = \"ati\"", "kind = \"kistler\""),
+            "kistler",
+        ),
+        (
+            // A Robotiq sensor has a serial port, not a CAN interface.
             CELL.replace("kind = \"ati\"", "kind = \"robotiq\""),
-            "robotiq",
+            "unknown field `can`",
         ),
         (
             format!("{CELL}\n[gravity]\nsigned_mass = nan\nmass_moment = [0.0, 0.0, 0.0]\n"),

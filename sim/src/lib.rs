@@ -3,6 +3,7 @@
 #![cfg_attr(not(test), warn(missing_docs))]
 
 pub mod ati_node;
+pub mod ft300;
 pub mod inner;
 pub mod krc;
 pub mod plant;
