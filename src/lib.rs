@@ -8,6 +8,7 @@ pub mod cell;
 pub mod metrics;
 pub mod plot;
 pub mod record;
+pub mod recorder;
 pub mod rsi;
 pub mod runner;
 pub mod scenario;

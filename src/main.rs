@@ -281,7 +281,11 @@ fn sim(a: SimArgs) -> Result<ExitCode> {
         }
     );
     println!("robot: {}", a.robot.describe());
-    let robot = forcecell::rsi::RobotSide::start(&spec, &a.robot)?;
+    let mut robot = forcecell::rsi::RobotSide::start(&spec, &a.robot)?;
+    let mcap = a.out.join(format!("{}.mcap", spec.file_stem()));
+    let (tx, recording) =
+        forcecell::runner::start_recording(&spec, &mcap, robot.is_realtime(&a.robot), None)?;
+    robot.record_to(tx);
     let (run, wire) = if a.sensor == "inproc" {
         robot.run_inproc_sensor(&mut |frac| bar.update(frac))?
     } else {
@@ -291,7 +295,10 @@ fn sim(a: SimArgs) -> Result<ExitCode> {
     if let Some(w) = &wire {
         w.print();
     }
-    report(&spec, &run, &a.out, a.check)
+    let recorded = recording.finish(run.rows.clone())?;
+    let code = report(&spec, &run, &a.out, a.check)?;
+    println!("recorded {recorded}");
+    Ok(code)
 }
 
 fn tune(a: TuneArgs) -> Result<ExitCode> {

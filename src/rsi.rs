@@ -19,7 +19,8 @@ use kuka_rsi::{
 use sim::krc::{Krc, KrcConfig, KrcEnd, KrcReport, Timing};
 use sim::{InProcRobot, InProcSensor, InnerLoopModel, SharedWorld};
 
-use crate::runner::{RunResult, RunSpec, run_with};
+use crate::recorder::Recorder;
+use crate::runner::{RunResult, RunSpec, run_recorded};
 
 /// Which robot backend `forcecell sim` drives.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -130,6 +131,7 @@ pub struct RobotSide {
     spec: RunSpec,
     world: SharedWorld,
     kind: Kind,
+    recorder: Option<Recorder>,
 }
 
 enum Kind {
@@ -151,6 +153,7 @@ impl RobotSide {
             world: spec.world(),
             spec: spec.clone(),
             kind: Kind::Inproc,
+            recorder: None,
         }
     }
 
@@ -171,6 +174,17 @@ impl RobotSide {
     /// The scenario as this robot runs it (an external robot sets the period and the inner loop).
     pub fn spec(&self) -> &RunSpec {
         &self.spec
+    }
+
+    /// Hand every cycle's record to `recorder` during [`RobotSide::run`].
+    pub fn record_to(&mut self, recorder: Recorder) {
+        self.recorder = Some(recorder);
+    }
+
+    /// Whether this robot keeps the wall clock (the simulated controller in real time, an external
+    /// robot) rather than stepping in lockstep with the loop.
+    pub fn is_realtime(&self, args: &RsiArgs) -> bool {
+        args.external_robot.is_some() || (args.robot == RobotBackend::Rsi && args.realtime)
     }
 
     /// The world the robot moves; a sensor backend measures it.
@@ -223,6 +237,7 @@ impl RobotSide {
                 krc,
                 abort,
             },
+            recorder: None,
         })
     }
 
@@ -257,6 +272,7 @@ impl RobotSide {
             kind: Kind::External {
                 link: Box::new(link),
             },
+            recorder: None,
         })
     }
 
@@ -270,18 +286,26 @@ impl RobotSide {
         S: ForceSensor,
         S::Error: Send + Sync + 'static,
     {
-        let Self { spec, world, kind } = self;
+        let Self {
+            spec,
+            world,
+            kind,
+            recorder,
+        } = self;
         match kind {
             Kind::Inproc => {
                 let robot = InProcRobot::new(world.clone());
-                Ok((run_with(&spec, &world, robot, sensor, progress)?, None))
+                Ok((
+                    run_recorded(&spec, &world, robot, sensor, recorder, progress)?,
+                    None,
+                ))
             }
             Kind::Simulated {
                 mut link,
                 krc,
                 abort,
             } => {
-                let result = run_with(&spec, &world, &mut *link, sensor, progress);
+                let result = run_recorded(&spec, &world, &mut *link, sensor, recorder, progress);
                 abort.store(true, Ordering::Relaxed);
                 let report = krc
                     .join()
@@ -303,7 +327,7 @@ impl RobotSide {
                     link: &mut link,
                     world: world.clone(),
                 };
-                let run = run_with(&spec, &world, robot, sensor, progress)?;
+                let run = run_recorded(&spec, &world, robot, sensor, recorder, progress)?;
                 Ok((
                     run,
                     Some(WireSummary {
