@@ -33,8 +33,10 @@ enum Command {
     Sim(SimArgs),
     /// Write the robot-side KUKA RSI files (Ethernet config XML, KRL template) for this configuration.
     RsiConfig(forcecell::rsi::RsiConfigArgs),
-    /// Plot a recorded trace (CSV written by `sim` or `run`) to PNG and print its metrics.
+    /// Plot a recorded trace (MCAP or CSV written by `sim` or `run`) to PNG and print its metrics.
     Plot(PlotArgs),
+    /// Export an MCAP recording as a CSV trace (the columns `sim` and `run` write).
+    Export(ExportArgs),
     /// Judge a tuning (damping ratio, delay margin) or propose impedance parameters for a stiffness range
     /// and the robot's loop.
     Tune(TuneArgs),
@@ -171,8 +173,20 @@ struct CalibrateArgs {
 }
 
 #[derive(Args)]
+struct ExportArgs {
+    /// The recording, MCAP.
+    mcap: PathBuf,
+    /// Write a CSV trace (the only export so far).
+    #[arg(long, required = true)]
+    csv: bool,
+    /// The CSV to write (default: the recording's path with .csv).
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+#[derive(Args)]
 struct PlotArgs {
-    /// The trace, CSV.
+    /// The trace: an MCAP recording or a CSV.
     csv: PathBuf,
     /// The PNG to write (default: the CSV's path with .png).
     #[arg(long)]
@@ -221,6 +235,7 @@ fn main() -> ExitCode {
             ExitCode::SUCCESS
         }),
         Command::Plot(a) => plot_trace(a),
+        Command::Export(a) => export(a),
         Command::Run(a) => forcecell::cell::run(&a.config).map(|()| ExitCode::SUCCESS),
         Command::Calibrate(a) => {
             forcecell::cell::calibrate(&a.config, a.poses).map(|()| ExitCode::SUCCESS)
@@ -357,10 +372,28 @@ fn sensor(a: SensorArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+fn export(a: ExportArgs) -> Result<ExitCode> {
+    let (rows, truncated) = forcecell::recorder::load_trace(&a.mcap)?;
+    if let Some(why) = truncated {
+        eprintln!(
+            "note: {} ends early ({why}): exported up to its last complete record",
+            a.mcap.display()
+        );
+    }
+    let csv = a.out.unwrap_or_else(|| a.mcap.with_extension("csv"));
+    record::write_csv_file(&csv, &rows)?;
+    println!("wrote {} ({} rows)", csv.display(), rows.len());
+    Ok(ExitCode::SUCCESS)
+}
+
 fn plot_trace(a: PlotArgs) -> Result<ExitCode> {
-    let text = std::fs::read_to_string(&a.csv)
-        .with_context(|| format!("cannot read {}", a.csv.display()))?;
-    let rows = record::read_csv(&text).with_context(|| format!("{}", a.csv.display()))?;
+    let (rows, truncated) = forcecell::recorder::load_trace(&a.csv)?;
+    if let Some(why) = truncated {
+        eprintln!(
+            "note: {} ends early ({why}): plotted up to its last complete record",
+            a.csv.display()
+        );
+    }
     if rows.is_empty() {
         anyhow::bail!("{}: the trace has no rows", a.csv.display());
     }

@@ -675,10 +675,7 @@ impl Writer {
             }
             Err(e) => {
                 if self.summary.error.is_none() {
-                    eprintln!(
-                        "recording: cannot finish {}: {e}",
-                        self.path.display()
-                    );
+                    eprintln!("recording: cannot finish {}: {e}", self.path.display());
                     self.summary.error = Some(e);
                 }
             }
@@ -716,7 +713,9 @@ pub struct ReadBack {
 }
 
 fn num(v: &serde_json::Value, k: &str) -> f64 {
-    v.get(k).and_then(serde_json::Value::as_f64).unwrap_or(f64::NAN)
+    v.get(k)
+        .and_then(serde_json::Value::as_f64)
+        .unwrap_or(f64::NAN)
 }
 
 /// Read a forcecell MCAP recording back into trace rows (for `export` and `plot`). A file that ends
@@ -799,5 +798,20 @@ fn nan_row() -> Row {
         k_c: f64::NAN,
         x_c: f64::NAN,
         fault: 0,
+    }
+}
+
+/// Read a trace from a file: an MCAP recording (by its magic) or a CSV. Returns the rows and, for an
+/// MCAP file that ends early, why.
+pub fn load_trace(path: &Path) -> Result<(Vec<Row>, Option<String>)> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    if bytes.starts_with(mcap::MAGIC) {
+        let back = read_mcap(&bytes).with_context(|| format!("{}", path.display()))?;
+        Ok((back.rows, back.truncated))
+    } else {
+        let text = String::from_utf8(bytes)
+            .map_err(|_| anyhow!("{}: neither an MCAP file nor a CSV trace", path.display()))?;
+        let rows = crate::record::read_csv(&text).with_context(|| format!("{}", path.display()))?;
+        Ok((rows, None))
     }
 }

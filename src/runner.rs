@@ -245,7 +245,10 @@ pub fn start_recording(
     meta.insert("plant".to_string(), spec.plant_label.clone());
     meta.insert("tuning".to_string(), spec.tuning.name.clone());
     meta.insert("period_s".to_string(), spec.plant.period.to_string());
-    meta.insert("segment".to_string(), "0 (segments not yet recorded)".into());
+    meta.insert(
+        "segment".to_string(),
+        "0 (segments not yet recorded)".into(),
+    );
     let opts = RecorderOptions {
         full: if realtime { Full::Drop } else { Full::Wait },
         attachments: vec![

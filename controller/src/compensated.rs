@@ -11,7 +11,9 @@ use core::cell::Cell;
 use core::fmt;
 use std::rc::Rc;
 
-use hal::{Correction, Cycle, Error as HalError, ErrorKind, ForceSensor, RobotLink, Sample, Wrench};
+use hal::{
+    Correction, Cycle, Error as HalError, ErrorKind, ForceSensor, RobotLink, Sample, Wrench,
+};
 
 use crate::gravity::{Compensator, GravityError, Orientation};
 
