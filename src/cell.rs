@@ -1,10 +1,10 @@
 //! `forcecell run`: the controller on a real cell, wired from one TOML file — the KUKA RSI link, the ATI
-//! sensor polled over SocketCAN, gravity compensation, a tuning — recorded to CSV and plotted.
+//! sensor polled over SocketCAN, gravity compensation, a tuning — recorded to MCAP (CSV exported) and plotted.
 //!
 //! ```toml
 //! tuning = "robust"                 # built-in name or a tuning file
 //! duration = 60.0                   # s of robot time; omit to run until the robot stops sending
-//! record = "recordings"             # the trace goes to record/run-<unix time>.csv (+ .png)
+//! record = "recordings"             # record/run-<unix time>.mcap, streamed (+ .csv, .png exported from it)
 //!
 //! [robot]
 //! listen = "192.168.1.100:49152"    # IP_NUMBER:PORT of the robot's Ethernet config
@@ -49,6 +49,7 @@ use kuka_rsi::{CorrectionMode, EthernetConfig, Limits, LinkConfig, PoscorrLimits
 use serde::Deserialize;
 
 use crate::record::Row;
+use crate::recorder::{Record, Recorder, RecorderOptions};
 use crate::scenario::load_tuning;
 
 /// The robot side of a cell.
@@ -362,6 +363,26 @@ where
     R::Error: Send + Sync + 'static,
     S::Error: Send + Sync + 'static,
 {
+    run_cell_recorded(cfg, tuning, robot, sensor, stop, None)
+}
+
+/// [`run_cell`] with every cycle's record (raw and compensated wrench, state, diagnostics) handed to
+/// `recorder` instead of collected: the cycle then neither allocates nor writes, and
+/// [`CellOutcome::rows`] stays empty (the recording holds the trace).
+pub fn run_cell_recorded<R, S>(
+    cfg: &CellConfig,
+    tuning: &Tuning,
+    robot: R,
+    sensor: S,
+    stop: &AtomicBool,
+    mut recorder: Option<Recorder>,
+) -> Result<CellOutcome>
+where
+    R: RobotLink,
+    S: ForceSensor,
+    R::Error: Send + Sync + 'static,
+    S::Error: Send + Sync + 'static,
+{
     let law = tuning.law.build().map_err(|e| anyhow!(e))?;
     let f_r = law.set_point();
     let orientation = shared_orientation();
@@ -375,7 +396,15 @@ where
         }
         match lp.cycle() {
             Ok(r) => {
-                rows.push(Row::from_report(&r, f_r));
+                if let Some(tx) = &mut recorder {
+                    let mut rec = Record::from_report(&r, f_r, 0);
+                    if let Some(raw) = lp.sensor_mut().last_raw() {
+                        rec.wrench_raw = raw.to_array();
+                    }
+                    tx.push(rec);
+                } else {
+                    rows.push(Row::from_report(&r, f_r));
+                }
                 if cfg.duration.is_some_and(|d| r.cycle.t >= d) {
                     break format!("{} s of robot time done", r.cycle.t);
                 }
@@ -453,7 +482,12 @@ pub fn run(path: &Path) -> Result<()> {
     let flag = stop.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
         .context("cannot install the Ctrl-C handler")?;
-    let out = run_cell(&cfg, &tuning, link, sensor, &stop)?;
+    let stamp = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let mcap = cfg.record.join(format!("run-{stamp}.mcap"));
+    let (tx, recording) = crate::recorder::start(&mcap, recording_options(path, &tuning), None)?;
+    let out = run_cell_recorded(&cfg, &tuning, link, sensor, &stop, Some(tx))?;
     println!(
         "{}; {} cycles, {} sensor faults, {} limited; Stop {}",
         out.ended,
@@ -466,7 +500,49 @@ pub fn run(path: &Path) -> Result<()> {
             "not sent (the link was gone)"
         }
     );
-    write_recording(&cfg.record, &out.rows)
+    let recorded = recording.finish(Vec::new())?;
+    println!("recorded {recorded}");
+    export_recording(&mcap)
+}
+
+/// A cell run's recording: the cell file and the tuning attached.
+fn recording_options(cell_file: &Path, tuning: &Tuning) -> RecorderOptions {
+    let mut attachments = Vec::new();
+    if let Ok(text) = std::fs::read(cell_file) {
+        attachments.push(("cell.toml".to_string(), "application/toml".into(), text));
+    }
+    if let Ok(text) = toml::to_string(tuning) {
+        attachments.push((
+            format!("tuning-{}.toml", tuning.name),
+            "application/toml".into(),
+            text.into_bytes(),
+        ));
+    }
+    RecorderOptions {
+        attachments,
+        ..RecorderOptions::default()
+    }
+}
+
+/// The CSV and PNG of a run, exported from its recording.
+fn export_recording(mcap: &Path) -> Result<()> {
+    let (rows, truncated) = crate::recorder::load_trace(mcap)?;
+    if let Some(why) = truncated {
+        println!("note: the recording ends early ({why})");
+    }
+    if rows.is_empty() {
+        println!("nothing to export: no cycle was recorded");
+        return Ok(());
+    }
+    let csv = mcap.with_extension("csv");
+    let png = mcap.with_extension("png");
+    crate::record::write_csv_file(&csv, &rows)?;
+    let title = mcap
+        .file_stem()
+        .map_or("run".into(), |s| s.to_string_lossy().into_owned());
+    crate::plot::write_png(&png, &format!("forcecell {title}"), &rows)?;
+    println!("wrote {} and {}", csv.display(), png.display());
+    Ok(())
 }
 
 /// `forcecell calibrate --config FILE --poses N`: while the robot's program holds the tool still in free
@@ -521,20 +597,4 @@ pub fn gravity_section(m: &GravityModel, mount: UnitQuaternion<f64>) -> String {
         v(&mount.scaled_axis()),
         default_max_age()
     )
-}
-
-fn write_recording(dir: &Path, rows: &[Row]) -> Result<()> {
-    if rows.is_empty() {
-        println!("nothing to record: no cycle was answered");
-        return Ok(());
-    }
-    let stamp = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs());
-    let csv = dir.join(format!("run-{stamp}.csv"));
-    let png = csv.with_extension("png");
-    crate::record::write_csv_file(&csv, rows)?;
-    crate::plot::write_png(&png, &format!("forcecell run {stamp}"), rows)?;
-    println!("wrote {} and {}", csv.display(), png.display());
-    Ok(())
 }

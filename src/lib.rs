@@ -9,6 +9,7 @@ pub mod metrics;
 pub mod plot;
 pub mod record;
 pub mod recorder;
+pub mod rig;
 pub mod rsi;
 pub mod runner;
 pub mod scenario;

@@ -211,6 +211,20 @@ impl Recorder {
     }
 }
 
+/// A recorder's queue of `capacity` records (allocated here, once) and its consumer end, for a writer
+/// of one's own (tests, benchmarks); [`start`] uses it with the MCAP writer.
+pub fn queue(capacity: usize, full: Full) -> (Recorder, rtrb::Consumer<Record>) {
+    let (tx, rx) = rtrb::RingBuffer::new(capacity.max(1));
+    (
+        Recorder {
+            tx,
+            full,
+            dropped: Arc::new(AtomicU64::new(0)),
+        },
+        rx,
+    )
+}
+
 /// Where the writer thread also sends every message (the live view): the channel's index in
 /// [`CHANNELS`], the log time in ns and the JSON payload. Called on the writer thread, never the loop's.
 pub type LiveSink = Box<dyn FnMut(usize, u64, &[u8]) + Send>;
@@ -464,8 +478,8 @@ pub fn start(
     }
     w.flush()
         .with_context(|| format!("cannot write {}", path.display()))?;
-    let (tx, rx) = rtrb::RingBuffer::new(opts.capacity.max(1));
-    let dropped = Arc::new(AtomicU64::new(0));
+    let (recorder, rx) = queue(opts.capacity, opts.full);
+    let dropped = recorder.dropped.clone();
     let (truth_tx, truth_rx) = mpsc::channel();
     let mut writer = Writer {
         w: Some(w),
@@ -492,11 +506,7 @@ pub fn start(
         })
         .context("cannot start the recorder thread")?;
     Ok((
-        Recorder {
-            tx,
-            full: opts.full,
-            dropped: dropped.clone(),
-        },
+        recorder,
         Recording {
             path: path.to_path_buf(),
             thread: Some(thread),
@@ -641,7 +651,7 @@ impl Writer {
     /// Report once, stop writing; the file keeps what was flushed.
     fn fail(&mut self, e: mcap::McapError) {
         if self.summary.error.is_none() {
-            let msg = e.to_string();
+            let msg = format!("{:#}", anyhow::Error::new(e));
             eprintln!(
                 "recording: cannot write {}: {msg}; the run goes on without recording",
                 self.path.display()
