@@ -4,7 +4,7 @@
 //! ```toml
 //! tuning = "robust"                 # built-in name or a tuning file
 //! duration = 60.0                   # s of robot time; omit to run until the robot stops sending
-//! record = "recordings"             # record/run-<unix time>.mcap, streamed (+ .csv, .png exported from it)
+//! record = "recordings"             # record/run-<unix time>.mcap, streamed (+ .csv, .png exported from it; .candump.log: CAN traffic)
 //!
 //! [robot]
 //! listen = "192.168.1.100:49152"    # IP_NUMBER:PORT of the robot's Ethernet config
@@ -429,10 +429,12 @@ where
 }
 
 /// Start the configured sensor (optionally taking a bias) and bind the robot link.
+/// With `can_log`, the sensor's CAN traffic is logged there in candump `-L` format.
 fn open_devices(
     cfg: &CellConfig,
     tuning: &Tuning,
     tare: bool,
+    can_log: Option<&Path>,
 ) -> Result<(kuka_rsi::RsiLink, ati_can::AtiSensor)> {
     let link_cfg = cfg.link_config(tuning)?;
     let SensorConfig::Ati {
@@ -451,7 +453,7 @@ fn open_devices(
         slot: *slot,
         ..ati_can::Config::default()
     };
-    let transport = ati_can::SocketCanTransport::open(can)?;
+    let transport = crate::candump::open_logged(can, can_log)?;
     let mut driver = ati_can::Driver::new(transport, ati_cfg)?;
     let info = driver
         .start()
@@ -472,8 +474,13 @@ pub fn run(path: &Path) -> Result<()> {
     let tuning = cfg.tuning()?;
     std::fs::create_dir_all(&cfg.record)
         .with_context(|| format!("cannot create {}", cfg.record.display()))?;
+    let stamp = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let stem = cfg.record.join(format!("run-{stamp}"));
+    let can_log = stem.with_extension("candump.log");
     let SensorConfig::Ati { tare, .. } = cfg.sensor;
-    let (link, sensor) = open_devices(&cfg, &tuning, tare)?;
+    let (link, sensor) = open_devices(&cfg, &tuning, tare, Some(&can_log))?;
     println!(
         "listening on {} for the robot at {} ({} ms cycle, tuning {}); start RSI on the robot now, Ctrl-C ends with a clean Stop",
         cfg.robot.listen, cfg.robot.robot_ip, cfg.robot.cycle_ms, tuning.name
@@ -482,10 +489,7 @@ pub fn run(path: &Path) -> Result<()> {
     let flag = stop.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
         .context("cannot install the Ctrl-C handler")?;
-    let stamp = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs());
-    let mcap = cfg.record.join(format!("run-{stamp}.mcap"));
+    let mcap = stem.with_extension("mcap");
     let (tx, recording) = crate::recorder::start(&mcap, recording_options(path, &tuning), None)?;
     let out = run_cell_recorded(&cfg, &tuning, link, sensor, &stop, Some(tx))?;
     println!(
@@ -502,6 +506,7 @@ pub fn run(path: &Path) -> Result<()> {
     );
     let recorded = recording.finish(Vec::new())?;
     println!("recorded {recorded}");
+    println!("CAN traffic logged to {} (candump -L)", can_log.display());
     export_recording(&mcap)
 }
 
@@ -554,7 +559,7 @@ pub fn calibrate(path: &Path, poses: usize) -> Result<()> {
     }
     let cfg = CellConfig::load(path)?;
     let tuning = cfg.tuning()?;
-    let (mut link, mut sensor) = open_devices(&cfg, &tuning, false)?;
+    let (mut link, mut sensor) = open_devices(&cfg, &tuning, false, None)?;
     let mount = cfg
         .gravity
         .as_ref()

@@ -4,6 +4,7 @@
 
 pub mod ati;
 pub mod bench;
+pub mod candump;
 pub mod cell;
 pub mod metrics;
 pub mod plot;

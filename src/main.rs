@@ -91,6 +91,9 @@ struct SensorArgs {
     /// host or a virtual interface).
     #[arg(long, default_value_t = 300)]
     turnaround_us: u64,
+    /// Log every CAN frame sent and received to FILE in candump `-L` format (for can-utils).
+    #[arg(long, value_name = "FILE")]
+    can_log: Option<PathBuf>,
     #[command(subcommand)]
     action: SensorCommand,
 }
@@ -368,7 +371,7 @@ fn sensor(a: SensorArgs) -> Result<ExitCode> {
             forcecell::ati::SensorAction::Read { count, rate, tare }
         }
     };
-    forcecell::ati::sensor(&a.bus.can, cfg, action)?;
+    forcecell::ati::sensor(&a.bus.can, cfg, action, a.can_log.as_deref())?;
     Ok(ExitCode::SUCCESS)
 }
 
