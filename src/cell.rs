@@ -469,7 +469,8 @@ fn open_devices(
 }
 
 /// `forcecell run --config FILE`: bind the robot link, start the sensor, run, record, plot.
-pub fn run(path: &Path) -> Result<()> {
+/// With `live`, the run is also served over the Foxglove WebSocket protocol there.
+pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<()> {
     let cfg = CellConfig::load(path)?;
     let tuning = cfg.tuning()?;
     std::fs::create_dir_all(&cfg.record)
@@ -490,7 +491,19 @@ pub fn run(path: &Path) -> Result<()> {
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
         .context("cannot install the Ctrl-C handler")?;
     let mcap = stem.with_extension("mcap");
-    let (tx, recording) = crate::recorder::start(&mcap, recording_options(path, &tuning), None)?;
+    let live = match live {
+        Some(addr) => {
+            let server = crate::live::LiveServer::bind(addr)?;
+            println!("live view: ws://{}", server.local_addr());
+            Some(server)
+        }
+        None => None,
+    };
+    let (tx, recording) = crate::recorder::start(
+        &mcap,
+        recording_options(path, &tuning),
+        live.as_ref().map(crate::live::LiveServer::sink),
+    )?;
     let out = run_cell_recorded(&cfg, &tuning, link, sensor, &stop, Some(tx))?;
     println!(
         "{}; {} cycles, {} sensor faults, {} limited; Stop {}",

@@ -6,6 +6,7 @@ pub mod ati;
 pub mod bench;
 pub mod candump;
 pub mod cell;
+pub mod live;
 pub mod metrics;
 pub mod plot;
 pub mod record;

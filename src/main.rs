@@ -158,11 +158,17 @@ struct BenchArgs {
     check: bool,
 }
 
+/// Where `--live` listens by default: loopback only.
+const LIVE_DEFAULT: &str = "127.0.0.1:8765";
+
 #[derive(Args)]
 struct RunArgs {
     /// The cell configuration (TOML; see the README's "Deploying on a cell").
     #[arg(long, short)]
     config: PathBuf,
+    /// Serve the run live over the Foxglove WebSocket protocol on ADDR (default 127.0.0.1:8765).
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = LIVE_DEFAULT)]
+    live: Option<std::net::SocketAddr>,
 }
 
 #[derive(Args)]
@@ -223,6 +229,10 @@ struct SimArgs {
     /// Run the ATI sensor over this SocketCAN interface (e.g. vcan0) instead of the in-memory bus.
     #[arg(long)]
     can: Option<String>,
+    /// Serve the run live over the Foxglove WebSocket protocol on ADDR (default 127.0.0.1:8765); the
+    /// simulated controller then runs on the wall clock (--realtime).
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = LIVE_DEFAULT)]
+    live: Option<std::net::SocketAddr>,
     #[command(flatten)]
     robot: forcecell::rsi::RsiArgs,
 }
@@ -239,7 +249,7 @@ fn main() -> ExitCode {
         }),
         Command::Plot(a) => plot_trace(a),
         Command::Export(a) => export(a),
-        Command::Run(a) => forcecell::cell::run(&a.config).map(|()| ExitCode::SUCCESS),
+        Command::Run(a) => forcecell::cell::run(&a.config, a.live).map(|()| ExitCode::SUCCESS),
         Command::Calibrate(a) => {
             forcecell::cell::calibrate(&a.config, a.poses).map(|()| ExitCode::SUCCESS)
         }
@@ -264,7 +274,7 @@ fn main() -> ExitCode {
     }
 }
 
-fn sim(a: SimArgs) -> Result<ExitCode> {
+fn sim(mut a: SimArgs) -> Result<ExitCode> {
     if a.list {
         list()?;
         return Ok(ExitCode::SUCCESS);
@@ -299,10 +309,28 @@ fn sim(a: SimArgs) -> Result<ExitCode> {
         }
     );
     println!("robot: {}", a.robot.describe());
+    let live = match a.live {
+        Some(addr) => {
+            if a.robot.robot == forcecell::rsi::RobotBackend::Rsi {
+                a.robot.realtime = true;
+            }
+            let server = forcecell::live::LiveServer::bind(addr)?;
+            println!(
+                "live view: ws://{} (Foxglove: Open connection → Foxglove WebSocket)",
+                server.local_addr()
+            );
+            Some(server)
+        }
+        None => None,
+    };
     let mut robot = forcecell::rsi::RobotSide::start(&spec, &a.robot)?;
     let mcap = a.out.join(format!("{}.mcap", spec.file_stem()));
-    let (tx, recording) =
-        forcecell::runner::start_recording(&spec, &mcap, robot.is_realtime(&a.robot), None)?;
+    let (tx, recording) = forcecell::runner::start_recording(
+        &spec,
+        &mcap,
+        robot.is_realtime(&a.robot),
+        live.as_ref().map(forcecell::live::LiveServer::sink),
+    )?;
     robot.record_to(tx);
     let (run, wire) = if a.sensor == "inproc" {
         robot.run_inproc_sensor(&mut |frac| bar.update(frac))?
