@@ -450,10 +450,13 @@ pub fn start(
 ) -> Result<(Recorder, Recording)> {
     let file = File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
     let mut w = mcap::WriteOptions::new()
-        .compression(None)
+        .compression(Some(mcap::Compression::Lz4))
         .profile("")
         .library(concat!("forcecell ", env!("CARGO_PKG_VERSION")))
         .chunk_size(Some(512 * 1024))
+        // Each chunk is built in memory and written whole when it is finished (at most a second
+        // later): a killed run leaves complete chunks only, never one with an unpatched length.
+        .disable_seeking(true)
         .create(BufWriter::with_capacity(256 * 1024, file))
         .with_context(|| format!("cannot write {}", path.display()))?;
     let mut ids = [0u16; CHANNELS.len()];
