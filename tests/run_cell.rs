@@ -6,7 +6,7 @@ use std::sync::atomic::AtomicBool;
 use std::thread;
 use std::time::Duration;
 
-use forcecell::cell::{CellConfig, CellOutcome, run_cell};
+use forcecell::cell::{CellConfig, CellOutcome};
 use kuka_rsi::{EthernetConfig, RsiLink};
 use sim::krc::{Krc, KrcConfig, KrcEnd, KrcReport, Timing};
 use sim::{ContactPlant, InProcSensor, InnerLoopModel, SensorParams, SharedWorld, World};
@@ -28,6 +28,14 @@ can = "vcan0"
 /// tool starts on its programmed path (correction 0, as at a real `RSI_ON`) with the surface 1 mm below.
 /// The controller sends at most `cycles` datagrams, so a missing `Stop` fails the test instead of hanging it.
 fn run_against_sim_krc(cycles: u64, stop: bool) -> (CellOutcome, KrcReport, SharedWorld) {
+    run_against_sim_krc_recorded(cycles, stop, None)
+}
+
+fn run_against_sim_krc_recorded(
+    cycles: u64,
+    stop: bool,
+    recorder: Option<forcecell::recorder::Recorder>,
+) -> (CellOutcome, KrcReport, SharedWorld) {
     let cfg = CellConfig::from_toml(CELL, "cell.toml").unwrap();
     let tuning = cfg.tuning().unwrap();
     let lc = cfg.link_config(&tuning).unwrap();
@@ -54,7 +62,15 @@ fn run_against_sim_krc(cycles: u64, stop: bool) -> (CellOutcome, KrcReport, Shar
     let mut mech = world.clone();
     let robot = thread::spawn(move || krc.run(&mut mech));
     let flag = AtomicBool::new(stop);
-    let out = run_cell(&cfg, &tuning, link, InProcSensor::new(world.clone()), &flag).unwrap();
+    let out = forcecell::cell::run_cell_recorded(
+        &cfg,
+        &tuning,
+        link,
+        InProcSensor::new(world.clone()),
+        &flag,
+        recorder,
+    )
+    .unwrap();
     (out, robot.join().unwrap(), world)
 }
 
@@ -185,4 +201,35 @@ fn calibrate_refuses_too_few_poses_before_touching_any_device() {
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("--poses must be 3..=64"), "{err}");
+}
+
+#[test]
+fn a_recorded_cell_run_streams_every_cycle_to_mcap() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.mcap");
+    let (tx, recording) = forcecell::recorder::start(
+        &path,
+        forcecell::recorder::RecorderOptions::default(),
+        None,
+    )
+    .unwrap();
+    let (out, report, _) = run_against_sim_krc_recorded(2_000, false, Some(tx));
+    assert!(out.stopped, "{}", out.ended);
+    assert_eq!(report.end, KrcEnd::Stopped);
+    assert!(out.rows.is_empty(), "the recording holds the trace, not a Vec grown in the loop");
+    let summary = recording.finish(Vec::new()).unwrap();
+    assert!(summary.finished, "{summary}");
+    // Every answered cycle but the final Stop is a record.
+    assert_eq!(summary.written + summary.dropped, out.stats.cycles - 1, "{summary}");
+    let bytes = std::fs::read(&path).unwrap();
+    let back = forcecell::recorder::read_mcap(&bytes).unwrap();
+    assert_eq!(back.rows.len() as u64, summary.written);
+    let last = back.rows.last().unwrap();
+    assert!(last.t >= 1.5 && (last.f - 5.0).abs() < 0.1, "{last:?}");
+    // The raw (uncompensated) wrench is recorded beside the compensated one.
+    let raw = mcap::MessageStream::new(&bytes)
+        .unwrap()
+        .filter(|m| m.as_ref().unwrap().channel.topic == "/wrench_raw")
+        .count() as u64;
+    assert_eq!(raw, summary.written);
 }
