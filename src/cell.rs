@@ -572,7 +572,15 @@ pub fn calibrate(path: &Path, poses: usize) -> Result<()> {
     }
     let cfg = CellConfig::load(path)?;
     let tuning = cfg.tuning()?;
-    let (mut link, mut sensor) = open_devices(&cfg, &tuning, false, None)?;
+    let (link, sensor) = open_devices(&cfg, &tuning, false, None)?;
+    std::fs::create_dir_all(&cfg.record)
+        .with_context(|| format!("cannot create {}", cfg.record.display()))?;
+    let stamp = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let mcap = cfg.record.join(format!("calibrate-{stamp}.mcap"));
+    let (tx, recording) = crate::recorder::start(&mcap, recording_options(path, &tuning), None)?;
+    let (mut link, mut sensor) = crate::tap::tap(link, sensor, tx);
     let mount = cfg
         .gravity
         .as_ref()
@@ -591,7 +599,10 @@ pub fn calibrate(path: &Path, poses: usize) -> Result<()> {
         controller::calibration::CollectorConfig::default(),
         &mut |n| println!("pose {n} of {poses}"),
     )
-    .map_err(|e| anyhow!("{e}"))?;
+    .map_err(|e| anyhow!("{e}"));
+    drop((link, sensor));
+    println!("recorded {}", recording.finish(Vec::new())?);
+    let c = c?;
     let m = c.model;
     println!(
         "fitted over {} poses: mass {:.4} kg, worst force residual {:.3} N\n",

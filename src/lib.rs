@@ -15,4 +15,5 @@ pub mod rig;
 pub mod rsi;
 pub mod runner;
 pub mod scenario;
+pub mod tap;
 pub mod tune;

@@ -207,20 +207,24 @@ fn calibrate_refuses_too_few_poses_before_touching_any_device() {
 fn a_recorded_cell_run_streams_every_cycle_to_mcap() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("run.mcap");
-    let (tx, recording) = forcecell::recorder::start(
-        &path,
-        forcecell::recorder::RecorderOptions::default(),
-        None,
-    )
-    .unwrap();
+    let (tx, recording) =
+        forcecell::recorder::start(&path, forcecell::recorder::RecorderOptions::default(), None)
+            .unwrap();
     let (out, report, _) = run_against_sim_krc_recorded(2_000, false, Some(tx));
     assert!(out.stopped, "{}", out.ended);
     assert_eq!(report.end, KrcEnd::Stopped);
-    assert!(out.rows.is_empty(), "the recording holds the trace, not a Vec grown in the loop");
+    assert!(
+        out.rows.is_empty(),
+        "the recording holds the trace, not a Vec grown in the loop"
+    );
     let summary = recording.finish(Vec::new()).unwrap();
     assert!(summary.finished, "{summary}");
     // Every answered cycle but the final Stop is a record.
-    assert_eq!(summary.written + summary.dropped, out.stats.cycles - 1, "{summary}");
+    assert_eq!(
+        summary.written + summary.dropped,
+        out.stats.cycles - 1,
+        "{summary}"
+    );
     let bytes = std::fs::read(&path).unwrap();
     let back = forcecell::recorder::read_mcap(&bytes).unwrap();
     assert_eq!(back.rows.len() as u64, summary.written);
