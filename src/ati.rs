@@ -214,7 +214,13 @@ pub fn bias_config() -> BiasConfig {
 }
 
 /// `forcecell sensor ati`: talk to a real sensor (or the simulated node) on `iface`.
-pub fn sensor(iface: &str, mut cfg: Config, action: SensorAction) -> Result<()> {
+/// With `can_log`, every frame sent and received is logged there in candump `-L` format.
+pub fn sensor(
+    iface: &str,
+    mut cfg: Config,
+    action: SensorAction,
+    can_log: Option<&std::path::Path>,
+) -> Result<()> {
     if let SensorAction::Read { rate, .. } = action
         && rate.is_finite()
         && rate > 0.0
@@ -222,7 +228,7 @@ pub fn sensor(iface: &str, mut cfg: Config, action: SensorAction) -> Result<()> 
         // A sample is stale after three missed polls.
         cfg.stale_after = cfg.stale_after.max(Duration::from_secs_f64(3.0 / rate));
     }
-    let transport = SocketCanTransport::open(iface)?;
+    let transport = crate::candump::open_logged(iface, can_log)?;
     let mut driver = Driver::new(transport, cfg)?;
     let info = driver
         .start()

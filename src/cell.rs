@@ -1,10 +1,10 @@
 //! `forcecell run`: the controller on a real cell, wired from one TOML file — the KUKA RSI link, the ATI
-//! sensor polled over SocketCAN, gravity compensation, a tuning — recorded to CSV and plotted.
+//! sensor polled over SocketCAN, gravity compensation, a tuning — recorded to MCAP (CSV exported) and plotted.
 //!
 //! ```toml
 //! tuning = "robust"                 # built-in name or a tuning file
 //! duration = 60.0                   # s of robot time; omit to run until the robot stops sending
-//! record = "recordings"             # the trace goes to record/run-<unix time>.csv (+ .png)
+//! record = "recordings"             # record/run-<unix time>.mcap, streamed (+ .csv, .png exported from it; .candump.log: CAN traffic)
 //!
 //! [robot]
 //! listen = "192.168.1.100:49152"    # IP_NUMBER:PORT of the robot's Ethernet config
@@ -50,6 +50,7 @@ use kuka_rsi::{CorrectionMode, EthernetConfig, Limits, LinkConfig, PoscorrLimits
 use serde::Deserialize;
 
 use crate::record::Row;
+use crate::recorder::{Record, Recorder, RecorderOptions};
 use crate::scenario::load_tuning;
 
 /// The robot side of a cell.
@@ -179,7 +180,8 @@ impl SensorConfig {
 
     /// Start this sensor (taking a bias or zero at start when configured). The one place the app turns a
     /// sensor kind into a running driver.
-    pub fn open(&self, zero_at_start: bool) -> Result<CellSensor> {
+    /// With `can_log`, a CAN sensor's traffic is logged there in candump `-L` format.
+    pub fn open(&self, zero_at_start: bool, can_log: Option<&Path>) -> Result<CellSensor> {
         match self {
             Self::Ati {
                 can,
@@ -197,7 +199,7 @@ impl SensorConfig {
                     slot: *slot,
                     ..ati_can::Config::default()
                 };
-                let transport = ati_can::SocketCanTransport::open(can)?;
+                let transport = crate::candump::open_logged(can, can_log)?;
                 let mut driver = ati_can::Driver::new(transport, ati_cfg)?;
                 let info = driver
                     .start()
@@ -512,6 +514,26 @@ where
     R::Error: Send + Sync + 'static,
     S::Error: Send + Sync + 'static,
 {
+    run_cell_recorded(cfg, tuning, robot, sensor, stop, None)
+}
+
+/// [`run_cell`] with every cycle's record (raw and compensated wrench, state, diagnostics) handed to
+/// `recorder` instead of collected: the cycle then neither allocates nor writes, and
+/// [`CellOutcome::rows`] stays empty (the recording holds the trace).
+pub fn run_cell_recorded<R, S>(
+    cfg: &CellConfig,
+    tuning: &Tuning,
+    robot: R,
+    sensor: S,
+    stop: &AtomicBool,
+    mut recorder: Option<Recorder>,
+) -> Result<CellOutcome>
+where
+    R: RobotLink,
+    S: ForceSensor,
+    R::Error: Send + Sync + 'static,
+    S::Error: Send + Sync + 'static,
+{
     let law = tuning.law.build().map_err(|e| anyhow!(e))?;
     let f_r = law.set_point();
     let orientation = shared_orientation();
@@ -525,7 +547,15 @@ where
         }
         match lp.cycle() {
             Ok(r) => {
-                rows.push(Row::from_report(&r, f_r));
+                if let Some(tx) = &mut recorder {
+                    let mut rec = Record::from_report(&r, f_r, 0);
+                    if let Some(raw) = lp.sensor_mut().last_raw() {
+                        rec.wrench_raw = raw.to_array();
+                    }
+                    tx.push(rec);
+                } else {
+                    rows.push(Row::from_report(&r, f_r));
+                }
                 if cfg.duration.is_some_and(|d| r.cycle.t >= d) {
                     break format!("{} s of robot time done", r.cycle.t);
                 }
@@ -553,24 +583,39 @@ where
 }
 
 /// Start the configured sensor (optionally taking a bias) and bind the robot link.
+/// With `can_log`, the sensor's CAN traffic is logged there in candump `-L` format.
 fn open_devices(
     cfg: &CellConfig,
     tuning: &Tuning,
     zero_at_start: bool,
+    can_log: Option<&Path>,
 ) -> Result<(kuka_rsi::RsiLink, CellSensor)> {
     let link_cfg = cfg.link_config(tuning)?;
-    let sensor = cfg.sensor.open(zero_at_start)?;
+    let sensor = cfg.sensor.open(zero_at_start, can_log)?;
     let link = kuka_rsi::RsiLink::bind(link_cfg).context("RSI link")?;
     Ok((link, sensor))
 }
 
 /// `forcecell run --config FILE`: bind the robot link, start the sensor, run, record, plot.
-pub fn run(path: &Path) -> Result<()> {
+/// With `live`, the run is also served over the Foxglove WebSocket protocol there.
+pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<()> {
     let cfg = CellConfig::load(path)?;
     let tuning = cfg.tuning()?;
     std::fs::create_dir_all(&cfg.record)
         .with_context(|| format!("cannot create {}", cfg.record.display()))?;
-    let (link, sensor) = open_devices(&cfg, &tuning, cfg.sensor.zero_at_start())?;
+    let stamp = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let stem = cfg.record.join(format!("run-{stamp}"));
+    // A CAN sensor's traffic is logged beside the recording; a serial sensor has no CAN.
+    let can_log =
+        matches!(cfg.sensor, SensorConfig::Ati { .. }).then(|| stem.with_extension("candump.log"));
+    let (link, sensor) = open_devices(
+        &cfg,
+        &tuning,
+        cfg.sensor.zero_at_start(),
+        can_log.as_deref(),
+    )?;
     println!(
         "listening on {} for the robot at {} ({} ms cycle, tuning {}); start RSI on the robot now, Ctrl-C ends with a clean Stop",
         cfg.robot.listen, cfg.robot.robot_ip, cfg.robot.cycle_ms, tuning.name
@@ -579,7 +624,21 @@ pub fn run(path: &Path) -> Result<()> {
     let flag = stop.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
         .context("cannot install the Ctrl-C handler")?;
-    let out = run_cell(&cfg, &tuning, link, sensor, &stop)?;
+    let mcap = stem.with_extension("mcap");
+    let live = match live {
+        Some(addr) => {
+            let server = crate::live::LiveServer::bind(addr)?;
+            println!("live view: ws://{}", server.local_addr());
+            Some(server)
+        }
+        None => None,
+    };
+    let (tx, recording) = crate::recorder::start(
+        &mcap,
+        recording_options(path, &tuning),
+        live.as_ref().map(crate::live::LiveServer::sink),
+    )?;
+    let out = run_cell_recorded(&cfg, &tuning, link, sensor, &stop, Some(tx))?;
     println!(
         "{}; {} cycles, {} sensor faults, {} limited; Stop {}",
         out.ended,
@@ -592,7 +651,52 @@ pub fn run(path: &Path) -> Result<()> {
             "not sent (the link was gone)"
         }
     );
-    write_recording(&cfg.record, &out.rows)
+    let recorded = recording.finish(Vec::new())?;
+    println!("recorded {recorded}");
+    if let Some(log) = &can_log {
+        println!("CAN traffic logged to {} (candump -L)", log.display());
+    }
+    export_recording(&mcap)
+}
+
+/// A cell run's recording: the cell file and the tuning attached.
+fn recording_options(cell_file: &Path, tuning: &Tuning) -> RecorderOptions {
+    let mut attachments = Vec::new();
+    if let Ok(text) = std::fs::read(cell_file) {
+        attachments.push(("cell.toml".to_string(), "application/toml".into(), text));
+    }
+    if let Ok(text) = toml::to_string(tuning) {
+        attachments.push((
+            format!("tuning-{}.toml", tuning.name),
+            "application/toml".into(),
+            text.into_bytes(),
+        ));
+    }
+    RecorderOptions {
+        attachments,
+        ..RecorderOptions::default()
+    }
+}
+
+/// The CSV and PNG of a run, exported from its recording.
+fn export_recording(mcap: &Path) -> Result<()> {
+    let (rows, truncated) = crate::recorder::load_trace(mcap)?;
+    if let Some(why) = truncated {
+        println!("note: the recording ends early ({why})");
+    }
+    if rows.is_empty() {
+        println!("nothing to export: no cycle was recorded");
+        return Ok(());
+    }
+    let csv = mcap.with_extension("csv");
+    let png = mcap.with_extension("png");
+    crate::record::write_csv_file(&csv, &rows)?;
+    let title = mcap
+        .file_stem()
+        .map_or("run".into(), |s| s.to_string_lossy().into_owned());
+    crate::plot::write_png(&png, &format!("forcecell {title}"), &rows)?;
+    println!("wrote {} and {}", csv.display(), png.display());
+    Ok(())
 }
 
 /// `forcecell calibrate --config FILE --poses N`: while the robot's program holds the tool still in free
@@ -604,7 +708,15 @@ pub fn calibrate(path: &Path, poses: usize) -> Result<()> {
     }
     let cfg = CellConfig::load(path)?;
     let tuning = cfg.tuning()?;
-    let (mut link, mut sensor) = open_devices(&cfg, &tuning, false)?;
+    let (link, sensor) = open_devices(&cfg, &tuning, false, None)?;
+    std::fs::create_dir_all(&cfg.record)
+        .with_context(|| format!("cannot create {}", cfg.record.display()))?;
+    let stamp = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let mcap = cfg.record.join(format!("calibrate-{stamp}.mcap"));
+    let (tx, recording) = crate::recorder::start(&mcap, recording_options(path, &tuning), None)?;
+    let (mut link, mut sensor) = crate::tap::tap(link, sensor, tx);
     let mount = cfg
         .gravity
         .as_ref()
@@ -623,7 +735,10 @@ pub fn calibrate(path: &Path, poses: usize) -> Result<()> {
         controller::calibration::CollectorConfig::default(),
         &mut |n| println!("pose {n} of {poses}"),
     )
-    .map_err(|e| anyhow!("{e}"))?;
+    .map_err(|e| anyhow!("{e}"));
+    drop((link, sensor));
+    println!("recorded {}", recording.finish(Vec::new())?);
+    let c = c?;
     let m = c.model;
     println!(
         "fitted over {} poses: mass {:.4} kg, worst force residual {:.3} N\n",
@@ -647,20 +762,4 @@ pub fn gravity_section(m: &GravityModel, mount: UnitQuaternion<f64>) -> String {
         v(&mount.scaled_axis()),
         default_max_age()
     )
-}
-
-fn write_recording(dir: &Path, rows: &[Row]) -> Result<()> {
-    if rows.is_empty() {
-        println!("nothing to record: no cycle was answered");
-        return Ok(());
-    }
-    let stamp = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs());
-    let csv = dir.join(format!("run-{stamp}.csv"));
-    let png = csv.with_extension("png");
-    crate::record::write_csv_file(&csv, rows)?;
-    crate::plot::write_png(&png, &format!("forcecell run {stamp}"), rows)?;
-    println!("wrote {} and {}", csv.display(), png.display());
-    Ok(())
 }

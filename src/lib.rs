@@ -4,12 +4,17 @@
 
 pub mod ati;
 pub mod bench;
+pub mod candump;
 pub mod cell;
+pub mod live;
 pub mod metrics;
 pub mod plot;
 pub mod record;
+pub mod recorder;
+pub mod rig;
 pub mod robotiq;
 pub mod rsi;
 pub mod runner;
 pub mod scenario;
+pub mod tap;
 pub mod tune;

@@ -33,8 +33,10 @@ enum Command {
     Sim(SimArgs),
     /// Write the robot-side KUKA RSI files (Ethernet config XML, KRL template) for this configuration.
     RsiConfig(forcecell::rsi::RsiConfigArgs),
-    /// Plot a recorded trace (CSV written by `sim` or `run`) to PNG and print its metrics.
+    /// Plot a recorded trace (MCAP or CSV written by `sim` or `run`) to PNG and print its metrics.
     Plot(PlotArgs),
+    /// Export an MCAP recording as a CSV trace (the columns `sim` and `run` write).
+    Export(ExportArgs),
     /// Judge a tuning (damping ratio, delay margin) or propose impedance parameters for a stiffness range
     /// and the robot's loop.
     Tune(TuneArgs),
@@ -150,6 +152,9 @@ struct SensorArgs {
     /// host or a virtual interface).
     #[arg(long, default_value_t = 300)]
     turnaround_us: u64,
+    /// Log every CAN frame sent and received to FILE in candump `-L` format (for can-utils).
+    #[arg(long, value_name = "FILE")]
+    can_log: Option<PathBuf>,
     #[command(subcommand)]
     action: SensorCommand,
 }
@@ -214,11 +219,17 @@ struct BenchArgs {
     check: bool,
 }
 
+/// Where `--live` listens by default: loopback only.
+const LIVE_DEFAULT: &str = "127.0.0.1:8765";
+
 #[derive(Args)]
 struct RunArgs {
     /// The cell configuration (TOML; see the README's "Deploying on a cell").
     #[arg(long, short)]
     config: PathBuf,
+    /// Serve the run live over the Foxglove WebSocket protocol on ADDR (default 127.0.0.1:8765).
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = LIVE_DEFAULT)]
+    live: Option<std::net::SocketAddr>,
 }
 
 #[derive(Args)]
@@ -232,8 +243,20 @@ struct CalibrateArgs {
 }
 
 #[derive(Args)]
+struct ExportArgs {
+    /// The recording, MCAP.
+    mcap: PathBuf,
+    /// Write a CSV trace (the only export so far).
+    #[arg(long, required = true)]
+    csv: bool,
+    /// The CSV to write (default: the recording's path with .csv).
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+#[derive(Args)]
 struct PlotArgs {
-    /// The trace, CSV.
+    /// The trace: an MCAP recording or a CSV.
     csv: PathBuf,
     /// The PNG to write (default: the CSV's path with .png).
     #[arg(long)]
@@ -269,6 +292,10 @@ struct SimArgs {
     /// Run the ATI sensor over this SocketCAN interface (e.g. vcan0) instead of the in-memory bus.
     #[arg(long)]
     can: Option<String>,
+    /// Serve the run live over the Foxglove WebSocket protocol on ADDR (default 127.0.0.1:8765); the
+    /// simulated controller then runs on the wall clock (--realtime).
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = LIVE_DEFAULT)]
+    live: Option<std::net::SocketAddr>,
     #[command(flatten)]
     robot: forcecell::rsi::RsiArgs,
 }
@@ -284,7 +311,8 @@ fn main() -> ExitCode {
             ExitCode::SUCCESS
         }),
         Command::Plot(a) => plot_trace(a),
-        Command::Run(a) => forcecell::cell::run(&a.config).map(|()| ExitCode::SUCCESS),
+        Command::Export(a) => export(a),
+        Command::Run(a) => forcecell::cell::run(&a.config, a.live).map(|()| ExitCode::SUCCESS),
         Command::Calibrate(a) => {
             forcecell::cell::calibrate(&a.config, a.poses).map(|()| ExitCode::SUCCESS)
         }
@@ -327,7 +355,7 @@ fn main() -> ExitCode {
     }
 }
 
-fn sim(a: SimArgs) -> Result<ExitCode> {
+fn sim(mut a: SimArgs) -> Result<ExitCode> {
     if a.list {
         list()?;
         return Ok(ExitCode::SUCCESS);
@@ -370,7 +398,29 @@ fn sim(a: SimArgs) -> Result<ExitCode> {
         }
     );
     println!("robot: {}", a.robot.describe());
-    let robot = forcecell::rsi::RobotSide::start(&spec, &a.robot)?;
+    let live = match a.live {
+        Some(addr) => {
+            if a.robot.robot == forcecell::rsi::RobotBackend::Rsi {
+                a.robot.realtime = true;
+            }
+            let server = forcecell::live::LiveServer::bind(addr)?;
+            println!(
+                "live view: ws://{} (Foxglove: Open connection → Foxglove WebSocket)",
+                server.local_addr()
+            );
+            Some(server)
+        }
+        None => None,
+    };
+    let mut robot = forcecell::rsi::RobotSide::start(&spec, &a.robot)?;
+    let mcap = a.out.join(format!("{}.mcap", spec.file_stem()));
+    let (tx, recording) = forcecell::runner::start_recording(
+        &spec,
+        &mcap,
+        robot.is_realtime(&a.robot),
+        live.as_ref().map(forcecell::live::LiveServer::sink),
+    )?;
+    robot.record_to(tx);
     let (run, wire) = match a.sensor.as_str() {
         "inproc" => robot.run_inproc_sensor(&mut |frac| bar.update(frac))?,
         "robotiq" => forcecell::robotiq::run_sim_with(robot, &mut |frac| bar.update(frac))?,
@@ -380,7 +430,10 @@ fn sim(a: SimArgs) -> Result<ExitCode> {
     if let Some(w) = &wire {
         w.print();
     }
-    report(&spec, &run, &a.out, a.check)
+    let recorded = recording.finish(run.rows.clone())?;
+    let code = report(&spec, &run, &a.out, a.check)?;
+    println!("recorded {recorded}");
+    Ok(code)
 }
 
 fn tune(a: TuneArgs) -> Result<ExitCode> {
@@ -436,14 +489,32 @@ fn sensor(a: SensorArgs) -> Result<ExitCode> {
             forcecell::ati::SensorAction::Read { count, rate, tare }
         }
     };
-    forcecell::ati::sensor(&a.bus.can, cfg, action)?;
+    forcecell::ati::sensor(&a.bus.can, cfg, action, a.can_log.as_deref())?;
+    Ok(ExitCode::SUCCESS)
+}
+
+fn export(a: ExportArgs) -> Result<ExitCode> {
+    let (rows, truncated) = forcecell::recorder::load_trace(&a.mcap)?;
+    if let Some(why) = truncated {
+        eprintln!(
+            "note: {} ends early ({why}): exported up to its last complete record",
+            a.mcap.display()
+        );
+    }
+    let csv = a.out.unwrap_or_else(|| a.mcap.with_extension("csv"));
+    record::write_csv_file(&csv, &rows)?;
+    println!("wrote {} ({} rows)", csv.display(), rows.len());
     Ok(ExitCode::SUCCESS)
 }
 
 fn plot_trace(a: PlotArgs) -> Result<ExitCode> {
-    let text = std::fs::read_to_string(&a.csv)
-        .with_context(|| format!("cannot read {}", a.csv.display()))?;
-    let rows = record::read_csv(&text).with_context(|| format!("{}", a.csv.display()))?;
+    let (rows, truncated) = forcecell::recorder::load_trace(&a.csv)?;
+    if let Some(why) = truncated {
+        eprintln!(
+            "note: {} ends early ({why}): plotted up to its last complete record",
+            a.csv.display()
+        );
+    }
     if rows.is_empty() {
         anyhow::bail!("{}: the trace has no rows", a.csv.display());
     }

@@ -19,7 +19,8 @@ use kuka_rsi::{
 use sim::krc::{Krc, KrcConfig, KrcEnd, KrcReport, Timing};
 use sim::{InProcRobot, InProcSensor, InnerLoopModel, SharedWorld};
 
-use crate::runner::{RunResult, RunSpec, run_with};
+use crate::recorder::Recorder;
+use crate::runner::{RunResult, RunSpec, run_recorded};
 
 /// Which robot backend `forcecell sim` drives.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -141,6 +142,7 @@ pub struct RobotSide {
     spec: RunSpec,
     world: SharedWorld,
     kind: Kind,
+    recorder: Option<Recorder>,
 }
 
 enum Kind {
@@ -162,6 +164,7 @@ impl RobotSide {
             world: spec.world(),
             spec: spec.clone(),
             kind: Kind::Inproc,
+            recorder: None,
         }
     }
 
@@ -182,6 +185,17 @@ impl RobotSide {
     /// The scenario as this robot runs it (an external robot sets the period and the inner loop).
     pub fn spec(&self) -> &RunSpec {
         &self.spec
+    }
+
+    /// Hand every cycle's record to `recorder` during [`RobotSide::run`].
+    pub fn record_to(&mut self, recorder: Recorder) {
+        self.recorder = Some(recorder);
+    }
+
+    /// Whether this robot keeps the wall clock (the simulated controller in real time, an external
+    /// robot) rather than stepping in lockstep with the loop.
+    pub fn is_realtime(&self, args: &RsiArgs) -> bool {
+        args.external_robot.is_some() || (args.robot == RobotBackend::Rsi && args.realtime)
     }
 
     /// The world the robot moves; a sensor backend measures it.
@@ -234,6 +248,7 @@ impl RobotSide {
                 krc,
                 abort,
             },
+            recorder: None,
         })
     }
 
@@ -268,6 +283,7 @@ impl RobotSide {
             kind: Kind::External {
                 link: Box::new(link),
             },
+            recorder: None,
         })
     }
 
@@ -281,18 +297,26 @@ impl RobotSide {
         S: ForceSensor,
         S::Error: Send + Sync + 'static,
     {
-        let Self { spec, world, kind } = self;
+        let Self {
+            spec,
+            world,
+            kind,
+            recorder,
+        } = self;
         match kind {
             Kind::Inproc => {
                 let robot = InProcRobot::new(world.clone());
-                Ok((run_with(&spec, &world, robot, sensor, progress)?, None))
+                Ok((
+                    run_recorded(&spec, &world, robot, sensor, recorder, progress)?,
+                    None,
+                ))
             }
             Kind::Simulated {
                 mut link,
                 krc,
                 abort,
             } => {
-                let result = run_with(&spec, &world, &mut *link, sensor, progress);
+                let result = run_recorded(&spec, &world, &mut *link, sensor, recorder, progress);
                 abort.store(true, Ordering::Relaxed);
                 let report = krc
                     .join()
@@ -316,7 +340,7 @@ impl RobotSide {
                     start: spec.scenario.start_position(),
                     origin: None,
                 };
-                let run = run_with(&spec, &world, robot, sensor, progress)?;
+                let run = run_recorded(&spec, &world, robot, sensor, recorder, progress)?;
                 Ok((
                     run,
                     Some(WireSummary {

@@ -10,6 +10,7 @@ use sim::{InProcRobot, InProcSensor, InnerLoopModel, SharedWorld, World};
 
 use crate::metrics::Metrics;
 use crate::record::Row;
+use crate::recorder::{Record, Recorder};
 use crate::scenario::{PlantSpec, Scenario, Target, load_tuning};
 
 /// A scenario with its plant and tuning resolved.
@@ -143,6 +144,25 @@ where
     R::Error: Send + Sync + 'static,
     S::Error: Send + Sync + 'static,
 {
+    run_recorded(spec, world, robot, sensor, None, progress)
+}
+
+/// [`run_with`], handing every cycle's [`Record`] to `recorder` as well (dropped at the end, so the
+/// writer can drain and finish).
+pub fn run_recorded<R, S>(
+    spec: &RunSpec,
+    world: &SharedWorld,
+    robot: R,
+    sensor: S,
+    mut recorder: Option<Recorder>,
+    progress: &mut dyn FnMut(f64),
+) -> Result<RunResult>
+where
+    R: RobotLink,
+    S: ForceSensor,
+    R::Error: Send + Sync + 'static,
+    S::Error: Send + Sync + 'static,
+{
     let law = spec.tuning.law.build().map_err(|e| anyhow!(e))?;
     let f_r = law.set_point();
     let mut lp = ControlLoop::new(robot, sensor, law, spec.tuning.loop_cfg);
@@ -153,7 +173,13 @@ where
     let every = (steps / 200).max(1);
     for k in 0..steps {
         match lp.cycle() {
-            Ok(r) => rows.push(Row::from_report(&r, f_r)),
+            Ok(r) => {
+                let rec = Record::from_report(&r, f_r, 0);
+                rows.push(rec.row);
+                if let Some(tx) = &mut recorder {
+                    tx.push(rec);
+                }
+            }
             Err(e) => {
                 ended_early = Some(e.to_string());
                 break;
@@ -165,6 +191,7 @@ where
     }
     progress(1.0);
     let wall = started.elapsed();
+    drop(recorder);
     let stats = lp.stats();
     let law_events = lp.law().counters();
     drop(lp);
@@ -201,4 +228,48 @@ pub fn run_inproc(spec: &RunSpec, progress: &mut dyn FnMut(f64)) -> Result<RunRe
         InProcSensor::new(world.clone()),
         progress,
     )
+}
+
+/// Start the MCAP recording of a simulated run at `path`: the scenario and the tuning attached (TOML),
+/// the plant and names as metadata. A lockstep run waits for the writer when the queue is full; one
+/// on the wall clock drops and counts, like a cell.
+pub fn start_recording(
+    spec: &RunSpec,
+    path: &std::path::Path,
+    realtime: bool,
+    live: Option<crate::recorder::LiveSink>,
+) -> Result<(Recorder, crate::recorder::Recording)> {
+    use crate::recorder::{Full, RecorderOptions};
+    let mut meta = std::collections::BTreeMap::new();
+    meta.insert("scenario".to_string(), spec.scenario.name.clone());
+    meta.insert("plant".to_string(), spec.plant_label.clone());
+    meta.insert("tuning".to_string(), spec.tuning.name.clone());
+    meta.insert("period_s".to_string(), spec.plant.period.to_string());
+    meta.insert(
+        "segment".to_string(),
+        "0 (segments not yet recorded)".into(),
+    );
+    let opts = RecorderOptions {
+        full: if realtime { Full::Drop } else { Full::Wait },
+        attachments: vec![
+            (
+                format!("scenario-{}.toml", spec.scenario.name),
+                "application/toml".into(),
+                toml_text(&spec.scenario).into_bytes(),
+            ),
+            (
+                format!("tuning-{}.toml", spec.tuning.name),
+                "application/toml".into(),
+                toml_text(&spec.tuning).into_bytes(),
+            ),
+        ],
+        metadata: vec![("forcecell.sim".into(), meta)],
+        ..RecorderOptions::default()
+    };
+    crate::recorder::start(path, opts, live)
+}
+
+/// TOML text of a serialisable value (a comment saying why in its place if it cannot be written).
+fn toml_text<T: serde::Serialize>(v: &T) -> String {
+    toml::to_string(v).unwrap_or_else(|e| format!("# cannot be written as TOML: {e}\n"))
 }

@@ -91,7 +91,7 @@ fn a_cell_file_with_a_robotiq_sensor_opens_and_reads_it() {
     let cfg = forcecell::cell::CellConfig::from_toml(&cell_file(&path, "zero = true"), "cell.toml")
         .unwrap();
     assert!(cfg.sensor.zero_at_start());
-    let mut sensor = cfg.sensor.open(true).unwrap();
+    let mut sensor = cfg.sensor.open(true, None).unwrap();
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
     let sample = loop {
         if let Ok(s) = sensor.read() {

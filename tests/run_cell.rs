@@ -6,7 +6,7 @@ use std::sync::atomic::AtomicBool;
 use std::thread;
 use std::time::Duration;
 
-use forcecell::cell::{CellConfig, CellOutcome, run_cell};
+use forcecell::cell::{CellConfig, CellOutcome};
 use kuka_rsi::{EthernetConfig, RsiLink};
 use sim::krc::{Krc, KrcConfig, KrcEnd, KrcReport, Timing};
 use sim::{ContactPlant, InProcSensor, InnerLoopModel, SensorParams, SharedWorld, Window, World};
@@ -28,14 +28,23 @@ can = "vcan0"
 /// tool starts on its programmed path (correction 0, as at a real `RSI_ON`) with the surface 1 mm below.
 /// The controller sends at most `cycles` datagrams, so a missing `Stop` fails the test instead of hanging it.
 fn run_against_sim_krc(cycles: u64, stop: bool) -> (CellOutcome, KrcReport, SharedWorld) {
-    run_with_sensor(cycles, stop, SensorParams::default())
+    run_with(cycles, stop, SensorParams::default(), None)
 }
 
-/// As [`run_against_sim_krc`], with the given sensor model.
-fn run_with_sensor(
+fn run_against_sim_krc_recorded(
+    cycles: u64,
+    stop: bool,
+    recorder: Option<forcecell::recorder::Recorder>,
+) -> (CellOutcome, KrcReport, SharedWorld) {
+    run_with(cycles, stop, SensorParams::default(), recorder)
+}
+
+/// As [`run_against_sim_krc`], with the given sensor model and recorder.
+fn run_with(
     cycles: u64,
     stop: bool,
     sensor: SensorParams,
+    recorder: Option<forcecell::recorder::Recorder>,
 ) -> (CellOutcome, KrcReport, SharedWorld) {
     let cfg = CellConfig::from_toml(CELL, "cell.toml").unwrap();
     let tuning = cfg.tuning().unwrap();
@@ -63,7 +72,15 @@ fn run_with_sensor(
     let mut mech = world.clone();
     let robot = thread::spawn(move || krc.run(&mut mech));
     let flag = AtomicBool::new(stop);
-    let out = run_cell(&cfg, &tuning, link, InProcSensor::new(world.clone()), &flag).unwrap();
+    let out = forcecell::cell::run_cell_recorded(
+        &cfg,
+        &tuning,
+        link,
+        InProcSensor::new(world.clone()),
+        &flag,
+        recorder,
+    )
+    .unwrap();
     (out, robot.join().unwrap(), world)
 }
 
@@ -99,7 +116,7 @@ fn a_sensor_silent_in_contact_ends_the_run_backed_off_with_stop() {
         }],
         ..SensorParams::default()
     };
-    let (out, report, world) = run_with_sensor(2_000, false, silent);
+    let (out, report, world) = run_with(2_000, false, silent, None);
     assert!(out.ended.contains("held the last command"), "{}", out.ended);
     assert!(out.stopped, "{}", out.ended);
     assert_eq!(report.end, KrcEnd::Stopped, "{report:?}");
@@ -228,4 +245,39 @@ fn calibrate_refuses_too_few_poses_before_touching_any_device() {
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("--poses must be 3..=64"), "{err}");
+}
+
+#[test]
+fn a_recorded_cell_run_streams_every_cycle_to_mcap() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.mcap");
+    let (tx, recording) =
+        forcecell::recorder::start(&path, forcecell::recorder::RecorderOptions::default(), None)
+            .unwrap();
+    let (out, report, _) = run_against_sim_krc_recorded(2_000, false, Some(tx));
+    assert!(out.stopped, "{}", out.ended);
+    assert_eq!(report.end, KrcEnd::Stopped);
+    assert!(
+        out.rows.is_empty(),
+        "the recording holds the trace, not a Vec grown in the loop"
+    );
+    let summary = recording.finish(Vec::new()).unwrap();
+    assert!(summary.finished, "{summary}");
+    // Every answered cycle but the final Stop is a record.
+    assert_eq!(
+        summary.written + summary.dropped,
+        out.stats.cycles - 1,
+        "{summary}"
+    );
+    let bytes = std::fs::read(&path).unwrap();
+    let back = forcecell::recorder::read_mcap(&bytes).unwrap();
+    assert_eq!(back.rows.len() as u64, summary.written);
+    let last = back.rows.last().unwrap();
+    assert!(last.t >= 1.5 && (last.f - 5.0).abs() < 0.1, "{last:?}");
+    // The raw (uncompensated) wrench is recorded beside the compensated one.
+    let raw = mcap::MessageStream::new(&bytes)
+        .unwrap()
+        .filter(|m| m.as_ref().unwrap().channel.topic == "/wrench_raw")
+        .count() as u64;
+    assert_eq!(raw, summary.written);
 }

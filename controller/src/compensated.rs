@@ -11,7 +11,9 @@ use core::cell::Cell;
 use core::fmt;
 use std::rc::Rc;
 
-use hal::{Correction, Cycle, Error as HalError, ErrorKind, ForceSensor, RobotLink, Sample};
+use hal::{
+    Correction, Cycle, Error as HalError, ErrorKind, ForceSensor, RobotLink, Sample, Wrench,
+};
 
 use crate::gravity::{Compensator, GravityError, Orientation};
 
@@ -106,6 +108,7 @@ pub struct CompensatedSensor<S> {
     inner: S,
     compensator: Compensator,
     shared: SharedOrientation,
+    last_raw: Option<Wrench>,
 }
 
 impl<S> CompensatedSensor<S> {
@@ -115,7 +118,13 @@ impl<S> CompensatedSensor<S> {
             inner,
             compensator,
             shared,
+            last_raw: None,
         }
+    }
+
+    /// The uncompensated wrench of the last sample read (for recordings: raw beside compensated).
+    pub fn last_raw(&self) -> Option<Wrench> {
+        self.last_raw
     }
 
     /// The wrapped sensor.
@@ -129,6 +138,7 @@ impl<S: ForceSensor> ForceSensor for CompensatedSensor<S> {
 
     fn read(&mut self) -> Result<Sample, Self::Error> {
         let s = self.inner.read().map_err(CompensatedError::Sensor)?;
+        self.last_raw = Some(s.wrench);
         let wrench = self
             .compensator
             .compensate(&s.wrench, self.shared.get())

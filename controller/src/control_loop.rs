@@ -3,7 +3,7 @@
 
 use core::fmt;
 
-use hal::{Correction, Cycle, Error as _, ErrorKind, ForceSensor, RobotLink};
+use hal::{Correction, Cycle, Error as _, ErrorKind, ForceSensor, RobotLink, Sample};
 use serde::{Deserialize, Serialize};
 
 use crate::law::{ForceLaw, Output};
@@ -133,6 +133,9 @@ pub struct CycleReport {
     pub x: f64,
     /// Measured compressive normal force, N, when the sensor gave a usable sample.
     pub f: Option<f64>,
+    /// The sensor's sample as read this cycle (wrench in the sensor frame, its counter and age), when
+    /// it gave one, finite or not; for recordings and diagnostics.
+    pub sample: Option<Sample>,
     /// The law's output (on a held cycle, the last output).
     pub out: Output,
     /// The correction sent.
@@ -302,9 +305,16 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         }
 
         let mut fatal_sensor = None;
+        let mut sample = None;
         let (f, mut fault) = match self.sensor.read() {
-            Ok(s) if s.wrench.is_finite() => (Some(self.cfg.force_sign * s.wrench.force.z), None),
-            Ok(_) => (None, Some(Fault::NonFiniteSample)),
+            Ok(s) if s.wrench.is_finite() => {
+                sample = Some(s);
+                (Some(self.cfg.force_sign * s.wrench.force.z), None)
+            }
+            Ok(s) => {
+                sample = Some(s);
+                (None, Some(Fault::NonFiniteSample))
+            }
             Err(e) => {
                 let kind = e.kind();
                 if matches!(
@@ -376,6 +386,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             cycle,
             x,
             f,
+            sample,
             out,
             command,
             fault,
@@ -427,6 +438,8 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             cycle,
             x,
             f: None,
+            // The sensor is not read while backing off: its reading no longer matters.
+            sample: None,
             out: self.last_out,
             command,
             fault: Some(Fault::Retracting),

@@ -1,0 +1,134 @@
+//! candump `-L` logs of the ATI driver's traffic: the driver talks to the simulated node over the
+//! in-memory bus through a logging transport; the log reads back (with the `socketcan` crate's
+//! candump reader) as exactly the frames that crossed the bus, and can-utils' `log2asc` accepts it.
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+use std::cell::Cell;
+use std::rc::Rc;
+
+use ati_can::{Base, BusEvent, CanTransport, Clock, Config, Driver, Frame, MemBus, TransportError};
+use forcecell::candump::{CanLog, CandumpWriter, read_log};
+use hal::Wrench;
+use sim::ati_node::{AtiNode, NodeConfig, SharedNode};
+
+/// Counts the frames that cross the bus below the log.
+struct Counting<T>(T, Rc<Cell<u64>>);
+
+impl<T: CanTransport> CanTransport for Counting<T> {
+    fn send(&mut self, frame: &Frame) -> Result<(), TransportError> {
+        self.0.send(frame)?;
+        self.1.set(self.1.get() + 1);
+        Ok(())
+    }
+    fn recv(&mut self, timeout: Duration) -> Result<Option<BusEvent>, TransportError> {
+        let ev = self.0.recv(timeout)?;
+        if matches!(ev, Some(BusEvent::Frame(_))) {
+            self.1.set(self.1.get() + 1);
+        }
+        Ok(ev)
+    }
+    fn accept_only(&mut self, base: Base) -> Result<(), TransportError> {
+        self.0.accept_only(base)
+    }
+    fn clock(&self) -> Clock {
+        self.0.clock()
+    }
+}
+
+/// Start the driver on a logged in-memory bus and step it `steps` times; returns the frames logged.
+fn logged_session(path: &Path, steps: usize) -> u64 {
+    let base = Base::DEFAULT;
+    let wrench = Wrench::from_array([0.0, 0.0, 12.5, 0.0, 0.0, 0.0]);
+    let node = SharedNode::new(
+        AtiNode::new(
+            NodeConfig {
+                base,
+                ..NodeConfig::default()
+            },
+            move |_t: Duration| wrench,
+        )
+        .unwrap(),
+    );
+    let bus = MemBus::with_virtual_clock();
+    bus.attach(node);
+    let log = CandumpWriter::create(path, "vcan0").unwrap();
+    let count = Rc::new(Cell::new(0));
+    let mut driver = Driver::new(
+        CanLog::new(Counting(bus.port(), count.clone()), log),
+        Config {
+            base,
+            ..Config::default()
+        },
+    )
+    .unwrap();
+    driver.start().unwrap();
+    for _ in 0..steps {
+        driver.step().unwrap();
+    }
+    drop(driver);
+    count.get()
+}
+
+#[test]
+fn the_log_holds_every_frame_of_a_session_in_candump_format() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("ati.log");
+    let frames = logged_session(&path, 50);
+    let text = std::fs::read_to_string(&path).unwrap();
+    let first = text.lines().next().unwrap();
+    // `(1700000000.123456) vcan0 201#` — seconds.micros, the interface, ID#DATA.
+    assert!(first.starts_with('('), "{first}");
+    assert!(first.contains(") vcan0 "), "{first}");
+    let logged = read_log(&path).unwrap();
+    assert_eq!(
+        logged.len() as u64,
+        frames,
+        "every frame sent or received is logged"
+    );
+    let base = Base::DEFAULT;
+    assert!(
+        logged
+            .iter()
+            .all(|(_, dev, f)| dev == "vcan0" && f.id() >> 4 == u32::from(base.id(0)) >> 4),
+        "only the sensor's ids"
+    );
+    for w in logged.windows(2) {
+        assert!(w[1].0 >= w[0].0, "times in order");
+    }
+    // Requests (remote or data) and answers with data both appear.
+    assert!(logged.iter().any(|(_, _, f)| !f.data().is_empty()));
+    let round: Vec<Frame> = logged.iter().map(|(_, _, f)| *f).collect();
+    let again = forcecell::candump::to_socketcan(&round[0])
+        .and_then(|f| forcecell::candump::from_socketcan(&f))
+        .unwrap();
+    assert_eq!(again, round[0]);
+}
+
+#[test]
+#[ignore = "needs can-utils (log2asc): apt-get install can-utils"]
+fn can_utils_log2asc_reads_the_log() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("ati.log");
+    let frames = logged_session(&path, 20);
+    let out = Command::new("log2asc")
+        .args(["-I"])
+        .arg(&path)
+        .arg("vcan0")
+        .output()
+        .expect("run log2asc (apt-get install can-utils)");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let asc = String::from_utf8_lossy(&out.stdout);
+    // One ASC line per frame, each naming channel 1 and the frame's id.
+    let lines = asc
+        .lines()
+        .filter(|l| l.trim_start().starts_with(|c: char| c.is_ascii_digit()) && l.contains(" 1 "))
+        .count() as u64;
+    assert_eq!(lines, frames, "{asc}");
+}

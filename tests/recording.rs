@@ -1,0 +1,368 @@
+//! MCAP recordings on real files: written → read back → the same values; a `sim` killed with SIGKILL
+//! leaves a file readable up to its last flush; a full disk is reported once and counted while the loop
+//! side never blocks.
+
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use forcecell::record::Row;
+use forcecell::recorder::{self, CHANNELS, Full, NO_STATE, Record, RecorderOptions};
+
+fn record(k: u64) -> Record {
+    let t = k as f64 * 0.004;
+    let mut rec = Record::from_row(Row {
+        t,
+        f: if k % 7 == 3 {
+            f64::NAN
+        } else {
+            5.0 + 0.01 * k as f64
+        },
+        f_true: f64::NAN,
+        f_r: 5.0,
+        x: 0.0101 + 1e-7 * k as f64,
+        x_cmd: 0.0102 - 3e-8 * k as f64,
+        x_r: 0.0103,
+        kc_hat: 50_000.0 + k as f64 / 3.0,
+        xc_hat: 0.009 + 1e-9 * k as f64,
+        k_c: f64::NAN,
+        x_c: f64::NAN,
+        fault: (k % 3) as u8,
+    });
+    rec.wrench = [0.1, -0.2, 5.0 + k as f64, 0.01, 0.02, -0.03];
+    rec.wrench_raw = [0.1, -0.2, 25.0, 0.01, 0.02, -0.03];
+    rec.state = if k < 10 { 0 } else { 1 };
+    rec.events = u16::from(k == 10);
+    rec.robot_seq = k;
+    rec.period = 0.004;
+    rec
+}
+
+fn same(a: f64, b: f64) -> bool {
+    a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan())
+}
+
+fn assert_same_row(got: &Row, want: &Row) {
+    let g = [
+        got.t, got.f, got.f_true, got.f_r, got.x, got.x_cmd, got.x_r, got.kc_hat, got.xc_hat,
+        got.k_c, got.x_c,
+    ];
+    let w = [
+        want.t,
+        want.f,
+        want.f_true,
+        want.f_r,
+        want.x,
+        want.x_cmd,
+        want.x_r,
+        want.kc_hat,
+        want.xc_hat,
+        want.k_c,
+        want.x_c,
+    ];
+    for (i, (a, b)) in g.iter().zip(w).enumerate() {
+        assert!(
+            same(*a, b),
+            "column {i}: read {a}, wrote {b} ({got:?} vs {want:?})"
+        );
+    }
+    assert_eq!(got.fault, want.fault);
+}
+
+#[test]
+fn records_round_trip_through_an_mcap_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("rt.mcap");
+    let opts = RecorderOptions {
+        full: Full::Wait,
+        capacity: 64,
+        attachments: vec![(
+            "cell.toml".into(),
+            "application/toml".into(),
+            b"tuning = \"robust\"\n".to_vec(),
+        )],
+        ..RecorderOptions::default()
+    };
+    let (mut tx, recording) = recorder::start(&path, opts, None).unwrap();
+    let n = 3_000;
+    let mut truth = Vec::new();
+    for k in 0..n {
+        assert!(tx.push(record(k)), "a waiting queue never drops");
+        let mut row = record(k).row;
+        row.f_true = 5.5;
+        row.k_c = 70_000.0;
+        row.x_c = 0.01 - k as f64 * 1e-9;
+        truth.push(row);
+    }
+    drop(tx);
+    let summary = recording.finish(truth.clone()).unwrap();
+    assert!(summary.finished, "{summary}");
+    assert_eq!(summary.written, n);
+    assert_eq!(summary.dropped + summary.lost, 0);
+    assert!(summary.error.is_none());
+
+    let bytes = std::fs::read(&path).unwrap();
+    let back = recorder::read_mcap(&bytes).unwrap();
+    assert!(back.truncated.is_none(), "{:?}", back.truncated);
+    assert_eq!(back.rows.len(), n as usize);
+    for (got, want) in back.rows.iter().zip(&truth) {
+        assert_same_row(got, want);
+    }
+
+    // The indexed view: every channel with its schema, the attachment, the message counts.
+    let summary = mcap::Summary::read(&bytes)
+        .unwrap()
+        .expect("a summary section");
+    let topics: Vec<&str> = summary
+        .channels
+        .values()
+        .map(|c| c.topic.as_str())
+        .collect();
+    for c in CHANNELS {
+        assert!(topics.contains(&c.topic), "{} missing: {topics:?}", c.topic);
+        let ch = summary
+            .channels
+            .values()
+            .find(|ch| ch.topic == c.topic)
+            .unwrap();
+        let schema = ch.schema.as_ref().expect("a schema");
+        assert_eq!(schema.encoding, "jsonschema");
+        let parsed: serde_json::Value = serde_json::from_slice(&schema.data).unwrap();
+        assert!(parsed["properties"].is_object(), "{}", c.topic);
+    }
+    let stats = summary.stats.unwrap();
+    assert_eq!(stats.message_count, n * CHANNELS.len() as u64);
+    assert_eq!(stats.attachment_count, 1);
+    let att = &summary.attachment_indexes[0];
+    let a = mcap::read::attachment(&bytes, att).unwrap();
+    assert_eq!(&a.data[..], b"tuning = \"robust\"\n");
+
+    // The wrench channels carry what was pushed, and the state its name.
+    let mut seen_raw = 0;
+    let mut seen_contact_event = false;
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        let k = (m.log_time as f64 / 4e6).round() as u64;
+        match m.channel.topic.as_str() {
+            "/wrench" => assert_eq!(v["force"]["z"].as_f64(), Some(5.0 + k as f64)),
+            "/wrench_raw" => {
+                seen_raw += 1;
+                assert_eq!(v["force"]["z"].as_f64(), Some(25.0));
+            }
+            "/state" if k == 10 => {
+                assert_eq!(v["state_name"], "contact");
+                assert_eq!(v["event_names"][0], "contact");
+                seen_contact_event = true;
+            }
+            _ => {}
+        }
+    }
+    assert_eq!(seen_raw, n);
+    assert!(seen_contact_event);
+    assert_ne!(record(0).state, NO_STATE);
+}
+
+#[test]
+fn sim_writes_an_mcap_whose_export_is_the_csv() {
+    let dir = tempfile::tempdir().unwrap();
+    let exe = env!("CARGO_BIN_EXE_forcecell");
+    let o = Command::new(exe)
+        .args(["sim", "--out", "res"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("finished with summary and index"),
+        "{stdout}"
+    );
+    let o = Command::new(exe)
+        .args([
+            "export",
+            "res/paper-fig9.mcap",
+            "--csv",
+            "--out",
+            "res/exported.csv",
+        ])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = std::fs::read_to_string(dir.path().join("res/paper-fig9.csv")).unwrap();
+    let exported = std::fs::read_to_string(dir.path().join("res/exported.csv")).unwrap();
+    assert!(csv.lines().count() > 1000);
+    assert_eq!(exported, csv, "the export is the CSV the run wrote");
+    let o = Command::new(exe)
+        .args(["plot", "res/paper-fig9.mcap", "--out", "res/from-mcap.png"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        dir.path()
+            .join("res/from-mcap.png")
+            .metadata()
+            .unwrap()
+            .len()
+            > 1000
+    );
+}
+
+fn wait_for(what: &str, limit: Duration, mut ok: impl FnMut() -> bool) {
+    let start = Instant::now();
+    while !ok() {
+        assert!(start.elapsed() < limit, "gave up waiting for {what}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn a_killed_sim_leaves_an_mcap_readable_up_to_its_last_flush() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/paper-fig9.toml"),
+    )
+    .unwrap()
+    .replace("name = \"paper-fig9\"", "name = \"long\"")
+    .replace("duration = 2.0", "duration = 60.0");
+    std::fs::write(dir.path().join("long.toml"), scenario).unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_forcecell"))
+        .args([
+            "sim",
+            "--scenario",
+            "long.toml",
+            "--plant",
+            "p2",
+            "--realtime",
+            "--out",
+            "res",
+        ])
+        .current_dir(dir.path())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let path = dir.path().join("res/long-p2-paper.mcap");
+    let len = || path.metadata().map_or(0, |m| m.len());
+    // The header, schemas and attachments are flushed at once; wait for two flushes of messages.
+    wait_for("the recording to start", Duration::from_secs(30), || {
+        len() > 0
+    });
+    let first = len();
+    wait_for("a first flush of messages", Duration::from_secs(30), || {
+        len() > first
+    });
+    let second = len();
+    wait_for("a second flush", Duration::from_secs(30), || len() > second);
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+
+    let bytes = std::fs::read(&path).unwrap();
+    let back = recorder::read_mcap(&bytes).unwrap();
+    assert!(
+        back.truncated.is_some(),
+        "a killed run cannot have finished the file"
+    );
+    assert!(
+        mcap::Summary::read(&bytes).is_err() || mcap::Summary::read(&bytes).unwrap().is_none(),
+        "no summary in a killed file"
+    );
+    assert!(
+        back.rows.len() > 100,
+        "at least the first flush: {} rows",
+        back.rows.len()
+    );
+    for w in back.rows.windows(2) {
+        assert!(
+            w[1].t > w[0].t,
+            "cycles in order: {} then {}",
+            w[0].t,
+            w[1].t
+        );
+    }
+    for r in &back.rows {
+        assert!(
+            r.f_r == 5.0 && r.x_cmd.is_finite() && r.t.is_finite(),
+            "{r:?}"
+        );
+    }
+}
+
+/// Needs root: mounts a 256 KiB tmpfs (the CI and the dev machines run as root).
+#[test]
+fn a_full_disk_is_reported_once_counted_and_never_blocks_the_loop() {
+    let dir = tempfile::tempdir().unwrap();
+    let mnt = dir.path().join("tiny");
+    std::fs::create_dir(&mnt).unwrap();
+    let st = Command::new("mount")
+        .args(["-t", "tmpfs", "-o", "size=256k", "tmpfs"])
+        .arg(&mnt)
+        .status()
+        .expect("run mount");
+    assert!(
+        st.success(),
+        "cannot mount a tmpfs (this test needs root): {st}"
+    );
+    struct Unmount<'a>(&'a Path);
+    impl Drop for Unmount<'_> {
+        fn drop(&mut self) {
+            let _ = Command::new("umount").arg(self.0).status();
+        }
+    }
+    let _guard = Unmount(&mnt);
+
+    let path = mnt.join("full.mcap");
+    let opts = RecorderOptions {
+        full: Full::Drop,
+        capacity: 1024,
+        flush_every: Duration::from_millis(10),
+        ..RecorderOptions::default()
+    };
+    let (mut tx, recording) = recorder::start(&path, opts, None).unwrap();
+    // ~1.3 kB a cycle: 256 KiB holds about 200 cycles; push 2 000, 20 at a time, so that some
+    // flushes land before the disk is full.
+    let n = 2_000u64;
+    let mut accepted = 0;
+    for k in 0..n {
+        accepted += u64::from(tx.push(record(k)));
+        if k % 20 == 19 {
+            std::thread::sleep(Duration::from_millis(15));
+        }
+    }
+    drop(tx);
+    let s = recording.finish(Vec::new()).unwrap();
+    let err = s.error.clone().expect("the write error is reported");
+    assert!(
+        err.contains("No space") || err.contains("space"),
+        "ENOSPC: {err}"
+    );
+    assert!(!s.finished);
+    assert_eq!(
+        s.written + s.lost + s.dropped,
+        n,
+        "every cycle written, lost or dropped: {s:?}"
+    );
+    assert_eq!(s.dropped, n - accepted);
+    assert!(s.lost > 0, "{s:?}");
+    assert!(s.to_string().contains("lost"), "{s}");
+    // What was flushed before the disk filled reads back intact.
+    let bytes = std::fs::read(&path).unwrap();
+    let back = recorder::read_mcap(&bytes).unwrap();
+    assert!(back.truncated.is_some());
+    assert!(!back.rows.is_empty());
+    for (got, k) in back.rows.iter().zip(0..) {
+        assert_same_row(got, &record(k).row);
+    }
+}
+
+#[test]
+fn an_unwritable_directory_is_an_error_before_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("no/such/dir/x.mcap");
+    let Err(e) = recorder::start(&path, RecorderOptions::default(), None) else {
+        panic!("created a file in a missing directory")
+    };
+    assert!(format!("{e:#}").contains("cannot create"), "{e:#}");
+}
