@@ -36,7 +36,6 @@
 
 use std::net::{IpAddr, SocketAddr};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
@@ -323,6 +322,8 @@ impl CellConfig {
             translation: r.poscorrmon_mm * 1e-3,
             ..PoscorrLimits::MONITOR_DEFAULT
         };
+        // Short waits for the first datagram, so a stop ends the wait (the loop waits again).
+        lc.first_contact_timeout = Some(Duration::from_millis(100));
         lc.limits = Limits {
             max_translation: (0.9 * lc.poscorr.translation).min(tuning.loop_cfg.max_offset),
             max_translation_step: tuning.loop_cfg.max_step,
@@ -344,6 +345,30 @@ pub struct CellOutcome {
     pub ended: String,
     /// Whether `Stop` was sent.
     pub stopped: bool,
+    /// Which way it ended.
+    pub end: CellEnd,
+}
+
+/// Which way a cell run ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CellEnd {
+    /// The configured duration was done (or the robot ended its program: a run without a duration).
+    Done,
+    /// The operator's stop flag (SIGINT, SIGTERM).
+    Stopped,
+    /// A link failed before the end: the robot fell silent past its watchdog, the sensor bus went off.
+    EndedEarly,
+}
+
+impl CellEnd {
+    /// The process exit status for this end ([`crate::stop`]).
+    pub fn exit_status(self) -> u8 {
+        match self {
+            Self::Done => crate::stop::OK,
+            Self::Stopped => crate::stop::INTERRUPTED,
+            Self::EndedEarly => crate::stop::ENDED_EARLY,
+        }
+    }
 }
 
 /// Run the controller on `robot` and `sensor` until `duration` of robot time has passed, `stop` is set,
@@ -369,23 +394,40 @@ where
     let sensor = CompensatedSensor::new(sensor, cfg.compensator(), orientation);
     let mut lp = ControlLoop::new(robot, sensor, law, tuning.loop_cfg);
     let mut rows = Vec::new();
-    let ended = loop {
+    let (ended, end) = loop {
         if stop.load(Ordering::Relaxed) {
-            break "stopped by the operator".to_string();
+            break ("stopped by the operator".to_string(), CellEnd::Stopped);
         }
         match lp.cycle() {
             Ok(r) => {
                 rows.push(Row::from_report(&r, f_r));
                 if cfg.duration.is_some_and(|d| r.cycle.t >= d) {
-                    break format!("{} s of robot time done", r.cycle.t);
+                    break (format!("{} s of robot time done", r.cycle.t), CellEnd::Done);
                 }
             }
+            // A wait for the robot that the stop ended: no cycle to answer with `Stop`.
+            Err(e) if stop.load(Ordering::Relaxed) => {
+                return Ok(CellOutcome {
+                    rows,
+                    stats: lp.stats(),
+                    ended: format!("stopped by the operator: {e}"),
+                    stopped: false,
+                    end: CellEnd::Stopped,
+                });
+            }
             Err(e) => {
+                // Without a duration the run lasts until the robot stops sending: that is its end.
+                let end = if cfg.duration.is_none() && !rows.is_empty() {
+                    CellEnd::Done
+                } else {
+                    CellEnd::EndedEarly
+                };
                 return Ok(CellOutcome {
                     rows,
                     stats: lp.stats(),
                     ended: format!("the loop ended: {e}"),
                     stopped: false,
+                    end,
                 });
             }
         }
@@ -396,6 +438,7 @@ where
         stats: lp.stats(),
         ended,
         stopped,
+        end,
     })
 }
 
@@ -427,9 +470,13 @@ fn open_devices(
     let info = driver
         .start()
         .with_context(|| format!("ATI sensor at base {base} on {can}"))?;
-    println!("sensor: {info:?}");
+    println!("sensor: {}", crate::ati::describe(&info));
     if tare {
-        let bias = driver.tare(crate::ati::bias_config())?;
+        // The bias needs samples: start-up ends before the first poll.
+        crate::ati::first_sample(&mut driver)?;
+        let bias = driver.tare(crate::ati::bias_config()).context(
+            "bias at start (sensor.tare = true; the tool must be in free air and still)",
+        )?;
         println!("bias taken (counts): {bias:.1?}");
     }
     let sensor = ati_can::AtiSensor::spawn(driver, *poll_hz)?;
@@ -437,23 +484,32 @@ fn open_devices(
     Ok((link, sensor))
 }
 
-/// `forcecell run --config FILE`: bind the robot link, start the sensor, run, record, plot.
-pub fn run(path: &Path) -> Result<()> {
+/// `forcecell run --config FILE`: check the recording directory, start the sensor, bind the robot link,
+/// run, record, plot. Returns the exit status ([`CellEnd::exit_status`]).
+pub fn run(path: &Path) -> Result<u8> {
     let cfg = CellConfig::load(path)?;
     let tuning = cfg.tuning()?;
-    std::fs::create_dir_all(&cfg.record)
-        .with_context(|| format!("cannot create {}", cfg.record.display()))?;
+    // Before anything moves: a recording that cannot be written is found now, not after the run.
+    let csv = reserve_recording(&cfg.record)?;
+    crate::stop::install()?;
     let SensorConfig::Ati { tare, .. } = cfg.sensor;
-    let (link, sensor) = open_devices(&cfg, &tuning, tare)?;
+    let (mut link, sensor) = match open_devices(&cfg, &tuning, tare) {
+        Ok(d) => d,
+        Err(e) => {
+            let _ = std::fs::remove_file(&csv);
+            return Err(e);
+        }
+    };
     println!(
-        "listening on {} for the robot at {} ({} ms cycle, tuning {}); start RSI on the robot now, Ctrl-C ends with a clean Stop",
-        cfg.robot.listen, cfg.robot.robot_ip, cfg.robot.cycle_ms, tuning.name
+        "listening on {} for the robot at {} ({} ms cycle, tuning {}); start RSI on the robot now, Ctrl-C (or SIGTERM) ends with a clean Stop",
+        link.local_addr().map_or(cfg.robot.listen, |a| a),
+        cfg.robot.robot_ip,
+        cfg.robot.cycle_ms,
+        tuning.name
     );
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
-        .context("cannot install the Ctrl-C handler")?;
-    let out = run_cell(&cfg, &tuning, link, sensor, &stop)?;
+    let stop = crate::stop::flag();
+    let robot = crate::stop::Interruptible::new(&mut link, stop);
+    let out = run_cell(&cfg, &tuning, robot, sensor, stop)?;
     println!(
         "{}; {} cycles, {} sensor faults, {} limited; Stop {}",
         out.ended,
@@ -463,10 +519,12 @@ pub fn run(path: &Path) -> Result<()> {
         if out.stopped {
             "sent"
         } else {
-            "not sent (the link was gone)"
+            "not sent (no robot cycle to answer)"
         }
     );
-    write_recording(&cfg.record, &out.rows)
+    crate::rsi::print_link(link.diagnostics());
+    write_recording(&csv, &out.rows)?;
+    Ok(out.end.exit_status())
 }
 
 /// `forcecell calibrate --config FILE --poses N`: while the robot's program holds the tool still in free
@@ -523,18 +581,77 @@ pub fn gravity_section(m: &GravityModel, mount: UnitQuaternion<f64>) -> String {
     )
 }
 
-fn write_recording(dir: &Path, rows: &[Row]) -> Result<()> {
-    if rows.is_empty() {
-        println!("nothing to record: no cycle was answered");
-        return Ok(());
-    }
+/// Create `dir` and reserve a new file in it for this run's trace (`run-<unix time>.csv`, or
+/// `run-<unix time>-N.csv` when a run of the same second has one), proven writable by writing the CSV
+/// header to it. An unwritable or full directory is an error here, before the robot is started.
+pub fn reserve_recording(dir: &Path) -> Result<PathBuf> {
+    use std::io::Write;
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("recording directory {}: cannot create it", dir.display()))?;
     let stamp = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_secs());
-    let csv = dir.join(format!("run-{stamp}.csv"));
+    for n in 0..1000 {
+        let name = if n == 0 {
+            format!("run-{stamp}.csv")
+        } else {
+            format!("run-{stamp}-{n}.csv")
+        };
+        let path = dir.join(name);
+        let mut f = match std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&path)
+        {
+            Ok(f) => f,
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => {
+                bail!(
+                    "recording directory {} is not writable ({}): fix it or set `record` in the cell file before starting the robot",
+                    dir.display(),
+                    os_error(&e)
+                )
+            }
+        };
+        let probe = writeln!(f, "{}", crate::record::HEADER).and_then(|()| f.sync_all());
+        if let Err(e) = probe {
+            drop(f);
+            let _ = std::fs::remove_file(&path);
+            bail!(
+                "recording directory {} cannot take the trace ({}): free space or set `record` in the cell file before starting the robot",
+                dir.display(),
+                os_error(&e)
+            );
+        }
+        return Ok(path);
+    }
+    bail!(
+        "recording directory {}: 1000 recordings of this second exist already",
+        dir.display()
+    )
+}
+
+fn write_recording(csv: &Path, rows: &[Row]) -> Result<()> {
+    if rows.is_empty() {
+        let _ = std::fs::remove_file(csv);
+        println!("nothing to record: no cycle was answered");
+        return Ok(());
+    }
     let png = csv.with_extension("png");
-    crate::record::write_csv_file(&csv, rows)?;
-    crate::plot::write_png(&png, &format!("forcecell run {stamp}"), rows)?;
+    let title = csv.file_stem().map_or("forcecell run".into(), |s| {
+        format!("forcecell {}", s.to_string_lossy())
+    });
+    crate::record::write_csv_file(csv, rows)?;
+    crate::plot::write_png(&png, &title, rows)?;
     println!("wrote {} and {}", csv.display(), png.display());
     Ok(())
+}
+
+/// An I/O error's text without the "(os error N)" suffix (the kind is in the words already).
+fn os_error(e: &std::io::Error) -> String {
+    let t = e.to_string();
+    match t.find(" (os error") {
+        Some(i) => t[..i].to_string(),
+        None => t,
+    }
 }
