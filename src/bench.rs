@@ -11,7 +11,7 @@ use anyhow::{Context, Result};
 use crate::plot;
 use crate::record;
 use crate::runner::{RunSpec, run_inproc};
-use crate::scenario::{PlantSpec, Scenario};
+use crate::scenario::{PlantSpec, Scenario, builtin_names};
 
 /// One line of the table.
 #[derive(Clone, Debug, PartialEq)]
@@ -68,6 +68,20 @@ pub fn scenarios(opts: &BenchOptions) -> Result<Vec<Scenario>> {
         .filter(|s| s.name.starts_with('b'))
         .filter(|s| opts.only.is_empty() || opts.only.iter().any(|o| s.name.starts_with(o)))
         .collect();
+    if let Some(o) = opts
+        .only
+        .iter()
+        .find(|o| !v.iter().any(|s| s.name.starts_with(o.as_str())))
+    {
+        let names: Vec<&str> = builtin_names()
+            .into_iter()
+            .filter(|n| n.starts_with('b'))
+            .collect();
+        anyhow::bail!(
+            "no B scenario starts with {o:?}; they are: {}",
+            names.join(", ")
+        );
+    }
     v.sort_by(|a, b| a.name.cmp(&b.name));
     Ok(v)
 }

@@ -15,6 +15,7 @@
 //! watchdog_cycles = 25
 //! poscorr_mm = 5.0                  # the robot's POSCORR translation limit …
 //! poscorrmon_mm = 6.0               # … and POSCORRMON's
+//! max_speed = 3.0                   # m/s: a pose jump faster than this is a counted fault
 //!
 //! [sensor]
 //! kind = "ati"
@@ -76,6 +77,10 @@ pub struct RobotConfig {
     /// The robot's POSCORRMON translation limit, mm.
     #[serde(default = "default_poscorrmon")]
     pub poscorrmon_mm: f64,
+    /// The fastest the tool moves while RSI runs, m/s: a reported pose jump beyond it is a counted
+    /// fault (`implausible`), never a control input.
+    #[serde(default = "default_max_speed")]
+    pub max_speed: f64,
 }
 
 /// Correction mode by name.
@@ -100,6 +105,9 @@ fn default_poscorr() -> f64 {
 }
 fn default_poscorrmon() -> f64 {
     6.0
+}
+fn default_max_speed() -> f64 {
+    LinkConfig::DEFAULT_MAX_SPEED
 }
 
 /// The force sensor of a cell.
@@ -309,6 +317,7 @@ impl CellConfig {
         lc.bind = Some(r.listen);
         lc.period = Duration::from_millis(u64::from(r.cycle_ms));
         lc.watchdog_cycles = r.watchdog_cycles;
+        lc.max_speed = r.max_speed;
         lc.mode = if relative {
             CorrectionMode::Relative
         } else {

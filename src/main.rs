@@ -270,6 +270,14 @@ fn sim(a: SimArgs) -> Result<ExitCode> {
     );
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create output directory {}", a.out.display()))?;
+    // An unwritable output directory is found before the run, not after it.
+    let csv = a.out.join(format!("{}.csv", spec.file_stem()));
+    std::fs::File::create(&csv).with_context(|| {
+        format!(
+            "output directory {} is not writable (--out)",
+            a.out.display()
+        )
+    })?;
     let mut bar = DelayedBar::new(Duration::from_millis(300));
     if a.sensor == "inproc" && a.can.is_some() {
         anyhow::bail!("--can needs --sensor ati");

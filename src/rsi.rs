@@ -89,21 +89,27 @@ impl WireSummary {
 /// Print the RSI link's counters (received, answered, late, skipped, stale, foreign, malformed,
 /// oversized, implausible) and its receive→send latency.
 pub fn print_link(d: &Diagnostics) {
-    {
-        let c = d.counters;
-        let l = &d.latency;
-        println!(
-            "RSI link: {} received, {} answered, {} late, {} skipped, {} stale, {} foreign, {} malformed, {} oversized",
-            c.received, c.answered, c.late, c.skipped, c.stale, c.foreign, c.malformed, c.oversized
-        );
-        println!(
-            "  receive→send: p50 {:?}, p99 {:?}, p99.9 {:?}, max {:?}",
-            l.quantile(0.5),
-            l.quantile(0.99),
-            l.quantile(0.999),
-            l.max()
-        );
-    }
+    let c = d.counters;
+    let l = &d.latency;
+    println!(
+        "RSI link: {} received, {} answered, {} late, {} skipped, {} stale, {} foreign, {} malformed, {} oversized, {} implausible",
+        c.received,
+        c.answered,
+        c.late,
+        c.skipped,
+        c.stale,
+        c.foreign,
+        c.malformed,
+        c.oversized,
+        c.implausible
+    );
+    println!(
+        "  receive→send: p50 {:?}, p99 {:?}, p99.9 {:?}, max {:?}",
+        l.quantile(0.5),
+        l.quantile(0.99),
+        l.quantile(0.999),
+        l.max()
+    );
 }
 
 /// Robot-side limits wide enough for a tuning's own loop limits, so the driver never acts before the
