@@ -25,6 +25,7 @@
 //! slot = 0
 //! poll_hz = 1000.0
 //! tare = true                       # bias at start: the tool must be in free air and still
+//! turnaround_us = 300               # optional: the board's answer allowance per request
 //!
 //! [gravity]                         # optional: the tool model (least-squares fit, controller::gravity)
 //! signed_mass = 2.0                 # kg, sign as fitted
@@ -133,6 +134,9 @@ pub enum SensorConfig {
         /// Take a bias at start (tool in free air, still).
         #[serde(default)]
         tare: bool,
+        /// The board's turnaround allowance per request, µs (raise it on a virtual interface).
+        #[serde(default = "default_turnaround_us")]
+        turnaround_us: u64,
     },
 }
 
@@ -144,6 +148,9 @@ fn default_bitrate() -> u32 {
 }
 fn default_poll() -> f64 {
     1000.0
+}
+fn default_turnaround_us() -> u64 {
+    300
 }
 
 /// The tool model for gravity compensation.
@@ -464,6 +471,7 @@ fn open_devices(
         bitrate,
         slot,
         poll_hz,
+        turnaround_us,
         ..
     } = &cfg.sensor;
     let base = ati_can::Base::new(*base)
@@ -472,8 +480,10 @@ fn open_devices(
         base,
         bitrate: *bitrate,
         slot: *slot,
+        turnaround: Duration::from_micros(*turnaround_us),
         ..ati_can::Config::default()
     };
+    ati_cfg.validate().map_err(|e| anyhow!("sensor: {e}"))?;
     let transport = ati_can::SocketCanTransport::open(can)?;
     let mut driver = ati_can::Driver::new(transport, ati_cfg)?;
     let info = driver

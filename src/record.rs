@@ -137,7 +137,7 @@ pub fn read_csv(text: &str) -> Result<Vec<Row>> {
                 v[i] = c
                     .parse()
                     .with_context(|| format!("line {}: column {} is not a number", n + 2, i + 1))?;
-                if !(v[i].abs() <= MAX_VALUE) {
+                if !(v[i].is_finite() && v[i].abs() <= MAX_VALUE) {
                     anyhow::bail!(
                         "line {}: column {} is {c}: every value must be finite and within ±{MAX_VALUE:e} (s, N, m, N/m; an empty field is a missing value)",
                         n + 2,

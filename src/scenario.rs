@@ -274,7 +274,7 @@ impl Scenario {
             );
         }
         let (_, k_hi) = extent(&plant.k_c, self.duration);
-        if !(k_hi <= MAX_STIFFNESS) {
+        if !(k_hi.is_finite() && k_hi <= MAX_STIFFNESS) {
             bail!(
                 "environment: k_c must stay at most {MAX_STIFFNESS:e} N/m (stiffer than steel on steel), it reaches {k_hi:e} N/m"
             );
@@ -355,8 +355,13 @@ pub fn load_tuning(spec: &str) -> Result<Tuning> {
             })?;
         (spec.to_string(), t.to_string())
     };
+    tuning_from_toml(&text, &origin)
+}
+
+/// Parse and validate a tuning's TOML text; `origin` names it in errors.
+pub fn tuning_from_toml(text: &str, origin: &str) -> Result<Tuning> {
     let t: Tuning =
-        toml::from_str(&text).map_err(|e| anyhow!("{origin}: {}", one_line(&e.to_string())))?;
+        toml::from_str(text).map_err(|e| anyhow!("{origin}: {}", one_line(&e.to_string())))?;
     t.validate()
         .map_err(|e| anyhow!("{origin}: invalid tuning: {e}"))?;
     Ok(t)

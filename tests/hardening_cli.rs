@@ -189,7 +189,7 @@ fn items6_to_8_sensor_values_are_refused_before_any_interface_is_opened() {
             ],
             d.path(),
         ),
-        &["--turnaround-us", "1 s"],
+        &["--turnaround-us", "10 s"],
     );
     refused(
         &forcecell(

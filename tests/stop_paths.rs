@@ -4,16 +4,13 @@
 //! status. The robot is the simulated KUKA controller on loopback, in this process, and its mechanism
 //! sends the signal at a chosen cycle, so no test depends on timing.
 
-use std::io::{BufRead, BufReader};
-use std::net::{SocketAddr, UdpSocket};
-use std::path::Path;
-use std::process::{Child, Command, Stdio};
-use std::sync::atomic::Ordering;
-use std::time::Duration;
+mod common;
 
-use hal::{Correction, Pose, UnitQuaternion, Vector3};
-use kuka_rsi::{EthernetConfig, PoscorrLimits};
-use sim::krc::{Krc, KrcConfig, KrcEnd, KrcReport, Mechanism, RigidArm, Timing};
+use std::path::Path;
+use std::sync::atomic::Ordering;
+
+use common::{SignallingArm, arm, client, finish, free_port, read_until, signal, spawn};
+use sim::krc::{KrcEnd, KrcReport};
 
 /// A 60 s scenario: long enough that only a signal or a lost link ends it in a test.
 const LONG: &str = r#"
@@ -25,126 +22,6 @@ tuning = "robust"
 k_c = 70000.0
 x_c = 0.01
 "#;
-
-fn signal(pid: u32, sig: &str) {
-    // Signals only the forcecell process this test started, by its id.
-    let st = Command::new("/bin/kill")
-        .args([&format!("-{sig}"), &pid.to_string()])
-        .status()
-        .expect("run /bin/kill");
-    assert!(st.success(), "kill -{sig} {pid}");
-}
-
-fn spawn(args: &[&str], dir: &Path) -> Child {
-    Command::new(env!("CARGO_BIN_EXE_forcecell"))
-        .args(args)
-        .current_dir(dir)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("start forcecell")
-}
-
-/// Read the child's stdout until a line containing `needle`; returns everything read.
-fn read_until(child: &mut Child, needle: &str) -> (String, BufReader<std::process::ChildStdout>) {
-    let mut r = BufReader::new(child.stdout.take().unwrap());
-    let mut seen = String::new();
-    loop {
-        let mut line = String::new();
-        let n = r.read_line(&mut line).unwrap();
-        assert!(n > 0, "the child ended before printing {needle:?}:\n{seen}");
-        seen.push_str(&line);
-        if line.contains(needle) {
-            return (seen, r);
-        }
-    }
-}
-
-/// Wait for the child and collect the rest of its output.
-fn finish(
-    mut child: Child,
-    mut out: String,
-    mut r: BufReader<std::process::ChildStdout>,
-) -> (i32, String) {
-    use std::io::Read;
-    r.read_to_string(&mut out).unwrap();
-    let mut err = String::new();
-    child
-        .stderr
-        .take()
-        .unwrap()
-        .read_to_string(&mut err)
-        .unwrap();
-    let st = child.wait().unwrap();
-    assert!(
-        st.code().is_some(),
-        "killed by a signal ({st:?}) instead of ending cleanly:\n{out}{err}"
-    );
-    (st.code().unwrap(), format!("{out}{err}"))
-}
-
-/// The rigid arm of an external RSI client, which sends `sig` to `pid` after `after` cycles.
-struct SignallingArm {
-    arm: RigidArm,
-    cycles: u64,
-    after: u64,
-    target: Option<(u32, &'static str)>,
-}
-
-impl Mechanism for SignallingArm {
-    fn poses(&mut self) -> (Pose, Pose) {
-        self.arm.poses()
-    }
-    fn advance(&mut self, c: &Correction) {
-        self.arm.advance(c);
-        self.cycles += 1;
-        if self.cycles == self.after
-            && let Some((pid, sig)) = self.target.take()
-        {
-            signal(pid, sig);
-        }
-    }
-}
-
-fn free_port() -> u16 {
-    UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-/// An RSI client (the simulated controller on a stiff arm) aimed at `port`, for `cycles` cycles.
-fn client(port: u16, cycles: u64, tweak: impl FnOnce(&mut KrcConfig)) -> Krc {
-    let target: SocketAddr = format!("127.0.0.1:{port}").parse().unwrap();
-    let mut kc = KrcConfig::new(
-        EthernetConfig::forcecell([127, 0, 0, 1].into(), port, false),
-        target,
-    );
-    kc.timing = Timing::Lockstep {
-        deadline: Duration::from_millis(500),
-    };
-    // A forcecell that died without answering ends the client after 20 late replies, not never.
-    kc.timeout = 20;
-    kc.cycles = Some(cycles);
-    kc.poscorr = PoscorrLimits {
-        translation: 0.055,
-        ..PoscorrLimits::default()
-    };
-    kc.poscorrmon = PoscorrLimits {
-        translation: 0.06,
-        ..PoscorrLimits::MONITOR_DEFAULT
-    };
-    tweak(&mut kc);
-    Krc::new(kc).unwrap()
-}
-
-fn arm() -> RigidArm {
-    RigidArm::new(Pose {
-        position: Vector3::new(0.5, 0.0, 0.3),
-        orientation: UnitQuaternion::from_euler_angles(core::f64::consts::PI, 0.0, 0.0),
-    })
-}
 
 /// Run `sim --external-robot` with a client that signals the process after `after` cycles.
 fn external_signalled(
@@ -174,6 +51,7 @@ fn external_signalled(
         cycles: 0,
         after,
         target: Some((child.id(), sig)),
+        killer: None,
     };
     let report = krc.run(&mut mech);
     let (code, text) = finish(child, seen, r);

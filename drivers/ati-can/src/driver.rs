@@ -92,7 +92,7 @@ impl Config {
     }
 
     /// The longest turnaround allowance accepted (every wait on the sensor ends).
-    pub const MAX_WAIT: Duration = Duration::from_secs(1);
+    pub const MAX_WAIT: Duration = Duration::from_secs(10);
 
     /// Checks the values.
     pub fn validate(&self) -> Result<(), AtiError> {
@@ -114,7 +114,7 @@ impl Config {
         }
         if self.turnaround > Self::MAX_WAIT {
             return bad(format!(
-                "turnaround {:?} is above {:?}: a CAN board answers within milliseconds, and every request waits this long before it times out",
+                "turnaround {:?} is above {:?}: a CAN board answers within milliseconds (a slow virtual interface within seconds), and every request waits this long before it times out",
                 self.turnaround,
                 Self::MAX_WAIT
             ));

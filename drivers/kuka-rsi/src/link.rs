@@ -610,11 +610,22 @@ impl RobotLink for RsiLink {
             self.diag.counters.unanswered += 1;
         }
         // A backlog (the application was late) is drained before waiting, so only its newest
-        // datagram is answered; in the steady state the queue is empty and the wait gets the next
-        // datagram, whose turnaround then includes no extra system call.
+        // datagram is answered. The wait wakes on the first datagram to arrive; when the network
+        // delivered several at once (a burst after a stall), whatever else is queued already is read
+        // too and the newest answered — a reply to an older one would reach the robot stale.
         let a = match self.drain()? {
             Some(a) => a,
-            None => self.wait_first()?,
+            None => {
+                let first = self.wait_first()?;
+                match self.drain()? {
+                    Some(mut newer) => {
+                        self.diag.counters.skipped += 1;
+                        newer.cycle.new_session |= first.cycle.new_session;
+                        newer
+                    }
+                    None => first,
+                }
+            }
         };
         self.pending = Some(Pending {
             ipoc: a.ipoc,
