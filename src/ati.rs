@@ -205,6 +205,33 @@ fn print_info(info: &DeviceInfo) {
     }
 }
 
+/// Poll until the driver has its first sample (start-up ends before the first poll), at most 20
+/// polls, each bounded by the request deadline. `Err` says why no sample came.
+pub fn first_sample<T: CanTransport>(driver: &mut Driver<T>) -> Result<()> {
+    for _ in 0..20 {
+        if driver.health() != Health::Waiting {
+            return Ok(());
+        }
+        driver.step()?;
+    }
+    if driver.health() == Health::Waiting {
+        bail!("the sensor answered start-up but no poll in 20 (check the bus and the turnaround)");
+    }
+    Ok(())
+}
+
+/// One line naming a sensor: firmware, serial, calibration slot, units.
+pub fn describe(info: &DeviceInfo) -> String {
+    format!(
+        "ATI firmware {}, serial {}, calibration slot {}, units {:?}/{:?}",
+        info.firmware,
+        info.serial_text().unwrap_or_else(|| "(no answer)".into()),
+        info.slot,
+        info.calibration.force_unit,
+        info.calibration.torque_unit
+    )
+}
+
 /// The bias window used by `sensor ati tare` and `run`'s start-up tare.
 pub fn bias_config() -> BiasConfig {
     BiasConfig {
@@ -234,11 +261,10 @@ pub fn sensor(
         .start()
         .with_context(|| format!("ATI sensor at base {} on {iface}", cfg.base))?;
     // Start-up ends before the first poll: get a sample (or the reason there is none).
-    for _ in 0..20 {
-        if driver.health() != Health::Waiting {
-            break;
-        }
-        driver.step()?;
+    if let Err(e) = first_sample(&mut driver)
+        && !matches!(action, SensorAction::Info)
+    {
+        return Err(e);
     }
     match action {
         SensorAction::Info => {

@@ -16,7 +16,7 @@ use crate::plot;
 use crate::record;
 use crate::rsi::{RobotSide, RsiArgs};
 use crate::runner::RunSpec;
-use crate::scenario::{PlantSpec, Scenario};
+use crate::scenario::{PlantSpec, Scenario, builtin_names};
 
 /// One line of the table.
 #[derive(Clone, Debug, PartialEq)]
@@ -73,6 +73,20 @@ pub fn scenarios(opts: &BenchOptions) -> Result<Vec<Scenario>> {
         .filter(|s| s.name.starts_with('b'))
         .filter(|s| opts.only.is_empty() || opts.only.iter().any(|o| s.name.starts_with(o)))
         .collect();
+    if let Some(o) = opts
+        .only
+        .iter()
+        .find(|o| !v.iter().any(|s| s.name.starts_with(o.as_str())))
+    {
+        let names: Vec<&str> = builtin_names()
+            .into_iter()
+            .filter(|n| n.starts_with('b'))
+            .collect();
+        anyhow::bail!(
+            "no B scenario starts with {o:?}; they are: {}",
+            names.join(", ")
+        );
+    }
     v.sort_by(|a, b| a.name.cmp(&b.name));
     Ok(v)
 }

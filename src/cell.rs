@@ -15,6 +15,7 @@
 //! watchdog_cycles = 25
 //! poscorr_mm = 5.0                  # the robot's POSCORR translation limit …
 //! poscorrmon_mm = 6.0               # … and POSCORRMON's
+//! max_speed = 3.0                   # m/s: a pose jump faster than this is a counted fault
 //!
 //! [sensor]
 //! kind = "ati"
@@ -24,6 +25,7 @@
 //! slot = 0
 //! poll_hz = 1000.0
 //! tare = true                       # bias at start: the tool must be in free air and still
+//! turnaround_us = 300               # optional: the board's answer allowance per request
 //! # or: kind = "robotiq", port = "/dev/ttyUSB0", slave = 9, zero = true (Robotiq FT 300)
 //!
 //! [gravity]                         # optional: the tool model (least-squares fit, controller::gravity)
@@ -37,7 +39,6 @@
 
 use std::net::{IpAddr, SocketAddr};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
@@ -79,6 +80,10 @@ pub struct RobotConfig {
     /// The robot's POSCORRMON translation limit, mm.
     #[serde(default = "default_poscorrmon")]
     pub poscorrmon_mm: f64,
+    /// The fastest the tool moves while RSI runs, m/s: a reported pose jump beyond it is a counted
+    /// fault (`implausible`), never a control input.
+    #[serde(default = "default_max_speed")]
+    pub max_speed: f64,
 }
 
 /// Correction mode by name.
@@ -104,6 +109,9 @@ fn default_poscorr() -> f64 {
 fn default_poscorrmon() -> f64 {
     6.0
 }
+fn default_max_speed() -> f64 {
+    LinkConfig::DEFAULT_MAX_SPEED
+}
 
 /// The force sensor of a cell.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
@@ -128,6 +136,9 @@ pub enum SensorConfig {
         /// Take a bias at start (tool in free air, still).
         #[serde(default)]
         tare: bool,
+        /// The board's turnaround allowance per request, µs (raise it on a virtual interface).
+        #[serde(default = "default_turnaround_us")]
+        turnaround_us: u64,
     },
     /// A Robotiq FT 300 (or FT 150) on a serial port: Modbus RTU start-up, then its 100 Hz stream.
     Robotiq {
@@ -189,6 +200,7 @@ impl SensorConfig {
                 bitrate,
                 slot,
                 poll_hz,
+                turnaround_us,
                 ..
             } => {
                 let base = ati_can::Base::new(*base)
@@ -197,16 +209,22 @@ impl SensorConfig {
                     base,
                     bitrate: *bitrate,
                     slot: *slot,
+                    turnaround: Duration::from_micros(*turnaround_us),
                     ..ati_can::Config::default()
                 };
+                ati_cfg.validate().map_err(|e| anyhow!("sensor: {e}"))?;
                 let transport = crate::candump::open_logged(can, can_log)?;
                 let mut driver = ati_can::Driver::new(transport, ati_cfg)?;
                 let info = driver
                     .start()
                     .with_context(|| format!("ATI sensor at base {base} on {can}"))?;
-                println!("sensor: {info:?}");
+                println!("sensor: {}", crate::ati::describe(&info));
                 if zero_at_start {
-                    let bias = driver.tare(crate::ati::bias_config())?;
+                    // The bias needs samples: start-up ends before the first poll.
+                    crate::ati::first_sample(&mut driver)?;
+                    let bias = driver.tare(crate::ati::bias_config()).context(
+                        "bias at start (sensor.tare = true; the tool must be in free air and still)",
+                    )?;
                     println!("bias taken (counts): {bias:.1?}");
                 }
                 Ok(CellSensor::Ati(ati_can::AtiSensor::spawn(
@@ -303,6 +321,9 @@ fn default_bitrate() -> u32 {
 }
 fn default_poll() -> f64 {
     1000.0
+}
+fn default_turnaround_us() -> u64 {
+    300
 }
 
 /// The tool model for gravity compensation.
@@ -462,6 +483,7 @@ impl CellConfig {
         lc.bind = Some(r.listen);
         lc.period = Duration::from_millis(u64::from(r.cycle_ms));
         lc.watchdog_cycles = r.watchdog_cycles;
+        lc.max_speed = r.max_speed;
         lc.mode = if relative {
             CorrectionMode::Relative
         } else {
@@ -475,6 +497,8 @@ impl CellConfig {
             translation: r.poscorrmon_mm * 1e-3,
             ..PoscorrLimits::MONITOR_DEFAULT
         };
+        // Short waits for the first datagram, so a stop ends the wait (the loop waits again).
+        lc.first_contact_timeout = Some(Duration::from_millis(100));
         lc.limits = Limits {
             max_translation: (0.9 * lc.poscorr.translation).min(tuning.loop_cfg.max_offset),
             max_translation_step: tuning.loop_cfg.max_step,
@@ -496,6 +520,30 @@ pub struct CellOutcome {
     pub ended: String,
     /// Whether `Stop` was sent.
     pub stopped: bool,
+    /// Which way it ended.
+    pub end: CellEnd,
+}
+
+/// Which way a cell run ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CellEnd {
+    /// The configured duration was done (or the robot ended its program: a run without a duration).
+    Done,
+    /// The operator's stop flag (SIGINT, SIGTERM).
+    Stopped,
+    /// A link failed before the end: the robot fell silent past its watchdog, the sensor bus went off.
+    EndedEarly,
+}
+
+impl CellEnd {
+    /// The process exit status for this end ([`crate::stop`]).
+    pub fn exit_status(self) -> u8 {
+        match self {
+            Self::Done => crate::stop::OK,
+            Self::Stopped => crate::stop::INTERRUPTED,
+            Self::EndedEarly => crate::stop::ENDED_EARLY,
+        }
+    }
 }
 
 /// Run the controller on `robot` and `sensor` until `duration` of robot time has passed, `stop` is set,
@@ -541,9 +589,9 @@ where
     let sensor = CompensatedSensor::new(sensor, cfg.compensator(), orientation);
     let mut lp = ControlLoop::new(robot, sensor, law, tuning.loop_cfg);
     let mut rows = Vec::new();
-    let ended = loop {
+    let (ended, end) = loop {
         if stop.load(Ordering::Relaxed) {
-            break "stopped by the operator".to_string();
+            break ("stopped by the operator".to_string(), CellEnd::Stopped);
         }
         match lp.cycle() {
             Ok(r) => {
@@ -557,10 +605,28 @@ where
                     rows.push(Row::from_report(&r, f_r));
                 }
                 if cfg.duration.is_some_and(|d| r.cycle.t >= d) {
-                    break format!("{} s of robot time done", r.cycle.t);
+                    break (format!("{} s of robot time done", r.cycle.t), CellEnd::Done);
                 }
             }
+            // A wait for the robot that the stop ended: no cycle to answer with `Stop`.
+            Err(e) if stop.load(Ordering::Relaxed) => {
+                return Ok(CellOutcome {
+                    rows,
+                    stats: lp.stats(),
+                    ended: format!("stopped by the operator: {e}"),
+                    stopped: false,
+                    end: CellEnd::Stopped,
+                });
+            }
             Err(e) => {
+                // The robot falling silent ends a run without a duration: that is its end. A sensor
+                // fault or a hold timeout ends it early.
+                let end = match e {
+                    LoopError::Robot(_) if cfg.duration.is_none() && lp.stats().cycles > 0 => {
+                        CellEnd::Done
+                    }
+                    _ => CellEnd::EndedEarly,
+                };
                 // A sensor fault or a hold timeout has already backed the tool off: end the robot's
                 // correction cleanly. A failed robot link has no one left to tell.
                 let stopped = !matches!(e, LoopError::Robot(_)) && lp.stop().is_ok();
@@ -569,6 +635,7 @@ where
                     stats: lp.stats(),
                     ended: format!("the loop ended: {e}"),
                     stopped,
+                    end,
                 });
             }
         }
@@ -579,6 +646,7 @@ where
         stats: lp.stats(),
         ended,
         stopped,
+        end,
     })
 }
 
@@ -596,34 +664,39 @@ fn open_devices(
     Ok((link, sensor))
 }
 
-/// `forcecell run --config FILE`: bind the robot link, start the sensor, run, record, plot.
-/// With `live`, the run is also served over the Foxglove WebSocket protocol there.
-pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<()> {
+/// `forcecell run --config FILE [--live ADDR]`: check the recording directory, start the sensor, bind
+/// the robot link, run, record (MCAP, then the CSV and PNG exported from it). With `live`, the run is
+/// also served over the Foxglove WebSocket protocol there. Returns the exit status
+/// ([`CellEnd::exit_status`]).
+pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
     let cfg = CellConfig::load(path)?;
     let tuning = cfg.tuning()?;
-    std::fs::create_dir_all(&cfg.record)
-        .with_context(|| format!("cannot create {}", cfg.record.display()))?;
-    let stamp = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs());
-    let stem = cfg.record.join(format!("run-{stamp}"));
+    // Before anything moves: a recording that cannot be written is found now, not after the run.
+    let csv = reserve_recording(&cfg.record)?;
+    let stem = csv.with_extension("");
+    crate::stop::install()?;
     // A CAN sensor's traffic is logged beside the recording; a serial sensor has no CAN.
     let can_log =
         matches!(cfg.sensor, SensorConfig::Ati { .. }).then(|| stem.with_extension("candump.log"));
-    let (link, sensor) = open_devices(
+    let (mut link, sensor) = match open_devices(
         &cfg,
         &tuning,
         cfg.sensor.zero_at_start(),
         can_log.as_deref(),
-    )?;
+    ) {
+        Ok(d) => d,
+        Err(e) => {
+            let _ = std::fs::remove_file(&csv);
+            return Err(e);
+        }
+    };
     println!(
-        "listening on {} for the robot at {} ({} ms cycle, tuning {}); start RSI on the robot now, Ctrl-C ends with a clean Stop",
-        cfg.robot.listen, cfg.robot.robot_ip, cfg.robot.cycle_ms, tuning.name
+        "listening on {} for the robot at {} ({} ms cycle, tuning {}); start RSI on the robot now, Ctrl-C (or SIGTERM) ends with a clean Stop",
+        link.local_addr().map_or(cfg.robot.listen, |a| a),
+        cfg.robot.robot_ip,
+        cfg.robot.cycle_ms,
+        tuning.name
     );
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
-        .context("cannot install the Ctrl-C handler")?;
     let mcap = stem.with_extension("mcap");
     let live = match live {
         Some(addr) => {
@@ -638,7 +711,9 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<()> {
         recording_options(path, &tuning),
         live.as_ref().map(crate::live::LiveServer::sink),
     )?;
-    let out = run_cell_recorded(&cfg, &tuning, link, sensor, &stop, Some(tx))?;
+    let stop = crate::stop::flag();
+    let robot = crate::stop::Interruptible::new(&mut link, stop);
+    let out = run_cell_recorded(&cfg, &tuning, robot, sensor, stop, Some(tx))?;
     println!(
         "{}; {} cycles, {} sensor faults, {} limited; Stop {}",
         out.ended,
@@ -648,15 +723,17 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<()> {
         if out.stopped {
             "sent"
         } else {
-            "not sent (the link was gone)"
+            "not sent (no robot cycle to answer)"
         }
     );
+    crate::rsi::print_link(link.diagnostics());
     let recorded = recording.finish(Vec::new())?;
     println!("recorded {recorded}");
     if let Some(log) = &can_log {
         println!("CAN traffic logged to {} (candump -L)", log.display());
     }
-    export_recording(&mcap)
+    export_recording(&mcap)?;
+    Ok(out.end.exit_status())
 }
 
 /// A cell run's recording: the cell file and the tuning attached.
@@ -684,11 +761,13 @@ fn export_recording(mcap: &Path) -> Result<()> {
     if let Some(why) = truncated {
         println!("note: the recording ends early ({why})");
     }
+    let csv = mcap.with_extension("csv");
     if rows.is_empty() {
+        // The CSV reserved before the run holds only its header.
+        let _ = std::fs::remove_file(&csv);
         println!("nothing to export: no cycle was recorded");
         return Ok(());
     }
-    let csv = mcap.with_extension("csv");
     let png = mcap.with_extension("png");
     crate::record::write_csv_file(&csv, &rows)?;
     let title = mcap
@@ -762,4 +841,63 @@ pub fn gravity_section(m: &GravityModel, mount: UnitQuaternion<f64>) -> String {
         v(&mount.scaled_axis()),
         default_max_age()
     )
+}
+
+/// Create `dir` and reserve a new file in it for this run's trace (`run-<unix time>.csv`, or
+/// `run-<unix time>-N.csv` when a run of the same second has one), proven writable by writing the CSV
+/// header to it. An unwritable or full directory is an error here, before the robot is started.
+pub fn reserve_recording(dir: &Path) -> Result<PathBuf> {
+    use std::io::Write;
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("recording directory {}: cannot create it", dir.display()))?;
+    let stamp = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    for n in 0..1000 {
+        let name = if n == 0 {
+            format!("run-{stamp}.csv")
+        } else {
+            format!("run-{stamp}-{n}.csv")
+        };
+        let path = dir.join(name);
+        let mut f = match std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&path)
+        {
+            Ok(f) => f,
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => {
+                bail!(
+                    "recording directory {} is not writable ({}): fix it or set `record` in the cell file before starting the robot",
+                    dir.display(),
+                    os_error(&e)
+                )
+            }
+        };
+        let probe = writeln!(f, "{}", crate::record::HEADER).and_then(|()| f.sync_all());
+        if let Err(e) = probe {
+            drop(f);
+            let _ = std::fs::remove_file(&path);
+            bail!(
+                "recording directory {} cannot take the trace ({}): free space or set `record` in the cell file before starting the robot",
+                dir.display(),
+                os_error(&e)
+            );
+        }
+        return Ok(path);
+    }
+    bail!(
+        "recording directory {}: 1000 recordings of this second exist already",
+        dir.display()
+    )
+}
+
+/// An I/O error's text without the "(os error N)" suffix (the kind is in the words already).
+fn os_error(e: &std::io::Error) -> String {
+    let t = e.to_string();
+    match t.find(" (os error") {
+        Some(i) => t[..i].to_string(),
+        None => t,
+    }
 }

@@ -2,6 +2,7 @@
 //! recording, metrics and plots. The `forcecell` binary is a thin CLI over it.
 #![cfg_attr(not(test), warn(missing_docs))]
 
+pub mod args;
 pub mod ati;
 pub mod bench;
 pub mod candump;
@@ -16,5 +17,6 @@ pub mod robotiq;
 pub mod rsi;
 pub mod runner;
 pub mod scenario;
+pub mod stop;
 pub mod tap;
 pub mod tune;

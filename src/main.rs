@@ -128,13 +128,13 @@ struct SimSensorArgs {
     #[command(flatten)]
     bus: CanSensorArgs,
     /// Constant Fz the node reports, N.
-    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true, value_parser = forcecell::args::sensor_force_n)]
     fz: f64,
     /// Gauge noise, counts (standard deviation).
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = 2.0, allow_negative_numbers = true, value_parser = forcecell::args::noise_counts)]
     noise: f64,
     /// Stop after this many seconds (default: run until interrupted).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = forcecell::args::serve_seconds)]
     seconds: Option<f64>,
 }
 
@@ -150,7 +150,7 @@ struct SensorArgs {
     slot: u8,
     /// The board's turnaround allowance added to each request's wire time, µs (raise it on a loaded
     /// host or a virtual interface).
-    #[arg(long, default_value_t = 300)]
+    #[arg(long, default_value_t = 300, allow_negative_numbers = true, value_parser = forcecell::args::turnaround_us)]
     turnaround_us: u64,
     /// Log every CAN frame sent and received to FILE in candump `-L` format (for can-utils).
     #[arg(long, value_name = "FILE")]
@@ -169,7 +169,7 @@ enum SensorCommand {
         #[arg(long, default_value_t = 20)]
         count: u32,
         /// Poll rate, Hz.
-        #[arg(long, default_value_t = 500.0)]
+        #[arg(long, default_value_t = 500.0, allow_negative_numbers = true, value_parser = forcecell::args::poll_rate_hz)]
         rate: f64,
         /// Take a bias first (hold the sensor still, unloaded).
         #[arg(long)]
@@ -182,28 +182,28 @@ enum SensorCommand {
 #[derive(Args)]
 struct TuneArgs {
     /// Softest expected surface, N/m.
-    #[arg(long, default_value_t = 10_000.0)]
+    #[arg(long, default_value_t = 10_000.0, allow_negative_numbers = true, value_parser = forcecell::args::stiffness_n_per_m)]
     k_min: f64,
     /// Stiffest expected surface, N/m.
-    #[arg(long, default_value_t = 500_000.0)]
+    #[arg(long, default_value_t = 500_000.0, allow_negative_numbers = true, value_parser = forcecell::args::stiffness_n_per_m)]
     k_max: f64,
     /// The robot's loop by plant name (p0, p1, p2); --period/--lag/--delay override its values.
     #[arg(long, default_value = "p2", value_parser = ["p0", "p1", "p2"])]
     plant: String,
     /// Control period, s.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = forcecell::args::period_s)]
     period: Option<f64>,
     /// Position-loop lag, s.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = forcecell::args::lag_s)]
     lag: Option<f64>,
     /// Pure delay, s.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = forcecell::args::lag_s)]
     delay: Option<f64>,
     /// A tuning to judge (built-in name or TOML file); without it, parameters are proposed.
     #[arg(long)]
     tuning: Option<String>,
     /// Force set-point of a proposal, N.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = 5.0, allow_negative_numbers = true, value_parser = forcecell::args::set_point_n)]
     f_r: f64,
 }
 
@@ -312,7 +312,7 @@ fn main() -> ExitCode {
         }),
         Command::Plot(a) => plot_trace(a),
         Command::Export(a) => export(a),
-        Command::Run(a) => forcecell::cell::run(&a.config, a.live).map(|()| ExitCode::SUCCESS),
+        Command::Run(a) => forcecell::cell::run(&a.config, a.live).map(ExitCode::from),
         Command::Calibrate(a) => {
             forcecell::cell::calibrate(&a.config, a.poses).map(|()| ExitCode::SUCCESS)
         }
@@ -350,7 +350,7 @@ fn main() -> ExitCode {
         Ok(code) => code,
         Err(e) => {
             eprintln!("error: {e:#}");
-            ExitCode::from(2)
+            ExitCode::from(forcecell::stop::ERROR)
         }
     }
 }
@@ -367,6 +367,8 @@ fn sim(mut a: SimArgs) -> Result<ExitCode> {
         (None, None) => None,
     };
     let spec = RunSpec::new(scenario, a.plant.as_deref(), tuning)?;
+    // SIGINT/SIGTERM end the run early, not the process: the trace, plot and summary are written.
+    forcecell::stop::install()?;
     println!(
         "forcecell sim: {} — {}",
         spec.scenario.name, spec.scenario.description
@@ -382,6 +384,14 @@ fn sim(mut a: SimArgs) -> Result<ExitCode> {
     );
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create output directory {}", a.out.display()))?;
+    // An unwritable output directory is found before the run, not after it.
+    let csv = a.out.join(format!("{}.csv", spec.file_stem()));
+    std::fs::File::create(&csv).with_context(|| {
+        format!(
+            "output directory {} is not writable (--out)",
+            a.out.display()
+        )
+    })?;
     let mut bar = DelayedBar::new(Duration::from_millis(300));
     if a.sensor != "ati" && a.can.is_some() {
         anyhow::bail!("--can needs --sensor ati");
@@ -571,6 +581,16 @@ fn report(spec: &RunSpec, run: &RunResult, out: &Path, check: bool) -> Result<Ex
     if let Some(why) = &run.ended_early {
         println!("the loop ended early: {why}");
     }
+    if let Some(stop_sent) = run.interrupted {
+        println!(
+            "stopped by SIGINT/SIGTERM after {steps} steps; Stop {}",
+            if stop_sent {
+                "sent to the robot"
+            } else {
+                "not sent (no robot cycle to answer)"
+            }
+        );
+    }
     let f_r = run.rows.last().map_or(f64::NAN, |r| r.f_r);
     let settle = if m.settle_time.is_finite() {
         format!("{:.3} s after first contact", m.settle_time)
@@ -692,11 +712,15 @@ fn report(spec: &RunSpec, run: &RunResult, out: &Path, check: bool) -> Result<Ex
     )?;
     println!("\nwrote {} and {}", csv.display(), png.display());
     let failed = verdicts.iter().any(|v| !v.pass);
-    Ok(if check && failed {
-        ExitCode::from(1)
+    Ok(ExitCode::from(if run.interrupted.is_some() {
+        forcecell::stop::INTERRUPTED
+    } else if run.ended_early.is_some() {
+        forcecell::stop::ENDED_EARLY
+    } else if check && failed {
+        forcecell::stop::CHECK_FAILED
     } else {
-        ExitCode::SUCCESS
-    })
+        forcecell::stop::OK
+    }))
 }
 
 /// A progress bar that appears only when a run takes more than a moment (and stderr is a terminal).

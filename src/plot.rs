@@ -106,6 +106,12 @@ const PURPLE_: RGBColor = RGBColor(148, 103, 189);
 /// Write a three-panel PNG: force, positions (mm), stiffness estimate (kN/m).
 pub fn write_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
     fonts();
+    // The backend reports an unwritable path as a nested Debug dump, only after drawing: find it first.
+    std::fs::File::create(path).map_err(|e| {
+        let t = e.to_string();
+        let t = t.split(" (os error").next().unwrap_or_default();
+        anyhow!("cannot write {}: {t}", path.display())
+    })?;
     let root = BitMapBackend::new(path, (1200, 1050)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| anyhow!("plot: {e}"))?;
     let root = root

@@ -111,6 +111,11 @@ pub fn write_csv_file(path: &Path, rows: &[Row]) -> Result<()> {
     write_csv(f, rows).with_context(|| format!("cannot write {}", path.display()))
 }
 
+/// The largest magnitude a trace value may have (stiffness in N/m is the largest column).
+pub const MAX_VALUE: f64 = 1e12;
+/// The latest time a trace row may have, s (about four months).
+pub const MAX_TIME: f64 = 1e7;
+
 /// Read a CSV written by [`write_csv`] (for `replay` and tests). Errors name the line.
 pub fn read_csv(text: &str) -> Result<Vec<Row>> {
     let mut lines = text.lines();
@@ -120,6 +125,9 @@ pub fn read_csv(text: &str) -> Result<Vec<Row>> {
     }
     let mut rows = Vec::new();
     for (n, line) in lines.enumerate() {
+        if line.trim().is_empty() {
+            continue;
+        }
         let cols: Vec<&str> = line.split(',').collect();
         if cols.len() != 12 {
             anyhow::bail!("line {}: expected 12 columns, got {}", n + 2, cols.len());
@@ -130,7 +138,21 @@ pub fn read_csv(text: &str) -> Result<Vec<Row>> {
                 v[i] = c
                     .parse()
                     .with_context(|| format!("line {}: column {} is not a number", n + 2, i + 1))?;
+                if !(v[i].is_finite() && v[i].abs() <= MAX_VALUE) {
+                    anyhow::bail!(
+                        "line {}: column {} is {c}: every value must be finite and within ±{MAX_VALUE:e} (s, N, m, N/m; an empty field is a missing value)",
+                        n + 2,
+                        i + 1,
+                    );
+                }
             }
+        }
+        if !(0.0..=MAX_TIME).contains(&v[0]) {
+            anyhow::bail!(
+                "line {}: t must be a time in [0, {MAX_TIME:e}] s, got {}",
+                n + 2,
+                v[0]
+            );
         }
         let fault = cols[11]
             .parse()

@@ -21,6 +21,7 @@ use sim::{InProcRobot, InProcSensor, InnerLoopModel, SharedWorld};
 
 use crate::recorder::Recorder;
 use crate::runner::{RunResult, RunSpec, run_recorded};
+use crate::stop::Interruptible;
 
 /// Which robot backend `forcecell sim` drives.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -87,20 +88,7 @@ pub struct WireSummary {
 impl WireSummary {
     /// Print a short table.
     pub fn print(&self) {
-        let d = &self.diagnostics;
-        let c = d.counters;
-        let l = &d.latency;
-        println!(
-            "RSI link: {} received, {} answered, {} late, {} skipped, {} stale, {} foreign, {} malformed, {} oversized",
-            c.received, c.answered, c.late, c.skipped, c.stale, c.foreign, c.malformed, c.oversized
-        );
-        println!(
-            "  receive→send: p50 {:?}, p99 {:?}, p99.9 {:?}, max {:?}",
-            l.quantile(0.5),
-            l.quantile(0.99),
-            l.quantile(0.999),
-            l.max()
-        );
+        print_link(&self.diagnostics);
         if let Some(k) = &self.krc {
             println!(
                 "  simulated KRC: {} cycles, {} good, {} late, max Delay {}, ended {:?}",
@@ -108,6 +96,32 @@ impl WireSummary {
             );
         }
     }
+}
+
+/// Print the RSI link's counters (received, answered, late, skipped, stale, foreign, malformed,
+/// oversized, implausible) and its receive→send latency.
+pub fn print_link(d: &Diagnostics) {
+    let c = d.counters;
+    let l = &d.latency;
+    println!(
+        "RSI link: {} received, {} answered, {} late, {} skipped, {} stale, {} foreign, {} malformed, {} oversized, {} implausible",
+        c.received,
+        c.answered,
+        c.late,
+        c.skipped,
+        c.stale,
+        c.foreign,
+        c.malformed,
+        c.oversized,
+        c.implausible
+    );
+    println!(
+        "  receive→send: p50 {:?}, p99 {:?}, p99.9 {:?}, max {:?}",
+        l.quantile(0.5),
+        l.quantile(0.99),
+        l.quantile(0.999),
+        l.max()
+    );
 }
 
 /// Robot-side limits wide enough for a tuning's own loop limits, so the driver never acts before the
@@ -131,6 +145,18 @@ pub fn cell_limits(loop_cfg: &LoopConfig) -> (Limits, PoscorrLimits, PoscorrLimi
     (limits, poscorr, mon)
 }
 
+/// How long one wait for the robot's first datagram lasts before the stop flag is looked at again.
+const FIRST_CONTACT_POLL: Duration = Duration::from_millis(100);
+
+/// Clears a flag when dropped.
+struct ClearOnDrop(Arc<AtomicBool>);
+
+impl Drop for ClearOnDrop {
+    fn drop(&mut self) {
+        self.0.store(false, Ordering::Relaxed);
+    }
+}
+
 fn period_of(model: &InnerLoopModel) -> Duration {
     Duration::from_secs_f64(model.period)
 }
@@ -151,6 +177,7 @@ enum Kind {
         link: Box<RsiLink>,
         krc: thread::JoinHandle<KrcReport>,
         abort: Arc<AtomicBool>,
+        running: Arc<AtomicBool>,
     },
     External {
         link: Box<RsiLink>,
@@ -214,7 +241,8 @@ impl RobotSide {
         lc.limits = limits;
         lc.poscorr = poscorr;
         lc.poscorrmon = poscorrmon;
-        lc.first_contact_timeout = Some(Duration::from_secs(10));
+        // Short waits for the first datagram, so a stop or a dead controller thread ends the wait.
+        lc.first_contact_timeout = Some(FIRST_CONTACT_POLL);
         // 1 s: lockstep pauses whenever the loop does.
         lc.watchdog_cycles = ((1.0 / spec.plant.period).ceil() as u32).max(25);
         let mut link = RsiLink::bind(lc).context("RSI driver")?;
@@ -237,9 +265,15 @@ impl RobotSide {
         link.set_robot_filter(RobotFilter::Exact(krc.local_addr()?));
         let abort = krc.abort_handle();
         let mut mech: SharedWorld = world.clone();
+        let running = Arc::new(AtomicBool::new(true));
+        let alive = running.clone();
         let krc = thread::Builder::new()
             .name("sim-krc".into())
-            .spawn(move || krc.run(&mut mech))?;
+            .spawn(move || {
+                // Cleared however the thread ends (a panic included), so the driver stops waiting.
+                let _alive = ClearOnDrop(alive);
+                krc.run(&mut mech)
+            })?;
         Ok(Self {
             spec: spec.clone(),
             world,
@@ -247,6 +281,7 @@ impl RobotSide {
                 link: Box::new(link),
                 krc,
                 abort,
+                running,
             },
             recorder: None,
         })
@@ -272,6 +307,7 @@ impl RobotSide {
         lc.limits = limits;
         lc.poscorr = poscorr;
         lc.poscorrmon = poscorrmon;
+        lc.first_contact_timeout = Some(FIRST_CONTACT_POLL);
         let link = RsiLink::bind(lc).context("RSI driver")?;
         println!(
             "listening for an RSI client on {} (SENTYPE ImFree; `forcecell rsi-config` writes its files)",
@@ -315,14 +351,20 @@ impl RobotSide {
                 mut link,
                 krc,
                 abort,
+                running,
             } => {
-                let result = run_recorded(&spec, &world, &mut *link, sensor, recorder, progress);
+                let robot = Interruptible::new(&mut *link, crate::stop::flag())
+                    .with_peer(|| running.load(Ordering::Relaxed));
+                let result = run_recorded(&spec, &world, robot, sensor, recorder, progress);
                 abort.store(true, Ordering::Relaxed);
                 let report = krc
                     .join()
                     .map_err(|_| anyhow!("the simulated controller panicked"))?;
                 let run = result?;
-                if !matches!(report.end, KrcEnd::Completed | KrcEnd::Aborted) {
+                if !matches!(
+                    report.end,
+                    KrcEnd::Completed | KrcEnd::Aborted | KrcEnd::Stopped
+                ) {
                     eprintln!("note: the simulated controller ended with {:?}", report.end);
                 }
                 Ok((
@@ -334,12 +376,15 @@ impl RobotSide {
                 ))
             }
             Kind::External { mut link } => {
-                let robot = ExternalRobot {
-                    link: &mut link,
-                    world: world.clone(),
-                    start: spec.scenario.start_position(),
-                    origin: None,
-                };
+                let robot = Interruptible::new(
+                    ExternalRobot {
+                        link: &mut link,
+                        world: world.clone(),
+                        start: spec.scenario.start_position(),
+                        origin: None,
+                    },
+                    crate::stop::flag(),
+                );
                 let run = run_recorded(&spec, &world, robot, sensor, recorder, progress)?;
                 Ok((
                     run,
@@ -429,7 +474,7 @@ pub struct RsiConfigArgs {
     #[arg(long, default_value = "192.168.1.10")]
     pub ip: Ipv4Addr,
     /// UDP port (PORT).
-    #[arg(long, default_value_t = 49152)]
+    #[arg(long, default_value_t = 49152, allow_negative_numbers = true, value_parser = crate::args::robot_port)]
     pub port: u16,
     /// Correction mode.
     #[arg(long, value_enum, default_value = "absolute")]

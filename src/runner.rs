@@ -39,6 +39,16 @@ impl RunSpec {
         tuning
             .validate()
             .map_err(|e| anyhow!("tuning {} with the scenario's overrides: {e}", tuning.name))?;
+        let steps = scenario.duration / model.period;
+        if steps > crate::scenario::MAX_STEPS as f64 {
+            return Err(anyhow!(
+                "{} s at plant {}'s {} s period is {steps:.0} steps; at most {} are recorded",
+                scenario.duration,
+                spec.label(),
+                model.period,
+                crate::scenario::MAX_STEPS
+            ));
+        }
         Ok(Self {
             plant_label: spec.label(),
             plant: model,
@@ -89,8 +99,11 @@ pub struct RunResult {
     pub metrics: Metrics,
     /// Wall-clock time the run took.
     pub wall: Duration,
-    /// Why the loop ended early, if it did.
+    /// Why the loop ended early, if it did (not counting an operator's stop).
     pub ended_early: Option<String>,
+    /// Stopped by SIGINT/SIGTERM ([`crate::stop::requested`]) before the end; `Some(true)` when the
+    /// robot then got `Stop`, `Some(false)` when it could not (no cycle came).
+    pub interrupted: Option<bool>,
 }
 
 /// A scenario target checked against a run.
@@ -171,7 +184,11 @@ where
     let started = Instant::now();
     let mut ended_early = None;
     let every = (steps / 200).max(1);
+    let mut interrupted = None;
     for k in 0..steps {
+        if crate::stop::requested() {
+            break;
+        }
         match lp.cycle() {
             Ok(r) => {
                 let rec = Record::from_report(&r, f_r, 0);
@@ -181,13 +198,20 @@ where
                 }
             }
             Err(e) => {
-                ended_early = Some(e.to_string());
+                if !crate::stop::requested() {
+                    ended_early = Some(e.to_string());
+                }
                 break;
             }
         }
         if k % every == 0 {
             progress(k as f64 / steps as f64);
         }
+    }
+    if crate::stop::requested() {
+        // The operator's stop: end the robot's correction motion as `run` does (bounded: the link's
+        // waits end on the stop flag).
+        interrupted = Some(lp.stop().is_ok());
     }
     progress(1.0);
     let wall = started.elapsed();
@@ -215,6 +239,7 @@ where
         metrics,
         wall,
         ended_early,
+        interrupted,
     })
 }
 

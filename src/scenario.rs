@@ -149,6 +149,55 @@ fn default_tuning() -> String {
 
 /// The longest simulated run accepted, s.
 pub const MAX_DURATION: f64 = 3600.0;
+/// The most steps a run may take: one hour at 1 kHz (a row each, kept in memory for the metrics).
+pub const MAX_STEPS: u64 = 3_600_000;
+/// The farthest the simulated surface may lie from the programmed path, m.
+pub const MAX_SURFACE: f64 = 1.0;
+/// The stiffest simulated surface, N/m.
+pub const MAX_STIFFNESS: f64 = 1e10;
+
+/// The range a schedule spans over `[0, duration]`: its value at every breakpoint (piecewise linear
+/// between them), widened by every sine's amplitude. Non-finite when the schedule is.
+fn extent(s: &sim::Schedule, duration: f64) -> (f64, f64) {
+    let mut times = vec![0.0, duration];
+    for e in &s.events {
+        match *e {
+            Event::Step { at, .. } | Event::Scale { at, .. } => times.push(at),
+            Event::Ramp { start, end, .. } => {
+                times.extend([Some(start), end].into_iter().flatten())
+            }
+            Event::Sine { start, .. } => times.push(start),
+        }
+    }
+    let no_sine = sim::Schedule {
+        base: s.base,
+        events: s
+            .events
+            .iter()
+            .filter(|e| !matches!(e, Event::Sine { .. }))
+            .copied()
+            .collect(),
+    };
+    let swing: f64 = s
+        .events
+        .iter()
+        .map(|e| match e {
+            Event::Sine { amplitude, .. } => amplitude.abs(),
+            _ => 0.0,
+        })
+        .sum();
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    // Just before each breakpoint too: a step ends a ramp's run-up there.
+    for t in times.into_iter().flat_map(|t| [t, t - 1e-9]) {
+        let v = no_sine.at(t.clamp(0.0, duration));
+        if v.is_nan() {
+            return (f64::NAN, f64::NAN);
+        }
+        lo = lo.min(v - swing);
+        hi = hi.max(v + swing);
+    }
+    (lo, hi)
+}
 
 impl Scenario {
     /// Parse and validate TOML text; `origin` names the source in errors.
@@ -207,9 +256,29 @@ impl Scenario {
                 self.duration
             );
         }
-        self.plant.model()?;
+        let model = self.plant.model()?;
+        let steps = self.duration / model.period;
+        if steps > MAX_STEPS as f64 {
+            bail!(
+                "duration {} s at a {} s period is {steps:.0} steps; at most {MAX_STEPS} are recorded (one row each, kept in memory)",
+                self.duration,
+                model.period
+            );
+        }
         let plant = self.environment.plant();
         plant.validate().map_err(|e| anyhow!("environment: {e}"))?;
+        let (lo, hi) = extent(&plant.x_c, self.duration);
+        if !(lo >= -MAX_SURFACE && hi <= MAX_SURFACE) {
+            bail!(
+                "environment: the surface x_c must stay within ±{MAX_SURFACE} m of the programmed path (RSI corrects by millimetres), it reaches [{lo}, {hi}] m"
+            );
+        }
+        let (_, k_hi) = extent(&plant.k_c, self.duration);
+        if !(k_hi.is_finite() && k_hi <= MAX_STIFFNESS) {
+            bail!(
+                "environment: k_c must stay at most {MAX_STIFFNESS:e} N/m (stiffer than steel on steel), it reaches {k_hi:e} N/m"
+            );
+        }
         self.sensor.validate().map_err(|e| anyhow!("sensor: {e}"))?;
         if let Some(x0) = self.x0
             && !(x0.is_finite() && x0.abs() < 1.0)
@@ -219,6 +288,32 @@ impl Scenario {
         for t in &self.targets {
             if t.max.is_none() && t.min.is_none() {
                 bail!("target {:?} has neither max nor min", t.metric);
+            }
+            for (n, v) in [
+                ("max", t.max),
+                ("min", t.min),
+                ("after", t.after),
+                ("until", t.until),
+            ] {
+                if v.is_some_and(|v| !v.is_finite()) {
+                    bail!("target {:?}: {n} must be a finite number", t.metric);
+                }
+            }
+            if let (Some(lo), Some(hi)) = (t.min, t.max)
+                && lo > hi
+            {
+                bail!(
+                    "target {:?}: min {lo} is above max {hi}, it can never pass",
+                    t.metric
+                );
+            }
+            if let (Some(a), Some(u)) = (t.after, t.until)
+                && a >= u
+            {
+                bail!(
+                    "target {:?}: the window [after {a}, until {u}] s is empty, it can never pass",
+                    t.metric
+                );
             }
             if !crate::metrics::METRIC_NAMES.contains(&t.metric.as_str()) {
                 bail!(
@@ -260,8 +355,13 @@ pub fn load_tuning(spec: &str) -> Result<Tuning> {
             })?;
         (spec.to_string(), t.to_string())
     };
+    tuning_from_toml(&text, &origin)
+}
+
+/// Parse and validate a tuning's TOML text; `origin` names it in errors.
+pub fn tuning_from_toml(text: &str, origin: &str) -> Result<Tuning> {
     let t: Tuning =
-        toml::from_str(&text).map_err(|e| anyhow!("{origin}: {}", one_line(&e.to_string())))?;
+        toml::from_str(text).map_err(|e| anyhow!("{origin}: {}", one_line(&e.to_string())))?;
     t.validate()
         .map_err(|e| anyhow!("{origin}: invalid tuning: {e}"))?;
     Ok(t)

@@ -3,7 +3,14 @@
 //! through the driver over the interface. Ignored in a plain `cargo test`; `scripts/vcan-tests.sh`
 //! runs them natively, inside User-Mode Linux or inside QEMU.
 
+mod common;
+
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
+use std::sync::atomic::Ordering;
+
+use common::{SignallingArm, arm, client, finish, free_port, read_until, signal, spawn};
+use sim::krc::KrcEnd;
 
 fn iface() -> String {
     std::env::var("FORCECELL_VCAN").unwrap_or_else(|_| "vcan0".into())
@@ -151,4 +158,182 @@ fn sim_runs_a_scenario_through_the_driver_over_vcan() {
     assert!(text.contains("ran 2000 steps"), "{text}");
     assert!(dir.join("paper-fig9.csv").exists(), "{text}");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The simulated node on `can` at the example's base (0x20), serving for up to two minutes.
+fn node(can: &str) -> Kill {
+    Kill(
+        forcecell()
+            .args([
+                "sim-sensor",
+                "ati",
+                "--can",
+                can,
+                "--fz",
+                "10",
+                "--noise",
+                "2",
+            ])
+            .args(["--seconds", "120"])
+            .stdout(Stdio::null())
+            .spawn()
+            .expect("start sim-sensor"),
+    )
+}
+
+/// `examples/cell.toml` as shipped (`tare = true`, the `[gravity]` model), pointed at loopback and `can`,
+/// with `duration` in place of the example's 60 s (`None`: the example's own).
+fn example_cell(dir: &Path, can: &str, port: u16, duration: Option<&str>) -> PathBuf {
+    let shipped =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/cell.toml"))
+            .unwrap();
+    assert!(
+        shipped.contains("tare = true"),
+        "the example tares at start"
+    );
+    let mut text = shipped
+        .replace("192.168.1.100:49152", &format!("127.0.0.1:{port}"))
+        .replace("\"192.168.1.10\"", "\"127.0.0.1\"")
+        .replace("can = \"can0\"", &format!("can = \"{can}\""));
+    // A virtual interface (under User-Mode Linux) answers in milliseconds, not microseconds, and
+    // background polling must leave each exchange that long.
+    text = text
+        .replace("tare = true", "tare = true\nturnaround_us = 20000")
+        .replace("poll_hz = 1000.0", "poll_hz = 40.0");
+    if let Some(d) = duration {
+        text = text.replace("duration = 60.0", &format!("duration = {d}"));
+    }
+    assert_ne!(text, shipped);
+    let path = dir.join("cell.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn recordings(dir: &Path) -> Vec<PathBuf> {
+    std::fs::read_dir(dir.join("recordings"))
+        .map(|r| r.map(|e| e.unwrap().path()).collect())
+        .unwrap_or_default()
+}
+
+/// Start `run` on the example cell; returns the child once it listens for the robot.
+fn start_run(dir: &Path) -> (Child, String, std::io::BufReader<std::process::ChildStdout>) {
+    let mut child = spawn(&["run", "--config", "cell.toml"], dir);
+    let (seen, r) = read_until(&mut child, "listening on");
+    (child, seen, r)
+}
+
+#[test]
+#[ignore = "needs a vcan0 interface: run scripts/vcan-tests.sh"]
+fn run_with_the_example_cell_file_tares_runs_and_records() {
+    let can = iface();
+    let _node = node(&can);
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    example_cell(dir.path(), &can, port, Some("1.0"));
+    let (child, seen, r) = start_run(dir.path());
+    let mut krc = client(port, 100_000, |_| {});
+    let report = krc.run(&mut arm());
+    let (code, text) = finish(child, seen, r);
+    assert_eq!(code, 0, "{text}");
+    assert!(
+        text.contains("bias taken"),
+        "tare = true works as shipped: {text}"
+    );
+    assert!(
+        text.contains("s of robot time done") && text.contains("Stop sent"),
+        "{text}"
+    );
+    assert_eq!(report.end, KrcEnd::Stopped, "{report:?}");
+    // The link's counters are printed.
+    assert!(
+        text.contains("RSI link: ") && text.contains(" foreign, "),
+        "{text}"
+    );
+    let files = recordings(dir.path());
+    assert!(
+        files
+            .iter()
+            .any(|f| f.extension().is_some_and(|e| e == "csv")),
+        "{files:?}"
+    );
+    assert!(
+        files
+            .iter()
+            .any(|f| f.extension().is_some_and(|e| e == "png")),
+        "{files:?}"
+    );
+}
+
+#[test]
+#[ignore = "needs a vcan0 interface: run scripts/vcan-tests.sh"]
+fn sigterm_ends_run_with_stop_to_the_robot_and_a_recording() {
+    let can = iface();
+    let _node = node(&can);
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    example_cell(dir.path(), &can, port, None);
+    let (child, seen, r) = start_run(dir.path());
+    let mut krc = client(port, 100_000, |_| {});
+    let mut mech = SignallingArm {
+        arm: arm(),
+        cycles: 0,
+        after: 200,
+        target: Some((child.id(), "TERM")),
+        killer: None,
+    };
+    let report = krc.run(&mut mech);
+    let (code, text) = finish(child, seen, r);
+    assert_eq!(code, 130, "{text}");
+    assert_eq!(
+        report.end,
+        KrcEnd::Stopped,
+        "the robot got Stop: {report:?}\n{text}"
+    );
+    assert!(
+        text.contains("stopped by the operator") && text.contains("Stop sent"),
+        "{text}"
+    );
+    assert!(recordings(dir.path()).len() == 2, "{text}");
+}
+
+#[test]
+#[ignore = "needs a vcan0 interface: run scripts/vcan-tests.sh"]
+fn ctrl_c_ends_run_while_it_waits_for_the_robot() {
+    let can = iface();
+    let _node = node(&can);
+    let dir = tempfile::tempdir().unwrap();
+    example_cell(dir.path(), &can, free_port(), None);
+    // No robot ever sends.
+    let (child, seen, r) = start_run(dir.path());
+    signal(child.id(), "INT");
+    let (code, text) = finish(child, seen, r);
+    assert_eq!(code, 130, "{text}");
+    assert!(
+        text.contains("not sent (no robot cycle to answer)"),
+        "{text}"
+    );
+    assert!(text.contains("nothing to record"), "{text}");
+}
+
+#[test]
+#[ignore = "needs a vcan0 interface: run scripts/vcan-tests.sh"]
+fn a_robot_that_falls_silent_ends_run_with_status_3() {
+    let can = iface();
+    let _node = node(&can);
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    example_cell(dir.path(), &can, port, None);
+    let (child, seen, r) = start_run(dir.path());
+    let mut krc = client(port, 100_000, |k| k.faults.silent_from = Some(200));
+    let abort = krc.abort_handle();
+    let robot = std::thread::spawn(move || krc.run(&mut arm()));
+    let (code, text) = finish(child, seen, r);
+    abort.store(true, Ordering::Relaxed);
+    robot.join().unwrap();
+    assert_eq!(code, 3, "{text}");
+    assert!(text.contains("link lost"), "{text}");
+    assert!(
+        recordings(dir.path()).len() == 2,
+        "recorded what ran: {text}"
+    );
 }

@@ -775,3 +775,64 @@ fn any_source_locks_onto_the_first_robot_until_the_link_is_lost() {
     assert_eq!(from, to, "B gets its reply");
     assert_eq!(link.diagnostics().counters.sessions, 2);
 }
+
+/// The rigid arm, with its reported `RIst` moved `jump` m along x in the cycles `from..until`.
+struct JumpingArm {
+    arm: RigidArm,
+    cycle: u64,
+    from: u64,
+    until: u64,
+    jump: f64,
+}
+
+impl sim::krc::Mechanism for JumpingArm {
+    fn poses(&mut self) -> (Pose, Pose) {
+        let (mut actual, programmed) = self.arm.poses();
+        if (self.from..self.until).contains(&self.cycle) {
+            actual.position.x += self.jump;
+        }
+        (actual, programmed)
+    }
+    fn advance(&mut self, c: &Correction) {
+        self.arm.advance(c);
+        self.cycle += 1;
+    }
+}
+
+/// Run 120 cycles with `RIst` jumped by 400 mm in cycles `from..until`; every cycle answered.
+fn jumped(from: u64, until: u64) -> (Vec<Cycle>, RsiLink) {
+    let eth = ethernet(false);
+    let (mut link, mut krc) = pair(&eth, |_| {}, |k| k.cycles = Some(120));
+    let h = thread::spawn(move || {
+        krc.run(&mut JumpingArm {
+            arm: rigid(),
+            cycle: 0,
+            from,
+            until,
+            jump: 0.4,
+        })
+    });
+    let (cycles, _) = serve(&mut link, |_, _| Some(Correction::along_z(0.0)));
+    let r = h.join().unwrap();
+    assert!(r.end == KrcEnd::Completed && r.good == 120, "{r:?}");
+    (cycles, link)
+}
+
+#[test]
+fn a_pose_jump_no_robot_can_make_is_a_counted_fault_not_an_input() {
+    // One cycle 400 mm away (100 m/s at 4 ms): a fault; the next, back on the path, is plausible.
+    let (cycles, link) = jumped(50, 51);
+    assert_eq!(cycles.len(), 120);
+    assert_eq!(link.diagnostics().counters.implausible, 1);
+    assert_eq!(link.diagnostics().counters.answered, 120);
+    for (i, c) in cycles.iter().enumerate() {
+        assert_eq!(c.actual.is_finite(), i != 50, "cycle {i}: {:?}", c.actual);
+        assert_eq!(c.programmed.is_finite(), i != 50, "cycle {i}");
+    }
+    // A jump that stays: a fault until the time since the last plausible pose allows the distance at
+    // the default 3 m/s (0.4 m in 134 ms = 34 cycles of 4 ms), then accepted as where the robot is.
+    let (cycles, link) = jumped(50, 1000);
+    assert_eq!(link.diagnostics().counters.implausible, 33);
+    assert!(cycles[50..83].iter().all(|c| !c.actual.is_finite()));
+    assert!(cycles[83..].iter().all(|c| c.actual.is_finite()));
+}

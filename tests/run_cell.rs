@@ -6,7 +6,7 @@ use std::sync::atomic::AtomicBool;
 use std::thread;
 use std::time::Duration;
 
-use forcecell::cell::{CellConfig, CellOutcome};
+use forcecell::cell::{CellConfig, CellOutcome, run_cell};
 use kuka_rsi::{EthernetConfig, RsiLink};
 use sim::krc::{Krc, KrcConfig, KrcEnd, KrcReport, Timing};
 use sim::{ContactPlant, InProcSensor, InnerLoopModel, SensorParams, SharedWorld, Window, World};
@@ -280,4 +280,84 @@ fn a_recorded_cell_run_streams_every_cycle_to_mcap() {
         .filter(|m| m.as_ref().unwrap().channel.topic == "/wrench_raw")
         .count() as u64;
     assert_eq!(raw, summary.written);
+}
+
+/// `run`'s wait for the robot's first datagram ends when the stop flag is set (Ctrl-C, SIGTERM): the
+/// link waits in short slices and the interruptible wrapper ends the wait between them.
+#[test]
+fn a_stop_ends_the_wait_for_a_robot_that_never_sends() {
+    use forcecell::cell::CellEnd;
+    use forcecell::stop::Interruptible;
+    use std::sync::atomic::Ordering;
+    let cfg = CellConfig::from_toml(CELL, "cell.toml").unwrap();
+    let tuning = cfg.tuning().unwrap();
+    let lc = cfg.link_config(&tuning).unwrap();
+    assert!(
+        lc.first_contact_timeout.is_some(),
+        "the wait comes back now and then"
+    );
+    let mut link = RsiLink::bind(lc).unwrap();
+    let world: SharedWorld = World::new(
+        ContactPlant::spring(70_000.0, 0.001),
+        InnerLoopModel::P2,
+        SensorParams::default(),
+        0.0,
+    )
+    .shared();
+    let flag = AtomicBool::new(false);
+    let out = thread::scope(|s| {
+        let run = s.spawn(|| {
+            run_cell(
+                &cfg,
+                &tuning,
+                Interruptible::new(&mut link, &flag),
+                InProcSensor::new(world.clone()),
+                &flag,
+            )
+            .unwrap()
+        });
+        // No robot: the run is waiting. The operator stops it.
+        thread::sleep(Duration::from_millis(300));
+        flag.store(true, Ordering::Relaxed);
+        run.join().unwrap()
+    });
+    assert_eq!(out.end, CellEnd::Stopped, "{out:?}");
+    assert_eq!(out.end.exit_status(), 130);
+    assert!(out.rows.is_empty() && !out.stopped, "{out:?}");
+}
+
+/// A robot that falls silent before the configured duration ends the run early, with its own status.
+#[test]
+fn a_lost_link_ends_the_run_early_with_status_3() {
+    use forcecell::cell::CellEnd;
+    let cfg = CellConfig::from_toml(CELL, "cell.toml").unwrap();
+    let tuning = cfg.tuning().unwrap();
+    let link = RsiLink::bind(cfg.link_config(&tuning).unwrap()).unwrap();
+    let addr = link.local_addr().unwrap();
+    let world: SharedWorld = World::new(
+        ContactPlant::spring(70_000.0, 0.001),
+        InnerLoopModel::P2,
+        SensorParams::default(),
+        0.0,
+    )
+    .shared();
+    let mut kc = KrcConfig::new(
+        EthernetConfig::forcecell([127, 0, 0, 1].into(), addr.port(), false),
+        addr,
+    );
+    kc.timing = Timing::Lockstep {
+        deadline: Duration::from_millis(500),
+    };
+    kc.cycles = Some(2_000);
+    kc.faults.silent_from = Some(100);
+    let mut krc = Krc::new(kc).unwrap();
+    let mut mech = world.clone();
+    let robot = thread::spawn(move || krc.run(&mut mech));
+    let flag = AtomicBool::new(false);
+    let out = run_cell(&cfg, &tuning, link, InProcSensor::new(world.clone()), &flag).unwrap();
+    robot.join().unwrap();
+    assert_eq!(out.end, CellEnd::EndedEarly, "{out:?}");
+    assert_eq!(out.end.exit_status(), 3);
+    assert_eq!(out.rows.len(), 100);
+    assert!(out.ended.contains("link lost"), "{}", out.ended);
 }

@@ -37,17 +37,29 @@ impl LoopModel {
 
     /// Checks the values.
     pub fn validate(&self) -> Result<(), String> {
-        if !(self.period.is_finite() && self.period > 0.0) {
-            return Err(format!("period must be > 0 s, got {}", self.period));
+        if !(self.period.is_finite() && (MIN_PERIOD..=MAX_PERIOD).contains(&self.period)) {
+            return Err(format!(
+                "period must be in [{MIN_PERIOD}, {MAX_PERIOD}] s (robot position loops run at 1 Hz to 10 kHz), got {}",
+                self.period
+            ));
         }
         for (n, v) in [("lag", self.lag), ("delay", self.delay)] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("{n} must be >= 0 s, got {v}"));
+            if !(v.is_finite() && (0.0..=MAX_LAG).contains(&v)) {
+                return Err(format!(
+                    "{n} must be in [0, {MAX_LAG}] s (a robot loop answering seconds late cannot be force-controlled), got {v}"
+                ));
             }
         }
         Ok(())
     }
 }
+
+/// The shortest control period analysed, s (10 kHz: faster than any robot's position interface).
+pub const MIN_PERIOD: f64 = 1e-4;
+/// The longest control period analysed, s (1 Hz: slower than any force loop can hold contact).
+pub const MAX_PERIOD: f64 = 1.0;
+/// The longest lag or delay analysed, s.
+pub const MAX_LAG: f64 = 1.0;
 
 /// Required margins: what "safe" means here.
 pub const MIN_DAMPING: f64 = 0.7;
@@ -139,12 +151,10 @@ pub fn analyse_contact(p: &ImpedanceParams, m: &LoopModel, k_c: f64) -> ContactA
             let wc = (lo * hi).sqrt();
             let (_, ph) = open_loop(p, m, k_c, wc);
             // Phase margin: distance of the phase from −180°, wrapped to (−180°, 180°].
-            let mut pm = ph + PI;
-            while pm > PI {
+            // (One remainder, not a loop: a phase of 1e8 rad wraps at once.)
+            let mut pm = (ph + PI).rem_euclid(2.0 * PI);
+            if pm > PI {
                 pm -= 2.0 * PI;
-            }
-            while pm <= -PI {
-                pm += 2.0 * PI;
             }
             let dm = pm / wc;
             if dm < worst.2 {

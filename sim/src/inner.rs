@@ -55,18 +55,38 @@ impl InnerLoopModel {
         self.delay_cycles as f64 * self.period
     }
 
+    /// The shortest period accepted, s (10 kHz: faster than any robot's position interface).
+    pub const MIN_PERIOD: f64 = 1e-4;
+    /// The longest period accepted, s (1 Hz: no force loop holds contact slower).
+    pub const MAX_PERIOD: f64 = 1.0;
+    /// The longest lag `tau` and pure delay accepted, s.
+    pub const MAX_LAG: f64 = 1.0;
+
     /// Checks the values.
     pub fn validate(&self) -> Result<(), String> {
-        if !(self.period.is_finite() && self.period > 0.0) {
-            return Err(format!("period must be > 0 s, got {}", self.period));
-        }
-        if !(self.tau.is_finite() && self.tau >= 0.0) {
-            return Err(format!("tau must be >= 0 s, got {}", self.tau));
-        }
-        if self.delay_cycles > 10_000 {
+        if !(self.period.is_finite()
+            && (Self::MIN_PERIOD..=Self::MAX_PERIOD).contains(&self.period))
+        {
             return Err(format!(
-                "delay_cycles {} is unreasonably large",
-                self.delay_cycles
+                "period must be in [{}, {}] s (robot position loops run at 1 Hz to 10 kHz), got {}",
+                Self::MIN_PERIOD,
+                Self::MAX_PERIOD,
+                self.period
+            ));
+        }
+        if !(self.tau.is_finite() && (0.0..=Self::MAX_LAG).contains(&self.tau)) {
+            return Err(format!(
+                "tau must be in [0, {}] s (a position loop lagging seconds cannot be force-controlled), got {}",
+                Self::MAX_LAG,
+                self.tau
+            ));
+        }
+        if self.delay_cycles > 10_000 || self.delay() > Self::MAX_LAG {
+            return Err(format!(
+                "delay_cycles {} × period {} s must stay within {} s of pure delay",
+                self.delay_cycles,
+                self.period,
+                Self::MAX_LAG
             ));
         }
         Ok(())

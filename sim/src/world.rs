@@ -186,6 +186,12 @@ impl World {
         }
     }
 
+    /// Take the truth logged since the last call (the log starts empty again): a long run hands it
+    /// on as it goes instead of keeping every cycle in memory.
+    pub fn drain_truth(&mut self) -> Vec<Truth> {
+        std::mem::take(&mut self.truth)
+    }
+
     /// The true state at every cycle so far (index = cycle index), followed by the state now.
     pub fn truth_log(&self) -> Vec<Truth> {
         let mut v = self.truth.clone();

@@ -91,7 +91,10 @@ impl Config {
         self.wire_time(req) * 2 + self.turnaround
     }
 
-    /// Check the values.
+    /// The longest turnaround allowance accepted (every wait on the sensor ends).
+    pub const MAX_WAIT: Duration = Duration::from_secs(10);
+
+    /// Checks the values.
     pub fn validate(&self) -> Result<(), AtiError> {
         let bad = |m: String| Err(AtiError::Config(m));
         if self.bitrate < 10_000 || self.bitrate > 1_000_000 {
@@ -108,6 +111,13 @@ impl Config {
         }
         if self.stale_after.is_zero() {
             return bad("stale_after must be positive".into());
+        }
+        if self.turnaround > Self::MAX_WAIT {
+            return bad(format!(
+                "turnaround {:?} is above {:?}: a CAN board answers within milliseconds (a slow virtual interface within seconds), and every request waits this long before it times out",
+                self.turnaround,
+                Self::MAX_WAIT
+            ));
         }
         Ok(())
     }

@@ -39,6 +39,9 @@ pub struct Counters {
     pub suppressed: u64,
     /// Socket errors while sending.
     pub send_errors: u64,
+    /// `<Rob>` datagrams whose pose jumped further than the robot can move in the time since the last
+    /// plausible one (`LinkConfig::max_speed`): answered with the last command, poses not used.
+    pub implausible: u64,
 }
 
 /// A receive→send latency distribution: 1 µs buckets up to 4.095 ms, then one overflow bucket.

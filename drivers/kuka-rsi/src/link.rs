@@ -72,6 +72,10 @@ pub struct LinkConfig {
     pub precision: u8,
     /// A receive→send turnaround above this counts as a late reply.
     pub late_after: Duration,
+    /// The fastest the robot's tool can move, m/s: a reported pose (`RIst` or `RSol`) further from
+    /// the last plausible one than this speed allows in the IPOC time between them is a counted fault
+    /// (`implausible`), never a control input.
+    pub max_speed: f64,
 }
 
 impl LinkConfig {
@@ -95,8 +99,13 @@ impl LinkConfig {
             session_jump: 1000,
             precision: 4,
             late_after: Duration::from_millis(2),
+            max_speed: Self::DEFAULT_MAX_SPEED,
         }
     }
+
+    /// Default [`max_speed`](Self::max_speed), m/s: faster than an arm moves while RSI corrects it
+    /// (raise it for fast moves under RSI).
+    pub const DEFAULT_MAX_SPEED: f64 = 3.0;
 
     /// Check the values.
     pub fn validate(&self) -> Result<(), String> {
@@ -117,6 +126,12 @@ impl LinkConfig {
         }
         if self.precision > 9 {
             return Err(format!("precision must be 0..=9, got {}", self.precision));
+        }
+        if !(self.max_speed.is_finite() && self.max_speed > 0.0 && self.max_speed <= 100.0) {
+            return Err(format!(
+                "max_speed must be in (0, 100] m/s (the fastest the robot's tool moves), got {}",
+                self.max_speed
+            ));
         }
         Ok(())
     }
@@ -235,6 +250,8 @@ struct Session {
     last_ipoc: u64,
     last_rx: Instant,
     peer: SocketAddr,
+    /// The last plausible `RIst` and `RSol` positions (m) and their IPOC.
+    plausible: Option<([hal::Vector3<f64>; 2], u64)>,
 }
 
 struct Pending {
@@ -412,6 +429,7 @@ impl RsiLink {
                 last_ipoc: v,
                 last_rx: rx_at,
                 peer: from,
+                plausible: None,
             });
             // A new RSI_ON starts the robot's relative total from zero; the rate limit starts from the
             // correction the robot reports in effect (set below, once the poses are decoded).
@@ -430,7 +448,7 @@ impl RsiLink {
         if delay > 0 {
             c.delay_alarms += 1;
         }
-        let cycle = Cycle {
+        let mut cycle = Cycle {
             seq: v,
             t: (v - s.ipoc0) as f64 * self.cfg.ipoc_unit,
             period: self.cfg.period.as_secs_f64(),
@@ -439,6 +457,28 @@ impl RsiLink {
             late_replies: delay,
             new_session,
         };
+        // The one plausibility check of the robot's poses: a jump no arm makes in the IPOC time since
+        // the last plausible pose is a counted fault. The cycle is still delivered (it must be answered,
+        // with the last command) but its poses are marked unusable, so no controller acts on them.
+        let now = [cycle.actual.position, cycle.programmed.position];
+        if now.iter().all(|p| p.iter().all(|v| v.is_finite())) {
+            let plausible = match s.plausible {
+                Some((last, at)) => {
+                    let dt = v.saturating_sub(at) as f64 * self.cfg.ipoc_unit;
+                    // 0.1 mm slack: the wire's decimals and the robot's own jitter.
+                    let reach = self.cfg.max_speed * dt + 1e-4;
+                    now.iter().zip(&last).all(|(p, q)| (p - q).norm() <= reach)
+                }
+                None => true,
+            };
+            if plausible {
+                s.plausible = Some((now, v));
+            } else {
+                c.implausible += 1;
+                cycle.actual = unusable();
+                cycle.programmed = unusable();
+            }
+        }
         if new_session {
             let t = cycle.tool_offset();
             let r =
@@ -532,6 +572,14 @@ impl RsiLink {
     }
 }
 
+/// A pose no controller can use (every component NaN).
+fn unusable() -> Pose {
+    Pose {
+        position: hal::Vector3::repeat(f64::NAN),
+        orientation: hal::UnitQuaternion::from_euler_angles(f64::NAN, f64::NAN, f64::NAN),
+    }
+}
+
 fn pose(v: [f64; 6]) -> Pose {
     wire::pose_from_wire(v)
 }
@@ -562,11 +610,22 @@ impl RobotLink for RsiLink {
             self.diag.counters.unanswered += 1;
         }
         // A backlog (the application was late) is drained before waiting, so only its newest
-        // datagram is answered; in the steady state the queue is empty and the wait gets the next
-        // datagram, whose turnaround then includes no extra system call.
+        // datagram is answered. The wait wakes on the first datagram to arrive; when the network
+        // delivered several at once (a burst after a stall), whatever else is queued already is read
+        // too and the newest answered — a reply to an older one would reach the robot stale.
         let a = match self.drain()? {
             Some(a) => a,
-            None => self.wait_first()?,
+            None => {
+                let first = self.wait_first()?;
+                match self.drain()? {
+                    Some(mut newer) => {
+                        self.diag.counters.skipped += 1;
+                        newer.cycle.new_session |= first.cycle.new_session;
+                        newer
+                    }
+                    None => first,
+                }
+            }
         };
         self.pending = Some(Pending {
             ipoc: a.ipoc,

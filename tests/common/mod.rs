@@ -1,0 +1,157 @@
+//! Helpers shared by the tests that run `forcecell` as a child process and stop it with signals, with
+//! the simulated KUKA controller in this process as the robot.
+#![allow(dead_code)]
+
+use std::io::{BufRead, BufReader};
+use std::net::{SocketAddr, UdpSocket};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use hal::{Correction, Pose, UnitQuaternion, Vector3};
+use kuka_rsi::{EthernetConfig, PoscorrLimits};
+use sim::krc::{Krc, KrcConfig, Mechanism, RigidArm, Timing};
+
+pub fn signal(pid: u32, sig: &str) {
+    // Signals only the forcecell process this test started, by its id.
+    let st = Command::new("/bin/kill")
+        .args([&format!("-{sig}"), &pid.to_string()])
+        .status()
+        .expect("run /bin/kill");
+    assert!(st.success(), "kill -{sig} {pid}");
+}
+
+pub fn spawn(args: &[&str], dir: &Path) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_forcecell"))
+        .args(args)
+        .current_dir(dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start forcecell")
+}
+
+/// Read the child's stdout until a line containing `needle`; returns everything read.
+pub fn read_until(
+    child: &mut Child,
+    needle: &str,
+) -> (String, BufReader<std::process::ChildStdout>) {
+    let mut r = BufReader::new(child.stdout.take().unwrap());
+    let mut seen = String::new();
+    loop {
+        let mut line = String::new();
+        let n = r.read_line(&mut line).unwrap();
+        if n == 0 {
+            use std::io::Read;
+            let mut err = String::new();
+            let _ = child.stderr.take().unwrap().read_to_string(&mut err);
+            panic!("the child ended before printing {needle:?}:\n{seen}{err}");
+        }
+        seen.push_str(&line);
+        if line.contains(needle) {
+            return (seen, r);
+        }
+    }
+}
+
+/// Wait for the child and collect the rest of its output.
+pub fn finish(
+    mut child: Child,
+    mut out: String,
+    mut r: BufReader<std::process::ChildStdout>,
+) -> (i32, String) {
+    use std::io::Read;
+    r.read_to_string(&mut out).unwrap();
+    let mut err = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    let st = child.wait().unwrap();
+    assert!(
+        st.code().is_some(),
+        "killed by a signal ({st:?}) instead of ending cleanly:\n{out}{err}"
+    );
+    (st.code().unwrap(), format!("{out}{err}"))
+}
+
+/// The rigid arm of an external RSI client, which sends `sig` to `pid` after `after` cycles.
+pub struct SignallingArm {
+    pub arm: RigidArm,
+    pub cycles: u64,
+    pub after: u64,
+    pub target: Option<(u32, &'static str)>,
+    pub killer: Option<Child>,
+}
+
+impl Mechanism for SignallingArm {
+    fn poses(&mut self) -> (Pose, Pose) {
+        self.arm.poses()
+    }
+    fn advance(&mut self, c: &Correction) {
+        self.arm.advance(c);
+        self.cycles += 1;
+        if self.cycles == self.after
+            && let Some((pid, sig)) = self.target.take()
+        {
+            // Without waiting for /bin/kill: the robot keeps its cycle meanwhile (a slow process start
+            // must not look like a robot that fell silent).
+            let child = Command::new("/bin/kill")
+                .args([&format!("-{sig}"), &pid.to_string()])
+                .spawn()
+                .expect("run /bin/kill");
+            self.killer = Some(child);
+        }
+    }
+}
+
+impl Drop for SignallingArm {
+    fn drop(&mut self) {
+        if let Some(mut k) = self.killer.take() {
+            let st = k.wait().expect("wait for /bin/kill");
+            assert!(st.success(), "/bin/kill failed");
+        }
+    }
+}
+
+pub fn free_port() -> u16 {
+    UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// An RSI client (the simulated controller on a stiff arm) aimed at `port`, for `cycles` cycles.
+pub fn client(port: u16, cycles: u64, tweak: impl FnOnce(&mut KrcConfig)) -> Krc {
+    let target: SocketAddr = format!("127.0.0.1:{port}").parse().unwrap();
+    let mut kc = KrcConfig::new(
+        EthernetConfig::forcecell([127, 0, 0, 1].into(), port, false),
+        target,
+    );
+    kc.timing = Timing::Lockstep {
+        deadline: Duration::from_millis(500),
+    };
+    // A forcecell that died without answering ends the client after 20 late replies, not never.
+    kc.timeout = 20;
+    kc.cycles = Some(cycles);
+    kc.poscorr = PoscorrLimits {
+        translation: 0.055,
+        ..PoscorrLimits::default()
+    };
+    kc.poscorrmon = PoscorrLimits {
+        translation: 0.06,
+        ..PoscorrLimits::MONITOR_DEFAULT
+    };
+    tweak(&mut kc);
+    Krc::new(kc).unwrap()
+}
+
+pub fn arm() -> RigidArm {
+    RigidArm::new(Pose {
+        position: Vector3::new(0.5, 0.0, 0.3),
+        orientation: UnitQuaternion::from_euler_angles(core::f64::consts::PI, 0.0, 0.0),
+    })
+}
