@@ -58,6 +58,19 @@ fn external_signalled(
     (code, text, report, dir)
 }
 
+/// The MCAP recording a signalled run left was finished (summary and index written), not cut off as
+/// after a kill, and holds every cycle of its CSV.
+fn assert_mcap_finished(path: &Path, text: &str) {
+    assert!(
+        text.contains("finished with summary and index"),
+        "the recording was finished: {text}"
+    );
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let back = forcecell::recorder::read_mcap(&bytes).unwrap();
+    assert_eq!(back.truncated, None, "{}", path.display());
+    assert_eq!(back.rows.len(), rows(&path.with_extension("csv")), "{text}");
+}
+
 fn rows(path: &Path) -> usize {
     std::fs::read_to_string(path)
         .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
@@ -80,6 +93,7 @@ fn sigterm_ends_sim_with_an_external_robot_with_stop_and_a_recording() {
     assert!(text.contains("peak force"), "the summary: {text}");
     assert!(rows(&dir.path().join("o/long.csv")) >= 199, "{text}");
     assert!(dir.path().join("o/long.png").exists(), "{text}");
+    assert_mcap_finished(&dir.path().join("o/long.mcap"), &text);
 }
 
 #[test]
@@ -106,6 +120,7 @@ fn sigint_ends_sim_with_the_simulated_controller_in_real_time_with_a_recording()
     assert!(text.contains("wrote o/long.csv and o/long.png"), "{text}");
     assert!(dir.path().join("o/long.png").exists());
     std::fs::read_to_string(dir.path().join("o/long.csv")).unwrap();
+    assert_mcap_finished(&dir.path().join("o/long.mcap"), &text);
 }
 
 #[test]
@@ -123,6 +138,7 @@ fn sigterm_ends_a_lockstep_sim_with_a_recording() {
     let (code, text) = finish(child, seen, r);
     assert_eq!(code, 130, "{text}");
     assert!(dir.path().join("o/long.csv").exists(), "{text}");
+    assert_mcap_finished(&dir.path().join("o/long.mcap"), &text);
 }
 
 #[test]
