@@ -210,6 +210,12 @@ impl SensorConfig {
                     bitrate: *bitrate,
                     slot: *slot,
                     turnaround: Duration::from_micros(*turnaround_us),
+                    // A sample is stale after three missed polls (never sooner than the driver's
+                    // default): at a low poll rate every sample would otherwise read as stale, and the
+                    // loop would hold until its `max_hold` ends the run.
+                    stale_after: ati_can::Config::default()
+                        .stale_after
+                        .max(Duration::from_secs_f64(3.0 / poll_hz)),
                     ..ati_can::Config::default()
                 };
                 ati_cfg.validate().map_err(|e| anyhow!("sensor: {e}"))?;
@@ -765,7 +771,7 @@ fn export_recording(mcap: &Path) -> Result<()> {
     if rows.is_empty() {
         // The CSV reserved before the run holds only its header.
         let _ = std::fs::remove_file(&csv);
-        println!("nothing to export: no cycle was recorded");
+        println!("nothing to record: no cycle was answered");
         return Ok(());
     }
     let png = mcap.with_extension("png");

@@ -252,8 +252,12 @@ impl RobotSide {
         kc.timing = if realtime {
             Timing::Realtime
         } else {
+            // Lockstep has no real-time meaning: a reply is late only if the host stalled (a loaded
+            // machine, a slow emulated guest). Waiting long keeps exactly one datagram per step
+            // there too; a shorter wait made the controller move on, the driver answer the newer
+            // datagram, and the run end one step short.
             Timing::Lockstep {
-                deadline: Duration::from_millis(500),
+                deadline: Duration::from_secs(5),
             }
         };
         // Lockstep: exactly one datagram per step. Real time: the robot keeps its clock whatever the
