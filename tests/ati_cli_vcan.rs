@@ -220,7 +220,9 @@ fn assert_recorded(dir: &Path, text: &str) {
     let files = recordings(dir);
     for ext in ["mcap", "csv", "png", "log"] {
         assert!(
-            files.iter().any(|f| f.extension().is_some_and(|e| e == ext)),
+            files
+                .iter()
+                .any(|f| f.extension().is_some_and(|e| e == ext)),
             "no .{ext} among {files:?}: {text}"
         );
     }
