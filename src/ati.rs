@@ -5,14 +5,13 @@
 use core::time::Duration;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Instant;
 
 use anyhow::{Context, Result, anyhow, bail};
 use ati_can::{
     AtiSensor, Base, BiasConfig, CanTransport, Config, DeviceInfo, Driver, Health, Lockstep,
     MemBus, SocketCanTransport,
 };
-use hal::{ForceSensor, Wrench};
+use hal::Wrench;
 use sim::ati_node::{AtiNode, NodeConfig, SharedNode, WorldSource, serve};
 
 use crate::rsi::{RobotSide, WireSummary};
@@ -297,32 +296,7 @@ fn stream<T: CanTransport + Send + 'static>(
     rate: f64,
 ) -> Result<()> {
     let mut sensor = AtiSensor::spawn(driver, rate)?;
-    let t0 = Instant::now();
-    println!(
-        "{:>8} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>7}  health",
-        "t s", "Fx N", "Fy N", "Fz N", "Tx N·m", "Ty N·m", "Tz N·m", "age ms"
-    );
-    for _ in 0..count {
-        std::thread::sleep(Duration::from_millis(100));
-        let t = t0.elapsed().as_secs_f64();
-        match sensor.read() {
-            Ok(s) => {
-                let w = s.wrench.to_array();
-                println!(
-                    "{t:>8.2} {:>9.3} {:>9.3} {:>9.3} {:>9.4} {:>9.4} {:>9.4} {:>7.2}  {:?}",
-                    w[0],
-                    w[1],
-                    w[2],
-                    w[3],
-                    w[4],
-                    w[5],
-                    s.age.as_secs_f64() * 1e3,
-                    sensor.health()
-                );
-            }
-            Err(e) => println!("{t:>8.2} {e}"),
-        }
-    }
+    crate::readout::print_readings(&mut sensor, count, AtiSensor::health);
     let c = sensor.counters();
     println!(
         "{} samples, {} timeouts, {} malformed, {} out of sequence, {} device errors, {} saturated",

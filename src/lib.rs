@@ -10,6 +10,7 @@ pub mod cell;
 pub mod live;
 pub mod metrics;
 pub mod plot;
+pub mod readout;
 pub mod record;
 pub mod recorder;
 pub mod rig;

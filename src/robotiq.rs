@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use hal::{ForceSensor, Wrench};
+use hal::Wrench;
 use robotiq::codec::SLAVE;
 use robotiq::sensor::{open_stream_port, stop_stream, stream_running};
 use robotiq::{Config, Ft300, Health, LinkConfig, Lockstep, ZeroConfig};
@@ -219,34 +219,8 @@ fn info(port: &Path) -> Result<()> {
 }
 
 fn stream(mut ft: Ft300, count: u32) -> Result<()> {
-    let t0 = Instant::now();
-    println!(
-        "{:>8} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>7}  health",
-        "t s", "Fx N", "Fy N", "Fz N", "Mx N·m", "My N·m", "Mz N·m", "age ms"
-    );
-    for _ in 0..count {
-        std::thread::sleep(Duration::from_millis(100));
-        let t = t0.elapsed().as_secs_f64();
-        match ft.read() {
-            Ok(s) => {
-                let w = s.wrench.to_array();
-                println!(
-                    "{t:>8.2} {:>9.3} {:>9.3} {:>9.3} {:>9.4} {:>9.4} {:>9.4} {:>7.2}  {:?}",
-                    w[0],
-                    w[1],
-                    w[2],
-                    w[3],
-                    w[4],
-                    w[5],
-                    s.age.as_secs_f64() * 1e3,
-                    ft.health()
-                );
-            }
-            Err(e) => println!("{t:>8.2} {e}"),
-        }
-    }
+    let secs = crate::readout::print_readings(&mut ft, count, Ft300::health).as_secs_f64();
     let c = ft.counters();
-    let secs = t0.elapsed().as_secs_f64();
     println!(
         "{} frames ({:.1} Hz), {} CRC errors ({:.2} %), {} bytes skipped, {} stale, {} lost",
         c.frames,
