@@ -6,10 +6,12 @@
 mod common;
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Child, Stdio};
 use std::sync::atomic::Ordering;
 
-use common::{SignallingArm, arm, client, finish, free_port, read_until, signal, spawn};
+use common::{
+    Kill, SignallingArm, arm, client, finish, forcecell, free_port, read_until, run, signal, spawn,
+};
 use sim::krc::KrcEnd;
 
 fn iface() -> String {
@@ -29,30 +31,6 @@ fn time_scale() -> u32 {
                 .unwrap_or_else(|| panic!("FORCECELL_VCAN_TIME_SCALE must be 1 to 100, not {s:?}"))
         })
         .unwrap_or(1)
-}
-
-fn forcecell() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_forcecell"))
-}
-
-struct Kill(Child);
-
-impl Drop for Kill {
-    fn drop(&mut self) {
-        // Ends only the node process this test started, by its own handle.
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn run(args: &[&str]) -> (Output, String) {
-    let out = forcecell().args(args).output().expect("run forcecell");
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    (out, text)
 }
 
 #[test]

@@ -2,32 +2,12 @@
 //! pseudo-terminal and prints its path, `sensor robotiq --port PATH info|read|zero` talks to it from
 //! another process, and `sim --sensor robotiq` runs a scenario through the driver over a pty.
 
+mod common;
+
 use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::Stdio;
 
-fn forcecell() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_forcecell"))
-}
-
-struct Kill(Child);
-
-impl Drop for Kill {
-    fn drop(&mut self) {
-        // Ends only the sensor process this test started, by its own handle.
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn run(args: &[&str]) -> (Output, String) {
-    let out = forcecell().args(args).output().expect("run forcecell");
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    (out, text)
-}
+use common::{Kill, forcecell, run};
 
 #[test]
 fn sensor_commands_talk_to_the_simulated_ft300_in_another_process() {

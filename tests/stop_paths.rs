@@ -7,6 +7,7 @@
 mod common;
 
 use std::path::Path;
+use std::process::Child;
 use std::sync::atomic::Ordering;
 
 use common::{SignallingArm, arm, client, finish, free_port, read_until, signal, spawn};
@@ -23,11 +24,14 @@ k_c = 70000.0
 x_c = 0.01
 "#;
 
-/// Run `sim --external-robot` with a client that signals the process after `after` cycles.
-fn external_signalled(
-    sig: &'static str,
-    after: u64,
-) -> (i32, String, KrcReport, tempfile::TempDir) {
+/// `sim -s long.toml --external-robot 127.0.0.1:PORT --out o` in a new directory, once it listens.
+fn start_external() -> (
+    tempfile::TempDir,
+    u16,
+    Child,
+    String,
+    std::io::BufReader<std::process::ChildStdout>,
+) {
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("long.toml"), LONG).unwrap();
     let port = free_port();
@@ -45,6 +49,15 @@ fn external_signalled(
         dir.path(),
     );
     let (seen, r) = read_until(&mut child, "listening for an RSI client");
+    (dir, port, child, seen, r)
+}
+
+/// Run `sim --external-robot` with a client that signals the process after `after` cycles.
+fn external_signalled(
+    sig: &'static str,
+    after: u64,
+) -> (i32, String, KrcReport, tempfile::TempDir) {
+    let (dir, port, child, seen, r) = start_external();
     let mut krc = client(port, 100_000, |_| {});
     let mut mech = SignallingArm {
         arm: arm(),
@@ -143,23 +156,8 @@ fn sigterm_ends_a_lockstep_sim_with_a_recording() {
 
 #[test]
 fn a_signal_ends_the_wait_for_the_first_datagram() {
-    let dir = tempfile::tempdir().unwrap();
-    std::fs::write(dir.path().join("long.toml"), LONG).unwrap();
-    let listen = format!("127.0.0.1:{}", free_port());
-    let mut child = spawn(
-        &[
-            "sim",
-            "-s",
-            "long.toml",
-            "--external-robot",
-            &listen,
-            "--out",
-            "o",
-        ],
-        dir.path(),
-    );
     // No robot ever sends.
-    let (seen, r) = read_until(&mut child, "listening for an RSI client");
+    let (_dir, _, child, seen, r) = start_external();
     signal(child.id(), "INT");
     let (code, text) = finish(child, seen, r);
     assert_eq!(code, 130, "{text}");
@@ -171,23 +169,7 @@ fn a_signal_ends_the_wait_for_the_first_datagram() {
 
 #[test]
 fn a_lost_link_ends_with_its_own_exit_status() {
-    let dir = tempfile::tempdir().unwrap();
-    std::fs::write(dir.path().join("long.toml"), LONG).unwrap();
-    let port = free_port();
-    let listen = format!("127.0.0.1:{port}");
-    let mut child = spawn(
-        &[
-            "sim",
-            "-s",
-            "long.toml",
-            "--external-robot",
-            &listen,
-            "--out",
-            "o",
-        ],
-        dir.path(),
-    );
-    let (seen, r) = read_until(&mut child, "listening for an RSI client");
+    let (dir, port, child, seen, r) = start_external();
     // The robot ends RSI without a goodbye after 300 cycles.
     let mut krc = client(port, 100_000, |k| k.faults.silent_from = Some(300));
     let abort = krc.abort_handle();

@@ -5,12 +5,39 @@
 use std::io::{BufRead, BufReader};
 use std::net::{SocketAddr, UdpSocket};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command, Output, Stdio};
 use std::time::Duration;
 
 use hal::{Correction, Pose, UnitQuaternion, Vector3};
 use kuka_rsi::{EthernetConfig, PoscorrLimits};
 use sim::krc::{Krc, KrcConfig, Mechanism, RigidArm, Timing};
+
+/// The `forcecell` binary under test.
+pub fn forcecell() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_forcecell"))
+}
+
+/// A child process (a simulated device) that is killed and reaped when the test lets go of it.
+pub struct Kill(pub Child);
+
+impl Drop for Kill {
+    fn drop(&mut self) {
+        // Ends only the process this test started, by its own handle.
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Run `forcecell ARGS` to its end; returns its output and stdout + stderr as text.
+pub fn run(args: &[&str]) -> (Output, String) {
+    let out = forcecell().args(args).output().expect("run forcecell");
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out, text)
+}
 
 pub fn signal(pid: u32, sig: &str) {
     // Signals only the forcecell process this test started, by its id.
@@ -22,7 +49,7 @@ pub fn signal(pid: u32, sig: &str) {
 }
 
 pub fn spawn(args: &[&str], dir: &Path) -> Child {
-    Command::new(env!("CARGO_BIN_EXE_forcecell"))
+    forcecell()
         .args(args)
         .current_dir(dir)
         .stdout(Stdio::piped())
