@@ -258,6 +258,7 @@ mod tests {
                 programmed: Pose::identity(),
                 late_replies: 0,
                 new_session: self.k == 0,
+                process: None,
             })
         }
         fn reply(&mut self, c: &Correction) -> Result<(), ErrorKind> {

@@ -180,6 +180,7 @@ mod tests {
             programmed: Pose::identity(),
             late_replies: 0,
             new_session: false,
+            process: None,
         }
     }
 

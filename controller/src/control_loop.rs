@@ -480,6 +480,7 @@ mod tests {
             programmed: Pose::identity(),
             late_replies: 0,
             new_session: false,
+            process: None,
         }
     }
 

@@ -185,6 +185,160 @@ impl Pose {
     }
 }
 
+/// What the robot program asks of the force process (RSI: `<FcCmd Mode=…>`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ProcessMode {
+    /// No force control: the correction returns to zero and stays there.
+    Off,
+    /// Approach until contact, ramp to the commanded force, hold it.
+    Press,
+    /// Ramp the force down, lift off, bring the correction back to zero, then report [`ProcessPhase::Off`].
+    Release,
+    /// A mode number the contract does not define; the process faults with [`ProcessFault::BadCommand`].
+    Unknown(i64),
+}
+
+impl ProcessMode {
+    /// The mode for a wire number (0 OFF, 1 PRESS, 2 RELEASE, anything else [`ProcessMode::Unknown`]).
+    pub fn from_code(code: i64) -> Self {
+        match code {
+            0 => Self::Off,
+            1 => Self::Press,
+            2 => Self::Release,
+            other => Self::Unknown(other),
+        }
+    }
+
+    /// The wire number.
+    pub fn code(self) -> i64 {
+        match self {
+            Self::Off => 0,
+            Self::Press => 1,
+            Self::Release => 2,
+            Self::Unknown(c) => c,
+        }
+    }
+}
+
+/// The robot program's process command, carried by one cycle. SI units: the driver converts at the wire.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProcessCommand {
+    /// What to do.
+    pub mode: ProcessMode,
+    /// Force set-point while pressing, N (compressive, along the tool's +z).
+    pub force: f64,
+    /// How long a change of set-point takes, s; 0 means the tuning's own rate.
+    pub ramp: f64,
+    /// The program's path segment number (recorded with every row).
+    pub segment: i64,
+}
+
+/// Where the force process is, as reported to the robot program (RSI: `<FcState State=…>`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum ProcessPhase {
+    /// No force control; the correction is (back) at zero.
+    #[default]
+    Off,
+    /// Pressing was asked; moving towards the surface.
+    Approach,
+    /// In contact, the set-point ramps towards the commanded force.
+    Ramp,
+    /// Holding the commanded force within the tuning's tolerance.
+    Pressing,
+    /// Releasing: force ramps down, the tool lifts off, the correction returns to zero.
+    Release,
+    /// A latched fault; re-armed only by [`ProcessMode::Off`].
+    Fault,
+}
+
+impl ProcessPhase {
+    /// The wire number (0 OFF · 1 APPROACH · 2 RAMP · 3 PRESSING · 4 RELEASE · 9 FAULT).
+    pub fn code(self) -> i64 {
+        match self {
+            Self::Off => 0,
+            Self::Approach => 1,
+            Self::Ramp => 2,
+            Self::Pressing => 3,
+            Self::Release => 4,
+            Self::Fault => 9,
+        }
+    }
+
+    /// The phase for a wire number, if the contract defines it.
+    pub fn from_code(code: i64) -> Option<Self> {
+        Some(match code {
+            0 => Self::Off,
+            1 => Self::Approach,
+            2 => Self::Ramp,
+            3 => Self::Pressing,
+            4 => Self::Release,
+            9 => Self::Fault,
+            _ => return None,
+        })
+    }
+}
+
+/// Why the force process faulted (RSI: `FcState.Fault`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum ProcessFault {
+    /// No fault.
+    #[default]
+    None,
+    /// The sensor was lost, or gave nothing usable for too long.
+    SensorLost,
+    /// The measured force exceeded the tuning's limit.
+    ForceLimit,
+    /// The correction reached its envelope.
+    CorrectionLimit,
+    /// The program sent a command the contract does not allow.
+    BadCommand,
+    /// Contact was lost for too long while pressing.
+    ContactLost,
+    /// The last command was held too long without a usable input.
+    HoldTimeout,
+}
+
+impl ProcessFault {
+    /// The wire number (0 none · 1 sensor · 2 force limit · 3 correction limit · 4 bad command ·
+    /// 5 contact lost · 6 hold timeout).
+    pub fn code(self) -> i64 {
+        match self {
+            Self::None => 0,
+            Self::SensorLost => 1,
+            Self::ForceLimit => 2,
+            Self::CorrectionLimit => 3,
+            Self::BadCommand => 4,
+            Self::ContactLost => 5,
+            Self::HoldTimeout => 6,
+        }
+    }
+
+    /// The fault for a wire number, if the contract defines it.
+    pub fn from_code(code: i64) -> Option<Self> {
+        Some(match code {
+            0 => Self::None,
+            1 => Self::SensorLost,
+            2 => Self::ForceLimit,
+            3 => Self::CorrectionLimit,
+            4 => Self::BadCommand,
+            5 => Self::ContactLost,
+            6 => Self::HoldTimeout,
+            _ => return None,
+        })
+    }
+}
+
+/// The force process's state, sent with a reply.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct ProcessState {
+    /// Where the process is.
+    pub phase: ProcessPhase,
+    /// Measured compensated normal force, N (0 when none is known).
+    pub force: f64,
+    /// The latched fault, [`ProcessFault::None`] unless `phase` is [`ProcessPhase::Fault`].
+    pub fault: ProcessFault,
+}
+
 /// One robot interpolation cycle as delivered by [`RobotLink::next_cycle`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Cycle {
@@ -202,6 +356,9 @@ pub struct Cycle {
     pub late_replies: u32,
     /// True on the first cycle of a new robot session: references captured from earlier cycles are void.
     pub new_session: bool,
+    /// The robot program's process command, when the link carries process channels (RSI: `FcCmd`).
+    /// `None`: no process channels; force control runs from the first cycle as configured.
+    pub process: Option<ProcessCommand>,
 }
 
 impl Cycle {
@@ -226,6 +383,9 @@ pub struct Correction {
     pub rotation: Vector3<f64>,
     /// Ask the robot to end the correction motion cleanly.
     pub stop: bool,
+    /// The force process's state for the robot program (RSI: `FcState`); links without process
+    /// channels ignore it.
+    pub process: ProcessState,
 }
 
 impl Correction {
@@ -352,6 +512,7 @@ mod tests {
             programmed,
             late_replies: 0,
             new_session: false,
+            process: None,
         };
         let off = c.tool_offset();
         assert!((off.z - 0.001).abs() < 1e-12, "{off:?}");
@@ -365,6 +526,23 @@ mod tests {
         assert!(w.is_finite());
         let bad = Wrench::from_array([1.0, f64::NAN, 3.0, 4.0, 5.0, 6.0]);
         assert!(!bad.is_finite());
+    }
+
+    #[test]
+    fn process_codes_round_trip() {
+        for c in -1..12 {
+            assert_eq!(ProcessMode::from_code(c).code(), c);
+            if let Some(p) = ProcessPhase::from_code(c) {
+                assert_eq!(p.code(), c);
+            }
+            if let Some(f) = ProcessFault::from_code(c) {
+                assert_eq!(f.code(), c);
+            }
+        }
+        assert_eq!(ProcessMode::from_code(7), ProcessMode::Unknown(7));
+        assert_eq!(ProcessPhase::from_code(5), None);
+        assert_eq!(ProcessPhase::Fault.code(), 9);
+        assert_eq!(ProcessFault::from_code(7), None);
     }
 
     #[test]

@@ -550,6 +550,7 @@ impl Run {
                 translation,
                 rotation,
                 stop: false,
+                ..Correction::default()
             });
             n += 1;
             let stop = stop_slot.is_some_and(|s| self.held[s] != 0.0);

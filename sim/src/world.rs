@@ -172,6 +172,7 @@ impl World {
             programmed: p,
             late_replies: 0,
             new_session: false,
+            process: None,
         }
     }
 

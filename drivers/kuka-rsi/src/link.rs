@@ -456,6 +456,7 @@ impl RsiLink {
             programmed: pose(f.get6(self.rob_slots.rsol)),
             late_replies: delay,
             new_session,
+            process: None,
         };
         // The one plausibility check of the robot's poses: a jump no arm makes in the IPOC time since
         // the last plausible pose is a counted fault. The cycle is still delivered (it must be answered,
