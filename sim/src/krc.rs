@@ -16,7 +16,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use hal::{Correction, Pose};
+use hal::{Correction, Pose, ProcessCommand, ProcessState};
 use kuka_rsi::codec::{Frame, Ipoc, Schema};
 use kuka_rsi::{CorrectionMode, EthernetConfig, ParseError, PoscorrLimits, wire};
 use rand::{RngExt, SeedableRng};
@@ -31,6 +31,14 @@ pub trait Mechanism {
     /// Apply the total correction accepted this cycle (SI, tool frame, after POSCORR) and advance
     /// one period.
     fn advance(&mut self, correction: &Correction);
+    /// The robot program's process command for the cycle about to be sent (`FcCmd`), if it runs one.
+    /// Sent only when the Ethernet config declares the `FcCmd` elements.
+    fn process_command(&mut self) -> Option<ProcessCommand> {
+        None
+    }
+    /// The process state the PC sent in its reply to the last cycle (`FcState`), when the config
+    /// declares it.
+    fn process_state(&mut self, _state: ProcessState) {}
 }
 
 impl Mechanism for SharedWorld {
