@@ -3,10 +3,17 @@
 
 use core::fmt;
 
-use hal::{Correction, Cycle, Error as _, ErrorKind, ForceSensor, RobotLink, Sample};
+use hal::{
+    Correction, Cycle, Error as _, ErrorKind, ForceSensor, ProcessCommand, ProcessFault, RobotLink,
+    Sample,
+};
 use serde::{Deserialize, Serialize};
 
 use crate::law::{ForceLaw, Output};
+
+mod process;
+pub use process::ProcessConfig;
+use process::{Act, Process, Release};
 
 /// How the loop maps devices onto the 1-DOF law and what it refuses to command.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -30,6 +37,8 @@ pub struct LoopConfig {
     pub retract_distance: f64,
     /// Speed of that back-off, m/s (never faster than `max_step` per cycle).
     pub retract_speed: f64,
+    /// The force process the robot program commands, on links that carry process channels.
+    pub process: ProcessConfig,
 }
 
 impl Default for LoopConfig {
@@ -41,6 +50,7 @@ impl Default for LoopConfig {
             max_hold: 0.1,
             retract_distance: 0.002,
             retract_speed: 0.02,
+            process: ProcessConfig::default(),
         }
     }
 }
@@ -79,7 +89,7 @@ impl LoopConfig {
                 self.retract_speed
             ));
         }
-        Ok(())
+        self.process.validate()
     }
 }
 
@@ -138,8 +148,11 @@ pub struct CycleReport {
     pub sample: Option<Sample>,
     /// The law's output (on a held cycle, the last output).
     pub out: Output,
-    /// The correction sent.
+    /// The correction sent (with the process state reported to the robot program).
     pub command: Correction,
+    /// The force set-point in effect, N: the law's, or the process's active one (0 while no force
+    /// control runs).
+    pub set_point: f64,
     /// What went wrong in this cycle, if anything.
     pub fault: Option<Fault>,
 }
@@ -190,6 +203,14 @@ impl<SE> Ending<SE> {
     }
 }
 
+/// One sensor read, classified.
+struct Reading<SE> {
+    f: Option<f64>,
+    sample: Option<Sample>,
+    fault: Option<Fault>,
+    fatal: Option<SE>,
+}
+
 /// What the loop is doing.
 enum Phase<SE> {
     /// Force control (or holding within `max_hold`).
@@ -218,6 +239,9 @@ pub struct ControlLoop<R, S: ForceSensor, L> {
     /// Robot time held since the law's last step, s.
     held: f64,
     phase: Phase<S::Error>,
+    /// Robot time of the law's last step, s (`None` right after a start).
+    stepped_t: Option<f64>,
+    process: Process,
 }
 
 impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
@@ -234,6 +258,8 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             last_cmd: 0.0,
             held: 0.0,
             phase: Phase::Control,
+            stepped_t: None,
+            process: Process::new(cfg.process),
         }
     }
 
@@ -285,6 +311,9 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             }
         };
         let x = cycle.tool_offset().z;
+        if let Some(pc) = cycle.process {
+            return self.process_cycle(cycle, x, pc);
+        }
         match self.phase {
             Phase::Control => {}
             Phase::Retract { target, .. } => return self.retract(cycle, x, target),
@@ -297,6 +326,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             }
             self.started = true;
             self.law.start(x);
+            self.stepped_t = None;
             self.last_cmd = x;
             self.last_out = Output {
                 x_cmd: x,
@@ -304,37 +334,19 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             };
         }
 
-        let mut fatal_sensor = None;
-        let mut sample = None;
-        let (f, mut fault) = match self.sensor.read() {
-            Ok(s) if s.wrench.is_finite() => {
-                sample = Some(s);
-                (Some(self.cfg.force_sign * s.wrench.force.z), None)
-            }
-            Ok(s) => {
-                sample = Some(s);
-                (None, Some(Fault::NonFiniteSample))
-            }
-            Err(e) => {
-                let kind = e.kind();
-                if matches!(
-                    kind,
-                    ErrorKind::LinkLost | ErrorKind::BusOff | ErrorKind::Config
-                ) {
-                    fatal_sensor = Some(e);
-                }
-                (None, Some(Fault::Sensor(kind)))
-            }
-        };
-        if !pose_ok && fault.is_none() {
-            fault = Some(Fault::NonFinitePose);
-        }
+        let Reading {
+            f,
+            sample,
+            mut fault,
+            fatal: fatal_sensor,
+        } = self.read_sensor(pose_ok);
 
         let mut out = self.last_out;
         let mut cmd = self.last_cmd;
         match (fault, f) {
             (None, Some(f)) if self.started => {
-                let o = self.law.step(x, f, cycle.period);
+                let dt = self.law_dt(&cycle);
+                let o = self.law.step(x, f, dt);
                 if o.x_cmd.is_finite() {
                     out = o;
                     cmd = self.limit(o.x_cmd, &mut fault);
@@ -344,25 +356,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             }
             _ => {}
         }
-        let held = match fault {
-            Some(Fault::Sensor(_)) => {
-                self.stats.sensor_faults += 1;
-                true
-            }
-            Some(Fault::NonFiniteSample | Fault::NonFinitePose) => {
-                self.stats.nonfinite_inputs += 1;
-                true
-            }
-            Some(Fault::NonFiniteCommand) => {
-                self.stats.nonfinite_commands += 1;
-                true
-            }
-            Some(Fault::StepLimited | Fault::EnvelopeLimited) => {
-                self.stats.limited += 1;
-                false
-            }
-            Some(Fault::Retracting) | None => false,
-        };
+        let held = self.count(fault);
         self.held = if held { self.held + cycle.period } else { 0.0 };
 
         let command = Correction::along_z(cmd);
@@ -389,8 +383,246 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             sample,
             out,
             command,
+            set_point: self.law.set_point(),
             fault,
         })
+    }
+
+    /// Read the newest sample and classify it: a usable force, a non-finite sample, a sensor error
+    /// (fatal for `LinkLost`, `BusOff`, `Config`), or an unusable pose.
+    fn read_sensor(&mut self, pose_ok: bool) -> Reading<S::Error> {
+        let mut fatal = None;
+        let mut sample = None;
+        let (f, mut fault) = match self.sensor.read() {
+            Ok(s) if s.wrench.is_finite() => {
+                sample = Some(s);
+                (Some(self.cfg.force_sign * s.wrench.force.z), None)
+            }
+            Ok(s) => {
+                sample = Some(s);
+                (None, Some(Fault::NonFiniteSample))
+            }
+            Err(e) => {
+                let kind = e.kind();
+                if matches!(
+                    kind,
+                    ErrorKind::LinkLost | ErrorKind::BusOff | ErrorKind::Config
+                ) {
+                    fatal = Some(e);
+                }
+                (None, Some(Fault::Sensor(kind)))
+            }
+        };
+        if !pose_ok && fault.is_none() {
+            fault = Some(Fault::NonFinitePose);
+        }
+        Reading {
+            f,
+            sample,
+            fault,
+            fatal,
+        }
+    }
+
+    /// The law's step: the robot time since its last step (held and skipped cycles included), from
+    /// the cycle's own timestamp; the nominal period on the first step or when the stamps are unusable.
+    fn law_dt(&mut self, cycle: &Cycle) -> f64 {
+        let dt = match self.stepped_t {
+            Some(t0) => cycle.t - t0,
+            None => cycle.period,
+        };
+        self.stepped_t = Some(cycle.t);
+        // A stamp that goes back or leaps past a hold the loop would have ended is not a clock.
+        if dt.is_finite() && dt > 0.0 && dt <= self.cfg.max_hold + 2.0 * cycle.period {
+            dt
+        } else {
+            cycle.period
+        }
+    }
+
+    /// One cycle of a process the robot program commands (the cycle carries a [`ProcessCommand`]):
+    /// OFF returns the correction to zero, PRESS approaches, ramps and holds the program's force,
+    /// RELEASE ramps down, lifts off and returns to zero; a fault latches, backs off and holds there
+    /// until the program sends OFF. The loop never ends on a process fault: the program decides.
+    fn process_cycle(
+        &mut self,
+        cycle: Cycle,
+        x: f64,
+        pc: ProcessCommand,
+    ) -> Result<CycleReport, LoopError<R::Error, S::Error>> {
+        let pose_ok = cycle.actual.is_finite() && cycle.programmed.is_finite() && x.is_finite();
+        if pose_ok && (!self.started || cycle.new_session) {
+            if self.started {
+                self.stats.sessions += 1;
+            }
+            self.started = true;
+            self.last_cmd = x;
+            self.process = Process::new(self.cfg.process);
+            self.last_out = Output {
+                x_cmd: x,
+                ..Output::default()
+            };
+        }
+        let Reading {
+            f,
+            sample,
+            mut fault,
+            fatal,
+        } = self.read_sensor(pose_ok);
+        if let Some(f) = f {
+            self.process.observe(f, cycle.period);
+        }
+        let lift = self.cfg.retract_distance;
+        let floor = -self.cfg.max_offset;
+        match self.process.command(&pc) {
+            Ok(true) => {
+                // A fresh start of force control at the measured position (bumpless).
+                self.law
+                    .set_set_point(self.process.sp)
+                    .expect("a checked PRESS force is a valid set-point");
+                self.law.start(if pose_ok { x } else { self.last_cmd });
+                self.stepped_t = None;
+                self.held = 0.0;
+            }
+            Ok(false) => {}
+            Err(why) => self.process.latch(
+                ProcessFault::BadCommand,
+                format!("bad command: {why}"),
+                self.last_cmd,
+                lift,
+                floor,
+            ),
+        }
+        if let Some(e) = &fatal {
+            self.process.latch(
+                ProcessFault::SensorLost,
+                format!("force sensor: {e}"),
+                self.last_cmd,
+                lift,
+                floor,
+            );
+        }
+
+        let mut out = self.last_out;
+        let mut cmd = self.last_cmd;
+        let controlling = match self.process.act(cmd) {
+            Act::MoveTo { target } => {
+                let step = (self.cfg.retract_speed * cycle.period).min(self.cfg.max_step);
+                cmd = self.last_cmd + (target - self.last_cmd).clamp(-step, step);
+                if cmd == target {
+                    self.process.arrived();
+                }
+                out.x_cmd = cmd;
+                if self.process.phase == hal::ProcessPhase::Fault {
+                    self.stats.retract_cycles += 1;
+                    fault = fault.or(Some(Fault::Retracting));
+                }
+                false
+            }
+            Act::Control => {
+                if let (None, Some(fv)) = (fault, f) {
+                    let dt = self.law_dt(&cycle);
+                    if self.process.ramp_step(dt) {
+                        self.law
+                            .set_set_point(self.process.sp)
+                            .expect("a ramp between checked forces is a valid set-point");
+                    }
+                    let o = self.law.step(x, fv, dt);
+                    if o.x_cmd.is_finite() {
+                        out = o;
+                        cmd = self.limit(o.x_cmd, &mut fault);
+                        if let Err((code, why)) = self.process.after_step(&o, fv, dt) {
+                            self.process.latch(code, why, cmd, lift, floor);
+                        } else if fault == Some(Fault::EnvelopeLimited) {
+                            self.process.latch(
+                                ProcessFault::CorrectionLimit,
+                                format!(
+                                    "correction reached its envelope of {:.1} mm",
+                                    self.cfg.max_offset * 1e3
+                                ),
+                                cmd,
+                                lift,
+                                floor,
+                            );
+                        } else if self.process.release_ramp_done() {
+                            self.process.release = Release::Lift {
+                                target: (cmd - lift).max(floor),
+                            };
+                        }
+                    } else {
+                        fault = Some(Fault::NonFiniteCommand);
+                    }
+                }
+                true
+            }
+        };
+        let held = self.count(fault) && controlling;
+        self.held = if held { self.held + cycle.period } else { 0.0 };
+        if self.held > self.cfg.max_hold {
+            let code = match fault {
+                Some(Fault::Sensor(_) | Fault::NonFiniteSample) => ProcessFault::SensorLost,
+                _ => ProcessFault::HoldTimeout,
+            };
+            let why = format!(
+                "held the last command for {:.0} ms without a usable input (last: {fault:?})",
+                self.held * 1e3
+            );
+            self.process.latch(code, why, cmd, lift, floor);
+            self.held = 0.0;
+        }
+
+        let command = Correction {
+            process: self.process.state(),
+            ..Correction::along_z(cmd)
+        };
+        self.robot.reply(&command).map_err(LoopError::Robot)?;
+        self.stats.cycles += 1;
+        self.last_out = out;
+        self.last_cmd = cmd;
+        Ok(CycleReport {
+            cycle,
+            x,
+            f,
+            sample,
+            out,
+            command,
+            set_point: self.process.recorded_set_point(),
+            fault,
+        })
+    }
+
+    /// The process's state as last reported to the robot program (OFF on links without process
+    /// channels).
+    pub fn process_state(&self) -> hal::ProcessState {
+        self.process.state()
+    }
+
+    /// Why the process's fault latched, while it is latched.
+    pub fn process_fault_reason(&self) -> Option<&str> {
+        self.process.reason.as_deref()
+    }
+
+    /// Count a cycle's fault; true when the cycle held its last command.
+    fn count(&mut self, fault: Option<Fault>) -> bool {
+        match fault {
+            Some(Fault::Sensor(_)) => {
+                self.stats.sensor_faults += 1;
+                true
+            }
+            Some(Fault::NonFiniteSample | Fault::NonFinitePose) => {
+                self.stats.nonfinite_inputs += 1;
+                true
+            }
+            Some(Fault::NonFiniteCommand) => {
+                self.stats.nonfinite_commands += 1;
+                true
+            }
+            Some(Fault::StepLimited | Fault::EnvelopeLimited) => {
+                self.stats.limited += 1;
+                false
+            }
+            Some(Fault::Retracting) | None => false,
+        }
     }
 
     /// End the robot's correction motion cleanly: wait for the next cycle and answer it with the last
@@ -405,6 +637,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         }
         let command = Correction {
             stop: true,
+            process: self.process.state(),
             ..Correction::along_z(self.last_cmd)
         };
         self.robot.reply(&command).map_err(LoopError::Robot)?;
@@ -442,6 +675,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             sample: None,
             out: self.last_out,
             command,
+            set_point: self.law.set_point(),
             fault: Some(Fault::Retracting),
         })
     }

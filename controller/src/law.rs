@@ -249,6 +249,9 @@ pub trait ForceLaw {
     fn step(&mut self, x: f64, f: f64, dt: f64) -> Output;
     /// The force set-point, N.
     fn set_point(&self) -> f64;
+    /// Change the force set-point while running, without a bump (a law may approach the new value at
+    /// its own rate). An invalid value is refused and changes nothing.
+    fn set_set_point(&mut self, f_r: f64) -> Result<(), String>;
     /// Events counted since `start` (laws without limits or a state machine count nothing).
     fn counters(&self) -> EventCounts {
         EventCounts::default()
@@ -264,6 +267,9 @@ impl<L: ForceLaw + ?Sized> ForceLaw for Box<L> {
     }
     fn set_point(&self) -> f64 {
         (**self).set_point()
+    }
+    fn set_set_point(&mut self, f_r: f64) -> Result<(), String> {
+        (**self).set_set_point(f_r)
     }
     fn counters(&self) -> EventCounts {
         (**self).counters()
@@ -369,6 +375,12 @@ impl ForceLaw for ImpedanceLaw {
 
     fn set_point(&self) -> f64 {
         self.imp.f_r
+    }
+
+    fn set_set_point(&mut self, f_r: f64) -> Result<(), String> {
+        check_non_negative("f_r", f_r)?;
+        self.imp.f_r = f_r;
+        Ok(())
     }
 }
 

@@ -25,7 +25,9 @@ pub mod robust;
 pub mod tune;
 
 pub use config::{LawConfig, Overrides, Tuning};
-pub use control_loop::{ControlLoop, CycleReport, Fault, LoopConfig, LoopError, LoopStats};
+pub use control_loop::{
+    ControlLoop, CycleReport, Fault, LoopConfig, LoopError, LoopStats, ProcessConfig,
+};
 pub use law::{
     AdaptiveParams, ContactState, EventCounts, Events, ForceLaw, ImpedanceLaw, ImpedanceParams,
     Output, Reference, fixed_reference_steady_state_error,

@@ -916,6 +916,10 @@ impl ForceLaw for RobustLaw {
         self.p.f_r
     }
 
+    fn set_set_point(&mut self, f_r: f64) -> Result<(), String> {
+        RobustLaw::set_set_point(self, f_r)
+    }
+
     fn counters(&self) -> EventCounts {
         self.counts
     }

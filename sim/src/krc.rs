@@ -50,6 +50,14 @@ impl Mechanism for SharedWorld {
     fn advance(&mut self, correction: &Correction) {
         lock(self).advance(Some(correction));
     }
+
+    fn process_command(&mut self) -> Option<ProcessCommand> {
+        lock(self).process_command()
+    }
+
+    fn process_state(&mut self, state: ProcessState) {
+        lock(self).process_reply(state);
+    }
 }
 
 /// A stiff arm: the measured pose is the programmed pose plus the correction of the previous cycle.

@@ -7,11 +7,13 @@ pub mod ft300;
 pub mod inner;
 pub mod krc;
 pub mod plant;
+pub mod program;
 pub mod sensor_model;
 pub mod world;
 
 pub use inner::{InnerLoop, InnerLoopModel};
 pub use krc::{Krc, KrcConfig, KrcEnd, KrcReport, Mechanism, RigidArm, Timing};
 pub use plant::{ContactPlant, Event, Schedule};
+pub use program::{Program, ProgramRunner, Segment, SegmentMode, SurfaceForm};
 pub use sensor_model::{SensorModel, SensorParams, Window};
 pub use world::{InProcRobot, InProcSensor, SharedWorld, Truth, World};

@@ -8,12 +8,13 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
 use hal::{
-    Correction, Cycle, ErrorKind, ForceSensor, Pose, RobotLink, Sample, UnitQuaternion, Vector3,
-    Wrench,
+    Correction, Cycle, ErrorKind, ForceSensor, Pose, ProcessCommand, ProcessState, RobotLink,
+    Sample, UnitQuaternion, Vector3, Wrench,
 };
 
 use crate::inner::{InnerLoop, InnerLoopModel};
 use crate::plant::ContactPlant;
+use crate::program::{Program, ProgramRunner, SurfaceForm};
 use crate::sensor_model::{SensorModel, SensorParams};
 
 /// The simulated cell's state. Time advances only through [`World::advance`].
@@ -27,6 +28,10 @@ pub struct World {
     last_command: f64,
     measurements: u64,
     truth: Vec<Truth>,
+    form: SurfaceForm,
+    program: Option<ProgramRunner>,
+    /// Path position when no program moves the tool, m.
+    s: f64,
 }
 
 /// The true state of the cell at one cycle, logged by [`World::advance`] for recording and metrics.
@@ -42,6 +47,8 @@ pub struct Truth {
     pub k_c: f64,
     /// Surface position, m.
     pub x_c: f64,
+    /// Path position along the workpiece, m.
+    pub s: f64,
 }
 
 /// A world shared between the peers of one simulation.
@@ -64,7 +71,46 @@ impl World {
             last_command: x0,
             measurements: 0,
             truth: Vec::new(),
+            form: SurfaceForm::default(),
+            program: None,
+            s: 0.0,
         }
+    }
+
+    /// The workpiece's form along the path.
+    pub fn with_form(mut self, form: SurfaceForm) -> Self {
+        self.form = form;
+        self
+    }
+
+    /// A robot program: each cycle carries its process command, and it moves the tool along the path.
+    pub fn with_program(mut self, program: Program) -> Self {
+        self.program = Some(ProgramRunner::new(program));
+        self
+    }
+
+    /// The running program, if any.
+    pub fn program(&self) -> Option<&ProgramRunner> {
+        self.program.as_ref()
+    }
+
+    /// The program's command for this cycle, if a program runs.
+    pub fn process_command(&self) -> Option<ProcessCommand> {
+        self.program.as_ref().map(ProgramRunner::command)
+    }
+
+    /// The process state the PC replied to this cycle.
+    pub fn process_reply(&mut self, state: ProcessState) {
+        if let Some(p) = &mut self.program {
+            p.observe(state);
+        }
+    }
+
+    /// Path position, m.
+    pub fn path_position(&self) -> f64 {
+        self.program
+            .as_ref()
+            .map_or(self.s, ProgramRunner::path_position)
     }
 
     /// The programmed (uncorrected) tool pose the simulation uses: 0.5 m out, 0.3 m up, tool z pointing
@@ -118,13 +164,18 @@ impl World {
 
     /// True contact force now, N.
     pub fn true_force(&self) -> f64 {
-        self.plant
-            .force(self.time(), self.inner.position(), self.inner.velocity())
+        // The form shifts the surface: the same as the tool standing back by its height.
+        let h = self.form.height(self.path_position());
+        self.plant.force(
+            self.time(),
+            self.inner.position() - h,
+            self.inner.velocity(),
+        )
     }
 
-    /// True surface position now, m.
+    /// True surface position now, m (the plant's, plus the form under the tool).
     pub fn surface(&self) -> f64 {
-        self.plant.x_c.at(self.time())
+        self.plant.x_c.at(self.time()) + self.form.height(self.path_position())
     }
 
     /// True stiffness now, N/m.
@@ -172,7 +223,7 @@ impl World {
             programmed: p,
             late_replies: 0,
             new_session: false,
-            process: None,
+            process: self.process_command(),
         }
     }
 
@@ -184,6 +235,7 @@ impl World {
             f: self.true_force(),
             k_c: self.stiffness(),
             x_c: self.surface(),
+            s: self.path_position(),
         }
     }
 
@@ -210,6 +262,9 @@ impl World {
         }
         self.truth.push(self.truth());
         self.inner.advance(self.last_command);
+        if let Some(p) = &mut self.program {
+            p.advance(self.inner.model().period);
+        }
         self.k += 1;
     }
 }
@@ -251,7 +306,9 @@ impl RobotLink for InProcRobot {
             return Err(ErrorKind::Other);
         }
         self.answered = true;
-        lock(&self.world).advance(Some(correction));
+        let mut w = lock(&self.world);
+        w.process_reply(correction.process);
+        w.advance(Some(correction));
         Ok(())
     }
 }

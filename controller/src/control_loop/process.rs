@@ -1,0 +1,501 @@
+//! The force process the robot program commands (RSI `FcCmd` → `FcState`): OFF, PRESS and RELEASE with
+//! ramps, latched faults that retract and re-arm on OFF. Contract: `shared/specs/rsi-process.md`.
+//!
+//! The loop runs this only on cycles that carry a [`ProcessCommand`]; without one it keeps its old
+//! behaviour (force control from the first cycle at the tuning's set-point).
+
+use hal::{ProcessCommand, ProcessFault, ProcessMode, ProcessPhase, ProcessState};
+use serde::{Deserialize, Serialize};
+
+use crate::law::{ContactState, Output};
+
+/// How the process reacts to the program's commands. Forces in N, times in s.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ProcessConfig {
+    /// `PRESSING` is reported once the measured force is within this fraction of `F` (and the ramp is
+    /// done).
+    pub tolerance: f64,
+    /// The force limit: a commanded `F` must lie below it, a measured force above it is a fault.
+    pub max_force: f64,
+    /// The set-point an entry ramp starts from before contact (the ramp then runs from the force at
+    /// contact to `F`), N.
+    pub entry_force: f64,
+    /// Rate of a set-point change when the program asks for `Ramp = 0`, N/s.
+    pub default_rate: f64,
+    /// Longest loss of contact while pressing before it is a fault, s.
+    pub contact_loss_time: f64,
+    /// Time constant of the force filter behind the `PRESSING` test and `FcState.F`, s.
+    pub force_filter: f64,
+}
+
+impl Default for ProcessConfig {
+    fn default() -> Self {
+        Self {
+            tolerance: 0.05,
+            max_force: 60.0,
+            entry_force: 2.0,
+            default_rate: 50.0,
+            contact_loss_time: 0.5,
+            force_filter: 0.01,
+        }
+    }
+}
+
+impl ProcessConfig {
+    /// Checks the values.
+    pub fn validate(&self) -> Result<(), String> {
+        let pos = |name: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(format!(
+                    "process.{name} must be a finite number > 0, got {v}"
+                ))
+            }
+        };
+        pos("tolerance", self.tolerance)?;
+        if self.tolerance >= 1.0 {
+            return Err(format!(
+                "process.tolerance is a fraction of F below 1, got {}",
+                self.tolerance
+            ));
+        }
+        pos("max_force", self.max_force)?;
+        pos("entry_force", self.entry_force)?;
+        pos("default_rate", self.default_rate)?;
+        pos("contact_loss_time", self.contact_loss_time)?;
+        pos("force_filter", self.force_filter)?;
+        Ok(())
+    }
+
+    /// Why the program's command is refused, if it is: an undefined mode, or a PRESS whose force or
+    /// ramp the contract does not allow.
+    pub fn check(&self, c: &ProcessCommand) -> Result<(), String> {
+        match c.mode {
+            ProcessMode::Unknown(m) => Err(format!("undefined mode {m}")),
+            ProcessMode::Press if !(c.force.is_finite() && c.force > 0.0) => {
+                Err(format!("PRESS needs F > 0 N, got {}", c.force))
+            }
+            ProcessMode::Press if c.force >= self.max_force => Err(format!(
+                "PRESS with F = {} N at or above the force limit {} N",
+                c.force, self.max_force
+            )),
+            ProcessMode::Press if !(c.ramp.is_finite() && (0.0..=60.0).contains(&c.ramp)) => {
+                Err(format!("Ramp must be 0..60 s, got {}", c.ramp))
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+/// Where a RELEASE is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum Release {
+    /// The set-point ramps down while the law holds contact.
+    RampDown,
+    /// The command backs off towards `target`.
+    Lift { target: f64 },
+    /// The command returns to zero.
+    Return,
+}
+
+/// What the loop does with the command this cycle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum Act {
+    /// Step the law with set-point `sp`.
+    Control,
+    /// Move the command towards `target` at the retract speed; the law is not stepped.
+    MoveTo { target: f64 },
+}
+
+/// The process's state.
+#[derive(Clone, Debug)]
+pub(super) struct Process {
+    pub cfg: ProcessConfig,
+    pub phase: ProcessPhase,
+    pub fault: ProcessFault,
+    /// Why the fault latched, for the operator.
+    pub reason: Option<String>,
+    /// Active set-point handed to the law, N.
+    pub sp: f64,
+    /// The program's `F`, N.
+    pub target: f64,
+    /// Rate of the running ramp, N/s.
+    pub rate: f64,
+    /// The program's `Ramp`, s.
+    pub ramp: f64,
+    pub f_filt: f64,
+    pub had_contact: bool,
+    /// Robot time without contact after contact, s.
+    pub lost: f64,
+    pub release: Release,
+    /// Where a fault's back-off ends, m.
+    pub retract_target: f64,
+}
+
+impl Process {
+    pub fn new(cfg: ProcessConfig) -> Self {
+        Self {
+            cfg,
+            phase: ProcessPhase::Off,
+            fault: ProcessFault::None,
+            reason: None,
+            sp: 0.0,
+            target: 0.0,
+            rate: cfg.default_rate,
+            ramp: 0.0,
+            f_filt: 0.0,
+            had_contact: false,
+            lost: 0.0,
+            release: Release::Return,
+            retract_target: 0.0,
+        }
+    }
+
+    /// The state reported to the program.
+    pub fn state(&self) -> ProcessState {
+        ProcessState {
+            phase: self.phase,
+            force: if self.f_filt.is_finite() {
+                self.f_filt
+            } else {
+                0.0
+            },
+            fault: self.fault,
+        }
+    }
+
+    /// The set-point to record: the active one while force control runs, else 0.
+    pub fn recorded_set_point(&self) -> f64 {
+        match self.phase {
+            ProcessPhase::Approach | ProcessPhase::Ramp | ProcessPhase::Pressing => self.sp,
+            ProcessPhase::Release if self.release == Release::RampDown => self.sp,
+            _ => 0.0,
+        }
+    }
+
+    /// Filter a usable force sample.
+    pub fn observe(&mut self, f: f64, dt: f64) {
+        let a = (dt / (self.cfg.force_filter + dt)).clamp(0.0, 1.0);
+        self.f_filt += a * (f - self.f_filt);
+    }
+
+    /// Latch a fault (the first one stands), backing off from `cmd`, within `floor`.
+    pub fn latch(&mut self, fault: ProcessFault, why: String, cmd: f64, lift: f64, floor: f64) {
+        if self.phase == ProcessPhase::Fault {
+            return;
+        }
+        self.phase = ProcessPhase::Fault;
+        self.fault = fault;
+        self.reason = Some(why);
+        self.retract_target = (cmd - lift).max(floor);
+    }
+
+    fn ramp_rate(&self, from: f64, to: f64) -> f64 {
+        if self.ramp > 0.0 {
+            ((to - from).abs() / self.ramp).max(1e-9)
+        } else {
+            self.cfg.default_rate
+        }
+    }
+
+    /// Take the program's command. Returns `true` when force control (re)starts: the loop restarts
+    /// the law at the measured position with set-point `sp`.
+    pub fn command(&mut self, c: &ProcessCommand) -> Result<bool, String> {
+        self.cfg.check(c)?;
+        match c.mode {
+            ProcessMode::Off => {
+                if self.phase != ProcessPhase::Off {
+                    // OFF re-arms a latched fault and ends anything else: back to zero.
+                    self.phase = ProcessPhase::Off;
+                    self.fault = ProcessFault::None;
+                    self.reason = None;
+                }
+                Ok(false)
+            }
+            ProcessMode::Press => match self.phase {
+                ProcessPhase::Fault => Ok(false),
+                ProcessPhase::Off | ProcessPhase::Release => {
+                    self.phase = ProcessPhase::Approach;
+                    self.target = c.force;
+                    self.ramp = c.ramp;
+                    self.sp = if c.ramp > 0.0 {
+                        self.cfg.entry_force.min(c.force)
+                    } else {
+                        c.force
+                    };
+                    self.rate = self.ramp_rate(self.sp, c.force);
+                    self.had_contact = false;
+                    self.lost = 0.0;
+                    Ok(true)
+                }
+                _ => {
+                    if c.force != self.target || c.ramp != self.ramp {
+                        self.ramp = c.ramp;
+                        self.rate = self.ramp_rate(self.sp, c.force);
+                        if c.force != self.target && self.phase == ProcessPhase::Pressing {
+                            self.phase = ProcessPhase::Ramp;
+                        }
+                        self.target = c.force;
+                    }
+                    Ok(false)
+                }
+            },
+            ProcessMode::Release => {
+                match self.phase {
+                    ProcessPhase::Approach | ProcessPhase::Ramp | ProcessPhase::Pressing => {
+                        self.phase = ProcessPhase::Release;
+                        self.ramp = c.ramp.max(0.0);
+                        self.release = if self.had_contact {
+                            let floor = self.cfg.entry_force.min(self.sp);
+                            self.rate = self.ramp_rate(self.sp, floor);
+                            Release::RampDown
+                        } else {
+                            Release::Return
+                        };
+                    }
+                    _ => {}
+                }
+                Ok(false)
+            }
+            ProcessMode::Unknown(_) => unreachable!("refused by check"),
+        }
+    }
+
+    /// Move the set-point one step along its ramp; true when it changed.
+    pub fn ramp_step(&mut self, dt: f64) -> bool {
+        let to = match (self.phase, self.release) {
+            (ProcessPhase::Release, Release::RampDown) => self.cfg.entry_force.min(self.target),
+            (ProcessPhase::Approach, _) => return false,
+            _ => self.target,
+        };
+        let before = self.sp;
+        let d = self.rate * dt;
+        self.sp += (to - self.sp).clamp(-d, d);
+        self.sp != before
+    }
+
+    /// What to do with the command this cycle, given the last command `cmd`.
+    pub fn act(&self, cmd: f64) -> Act {
+        match (self.phase, self.release) {
+            (ProcessPhase::Off, _) => Act::MoveTo { target: 0.0 },
+            (ProcessPhase::Fault, _) => Act::MoveTo {
+                target: self.retract_target,
+            },
+            (ProcessPhase::Release, Release::Lift { target }) => Act::MoveTo { target },
+            (ProcessPhase::Release, Release::Return) => Act::MoveTo { target: 0.0 },
+            _ => {
+                let _ = cmd;
+                Act::Control
+            }
+        }
+    }
+
+    /// After a law step: contact, ramp end, `PRESSING`, contact loss. `Err` is a fault to latch.
+    pub fn after_step(
+        &mut self,
+        out: &Output,
+        f: f64,
+        dt: f64,
+    ) -> Result<(), (ProcessFault, String)> {
+        if out.events.force_limit || f > self.cfg.max_force {
+            return Err((
+                ProcessFault::ForceLimit,
+                format!("force {f:.1} N above the limit {:.1} N", self.cfg.max_force),
+            ));
+        }
+        let in_contact = match out.state {
+            Some(s) => s == ContactState::Contact,
+            None => self.f_filt >= self.cfg.entry_force.min(self.target),
+        };
+        if in_contact {
+            self.lost = 0.0;
+        } else if self.had_contact {
+            self.lost += dt;
+            if self.lost > self.cfg.contact_loss_time {
+                return Err((
+                    ProcessFault::ContactLost,
+                    format!("contact lost for {:.0} ms while pressing", self.lost * 1e3),
+                ));
+            }
+        }
+        match self.phase {
+            ProcessPhase::Approach if in_contact => {
+                self.had_contact = true;
+                self.phase = ProcessPhase::Ramp;
+                if self.ramp > 0.0 {
+                    self.sp = f.clamp(self.sp.min(self.target), self.target);
+                    self.rate = self.ramp_rate(self.sp, self.target);
+                }
+            }
+            ProcessPhase::Ramp
+                if self.sp == self.target
+                    && (self.f_filt - self.target).abs() <= self.cfg.tolerance * self.target =>
+            {
+                self.phase = ProcessPhase::Pressing;
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// A RELEASE's ramp-down ended: lift off from `cmd` by `lift`, within `floor`.
+    pub fn release_ramp_done(&self) -> bool {
+        self.phase == ProcessPhase::Release
+            && self.release == Release::RampDown
+            && self.sp <= self.cfg.entry_force.min(self.target)
+    }
+
+    /// A move of the command reached its target: the next stage.
+    pub fn arrived(&mut self) {
+        if self.phase == ProcessPhase::Release {
+            match self.release {
+                Release::Lift { .. } => self.release = Release::Return,
+                Release::Return => self.phase = ProcessPhase::Off,
+                Release::RampDown => {}
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn press(f: f64, ramp: f64) -> ProcessCommand {
+        ProcessCommand {
+            mode: ProcessMode::Press,
+            force: f,
+            ramp,
+            segment: 1,
+        }
+    }
+
+    #[test]
+    fn commands_the_contract_forbids_are_refused() {
+        let c = ProcessConfig::default();
+        assert!(c.check(&press(20.0, 0.5)).is_ok());
+        assert!(c.check(&press(0.0, 0.5)).is_err());
+        assert!(c.check(&press(-1.0, 0.5)).is_err());
+        assert!(c.check(&press(f64::NAN, 0.5)).is_err());
+        assert!(c.check(&press(60.0, 0.5)).is_err(), "at the limit");
+        assert!(c.check(&press(20.0, -1.0)).is_err());
+        assert!(c.check(&press(20.0, f64::INFINITY)).is_err());
+        let bad = ProcessCommand {
+            mode: ProcessMode::Unknown(7),
+            ..press(20.0, 0.5)
+        };
+        assert!(c.check(&bad).unwrap_err().contains('7'));
+    }
+
+    #[test]
+    fn entry_ramp_runs_from_the_contact_force_to_f_over_ramp() {
+        let mut p = Process::new(ProcessConfig::default());
+        assert_eq!(p.command(&press(20.0, 0.5)), Ok(true));
+        assert_eq!(p.phase, ProcessPhase::Approach);
+        assert_eq!(p.sp, 2.0);
+        assert!(!p.ramp_step(0.004), "no ramp before contact");
+        let contact = Output {
+            state: Some(ContactState::Contact),
+            ..Output::default()
+        };
+        p.after_step(&contact, 3.0, 0.004).unwrap();
+        assert_eq!(p.phase, ProcessPhase::Ramp);
+        assert_eq!(p.sp, 3.0);
+        // 17 N over 0.5 s: 34 N/s.
+        let mut t = 0.0_f64;
+        while p.sp < 20.0 {
+            p.ramp_step(0.004);
+            t += 0.004;
+        }
+        assert!((t - 0.5).abs() < 0.005, "{t}");
+        p.f_filt = 19.5;
+        p.after_step(&contact, 19.5, 0.004).unwrap();
+        assert_eq!(p.phase, ProcessPhase::Pressing);
+    }
+
+    #[test]
+    fn a_new_force_ramps_again_and_leaves_pressing() {
+        let mut p = Process::new(ProcessConfig::default());
+        p.command(&press(10.0, 0.0)).unwrap();
+        p.phase = ProcessPhase::Pressing;
+        p.sp = 10.0;
+        assert_eq!(p.command(&press(30.0, 0.4)), Ok(false));
+        assert_eq!(p.phase, ProcessPhase::Ramp);
+        assert!((p.rate - 50.0).abs() < 1e-9, "20 N over 0.4 s");
+    }
+
+    #[test]
+    fn release_ramps_down_lifts_returns_then_off() {
+        let mut p = Process::new(ProcessConfig::default());
+        p.command(&press(20.0, 0.0)).unwrap();
+        p.had_contact = true;
+        p.phase = ProcessPhase::Pressing;
+        p.sp = 20.0;
+        let rel = ProcessCommand {
+            mode: ProcessMode::Release,
+            ..press(20.0, 0.3)
+        };
+        p.command(&rel).unwrap();
+        assert_eq!(p.phase, ProcessPhase::Release);
+        assert_eq!(p.release, Release::RampDown);
+        assert_eq!(p.act(0.001), Act::Control);
+        let mut n = 0;
+        while !p.release_ramp_done() {
+            p.ramp_step(0.004);
+            n += 1;
+        }
+        assert!((75..=76).contains(&n), "18 N over 0.3 s: {n} steps");
+        p.release = Release::Lift { target: -0.001 };
+        assert_eq!(p.act(0.001), Act::MoveTo { target: -0.001 });
+        p.arrived();
+        assert_eq!(p.act(0.0), Act::MoveTo { target: 0.0 });
+        p.arrived();
+        assert_eq!(p.phase, ProcessPhase::Off);
+    }
+
+    #[test]
+    fn a_fault_latches_until_off() {
+        let mut p = Process::new(ProcessConfig::default());
+        p.command(&press(20.0, 0.0)).unwrap();
+        p.latch(ProcessFault::ForceLimit, "x".into(), 0.002, 0.002, -0.05);
+        p.latch(ProcessFault::ContactLost, "y".into(), 0.0, 0.002, -0.05);
+        assert_eq!(p.fault, ProcessFault::ForceLimit, "the first fault stands");
+        assert_eq!(p.act(0.002), Act::MoveTo { target: 0.0 });
+        assert_eq!(
+            p.command(&press(20.0, 0.0)),
+            Ok(false),
+            "PRESS does not re-arm"
+        );
+        assert_eq!(p.phase, ProcessPhase::Fault);
+        let off = ProcessCommand {
+            mode: ProcessMode::Off,
+            ..press(20.0, 0.0)
+        };
+        p.command(&off).unwrap();
+        assert_eq!(p.state().phase, ProcessPhase::Off);
+        assert_eq!(p.state().fault, ProcessFault::None);
+        assert_eq!(p.command(&press(20.0, 0.0)), Ok(true));
+    }
+
+    #[test]
+    fn contact_lost_too_long_is_a_fault() {
+        let mut p = Process::new(ProcessConfig::default());
+        p.command(&press(20.0, 0.0)).unwrap();
+        p.had_contact = true;
+        p.phase = ProcessPhase::Pressing;
+        let lost = Output {
+            state: Some(ContactState::Reacquire),
+            ..Output::default()
+        };
+        let mut r = Ok(());
+        for _ in 0..200 {
+            r = p.after_step(&lost, 0.0, 0.004);
+            if r.is_err() {
+                break;
+            }
+        }
+        assert_eq!(r.unwrap_err().0, ProcessFault::ContactLost);
+    }
+}
