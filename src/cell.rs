@@ -593,7 +593,7 @@ where
     let orientation = shared_orientation();
     let robot = OrientationTap::new(robot, orientation.clone());
     let sensor = CompensatedSensor::new(sensor, cfg.compensator(), orientation);
-    let mut lp = ControlLoop::new(robot, sensor, law, tuning.loop_cfg);
+    let mut lp = ControlLoop::new(robot, sensor, law, tuning.loop_config());
     let mut rows = Vec::new();
     let (ended, end) = loop {
         if stop.load(Ordering::Relaxed) {

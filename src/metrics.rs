@@ -16,6 +16,16 @@
 //!   controller causes, without the slow trend a drifting sensor bias imposes (unobservable in a steady
 //!   contact);
 //! * `kc_hat`, `xc_hat` — estimates at the window's end; `kc_rel_error` — `|k̂_c − k_c|/k_c` there.
+//!
+//! Of a pass the robot program commands (rows with a process phase, see `rsi-process.md`):
+//! * `pressing_time` — time reported `PRESSING`, s;
+//! * `pressing_in_band_pct` — share of that time with the force within ±5 % of the program's `F`, %;
+//! * `press_overshoot_pct` — the largest overshoot of the force past the program's `F` while
+//!   approaching, ramping or pressing, in % of `F`, in the direction of the change that led there
+//!   (above `F` after an entry or a rise, below it after a fall);
+//! * `release_excess` — largest force above `F` while releasing, N (≤ 0: no force above `F`);
+//! * `final_correction` — `|x_cmd|` of the window's last row, m;
+//! * `press_contact_losses` — drops of the force to zero while ramping or pressing.
 
 use crate::record::Row;
 
@@ -37,7 +47,21 @@ pub const METRIC_NAMES: &[&str] = &[
     "xc_hat",
     "kc_rel_error",
     "faults",
+    "pressing_time",
+    "pressing_in_band_pct",
+    "press_overshoot_pct",
+    "release_excess",
+    "final_correction",
+    "press_contact_losses",
 ];
+
+/// The process phase codes of a row (`FcState.State`).
+mod phase {
+    pub const APPROACH: u8 = 1;
+    pub const RAMP: u8 = 2;
+    pub const PRESSING: u8 = 3;
+    pub const RELEASE: u8 = 4;
+}
 
 /// Metrics over one window `[from, until)`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -74,6 +98,18 @@ pub struct Metrics {
     pub kc_rel_error: f64,
     /// Steps with a fault.
     pub faults: f64,
+    /// s.
+    pub pressing_time: f64,
+    /// %.
+    pub pressing_in_band_pct: f64,
+    /// %.
+    pub press_overshoot_pct: f64,
+    /// N.
+    pub release_excess: f64,
+    /// m.
+    pub final_correction: f64,
+    /// Count.
+    pub press_contact_losses: f64,
 }
 
 impl Metrics {
@@ -103,10 +139,18 @@ impl Metrics {
             xc_hat: f64::NAN,
             kc_rel_error: f64::NAN,
             faults: win.iter().filter(|r| r.fault != 0).count() as f64,
+            pressing_time: 0.0,
+            pressing_in_band_pct: f64::NAN,
+            press_overshoot_pct: f64::NAN,
+            release_excess: f64::NAN,
+            final_correction: f64::NAN,
+            press_contact_losses: 0.0,
         };
         let Some(last) = win.last() else {
             return m;
         };
+        m.final_correction = last.x_cmd.abs();
+        m.pass(&win, force);
         m.kc_hat = last.kc_hat;
         m.xc_hat = last.xc_hat;
         m.kc_rel_error = ((last.kc_hat - last.k_c) / last.k_c).abs();
@@ -194,6 +238,61 @@ impl Metrics {
         m
     }
 
+    /// The metrics of a commanded pass (see the module's list).
+    fn pass(&mut self, win: &[&Row], force: impl Fn(&Row) -> f64) {
+        let (mut pressing, mut in_band) = (0usize, 0usize);
+        let (mut over, mut excess) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
+        // An episode: one commanded force while pressing; its overshoot is measured in the direction
+        // of the change that began it (up from the last force, or from nothing at entry).
+        let (mut episode_f, mut direction) = (f64::NAN, 1.0);
+        let mut touching = true;
+        let mut dt_sum = 0.0;
+        for w in win.windows(2) {
+            let (r, next) = (w[0], w[1]);
+            let f = force(r);
+            match r.phase {
+                phase::PRESSING => {
+                    pressing += 1;
+                    dt_sum += next.t - r.t;
+                    in_band += usize::from((f - r.f_cmd).abs() <= 0.05 * r.f_cmd);
+                }
+                phase::RELEASE => excess = excess.max(f - r.f_cmd),
+                _ => {}
+            }
+            if matches!(r.phase, phase::APPROACH | phase::RAMP | phase::PRESSING) {
+                if r.f_cmd != episode_f {
+                    direction = if episode_f.is_nan() || r.f_cmd > episode_f {
+                        1.0
+                    } else {
+                        -1.0
+                    };
+                    episode_f = r.f_cmd;
+                }
+                over = over.max(direction * (f - r.f_cmd) / r.f_cmd * 100.0);
+            } else {
+                episode_f = f64::NAN;
+            }
+            if matches!(r.phase, phase::RAMP | phase::PRESSING) {
+                if touching && f <= 0.0 {
+                    self.press_contact_losses += 1.0;
+                }
+                touching = f > 0.0;
+            } else {
+                touching = true;
+            }
+        }
+        self.pressing_time = dt_sum;
+        if pressing > 0 {
+            self.pressing_in_band_pct = in_band as f64 / pressing as f64 * 100.0;
+        }
+        if over.is_finite() {
+            self.press_overshoot_pct = over.max(0.0);
+        }
+        if excess.is_finite() {
+            self.release_excess = excess;
+        }
+    }
+
     /// A metric by name (see [`METRIC_NAMES`]).
     pub fn get(&self, name: &str) -> Option<f64> {
         Some(match name {
@@ -213,6 +312,12 @@ impl Metrics {
             "xc_hat" => self.xc_hat,
             "kc_rel_error" => self.kc_rel_error,
             "faults" => self.faults,
+            "pressing_time" => self.pressing_time,
+            "pressing_in_band_pct" => self.pressing_in_band_pct,
+            "press_overshoot_pct" => self.press_overshoot_pct,
+            "release_excess" => self.release_excess,
+            "final_correction" => self.final_correction,
+            "press_contact_losses" => self.press_contact_losses,
             _ => return None,
         })
     }

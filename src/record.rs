@@ -32,7 +32,20 @@ pub struct Row {
     pub x_c: f64,
     /// Fault code of the step (0: none; see [`fault_code`]).
     pub fault: u8,
+    /// The force process's phase as reported to the robot program (`FcState.State`: 0 OFF,
+    /// 1 APPROACH, 2 RAMP, 3 PRESSING, 4 RELEASE, 9 FAULT), or [`NO_PROCESS`] on a link without
+    /// process channels.
+    pub phase: u8,
+    /// The robot program's segment number (`FcCmd.Seg`; 0 without process channels).
+    pub segment: i64,
+    /// The robot program's commanded force (`FcCmd.F`), N; NaN without process channels.
+    pub f_cmd: f64,
+    /// Path position along the workpiece, m (NaN on a real cell).
+    pub s: f64,
 }
+
+/// [`Row::phase`] of a cycle that carried no process command.
+pub const NO_PROCESS: u8 = 255;
 
 impl Row {
     /// The row of an answered cycle with set-point `f_r`; the truth columns (`f_true`, `k_c`, `x_c`) are
@@ -51,6 +64,13 @@ impl Row {
             k_c: f64::NAN,
             x_c: f64::NAN,
             fault: fault_code(r.fault),
+            phase: r
+                .cycle
+                .process
+                .map_or(NO_PROCESS, |_| r.command.process.phase.code() as u8),
+            segment: r.cycle.process.map_or(0, |p| p.segment),
+            f_cmd: r.cycle.process.map_or(f64::NAN, |p| p.force),
+            s: f64::NAN,
         }
     }
 }
@@ -170,6 +190,10 @@ pub fn read_csv(text: &str) -> Result<Vec<Row>> {
             k_c: v[9],
             x_c: v[10],
             fault,
+            phase: NO_PROCESS,
+            segment: 0,
+            f_cmd: f64::NAN,
+            s: f64::NAN,
         });
     }
     Ok(rows)
@@ -195,6 +219,10 @@ mod tests {
                 k_c: 70_000.0,
                 x_c: 0.01,
                 fault: 1,
+                phase: NO_PROCESS,
+                segment: 0,
+                f_cmd: f64::NAN,
+                s: f64::NAN,
             };
             2
         ];

@@ -812,6 +812,10 @@ fn nan_row() -> Row {
         k_c: f64::NAN,
         x_c: f64::NAN,
         fault: 0,
+        phase: crate::record::NO_PROCESS,
+        segment: 0,
+        f_cmd: f64::NAN,
+        s: f64::NAN,
     }
 }
 

@@ -262,7 +262,8 @@ impl RobotSide {
         };
         // Lockstep: exactly one datagram per step. Real time: the robot keeps its clock whatever the
         // loop misses, so it runs until the loop is done and aborts it.
-        kc.cycles = (!realtime).then(|| spec.steps());
+        // One more than the run's steps: the last cycle is answered with `Stop`.
+        kc.cycles = (!realtime).then(|| spec.steps() + 1);
         kc.poscorr = poscorr;
         kc.poscorrmon = poscorrmon;
         let mut krc = Krc::new(kc).context("simulated KUKA controller")?;
@@ -300,6 +301,7 @@ impl RobotSide {
             delay_cycles: 0,
         };
         spec.plant_label = "external".into();
+        spec.external = true;
         let world = spec.world();
         let ip = match addr.ip() {
             std::net::IpAddr::V4(ip) => ip,
@@ -448,16 +450,23 @@ impl RobotLink for ExternalRobot<'_> {
     type Error = LinkError;
 
     fn next_cycle(&mut self) -> Result<Cycle, LinkError> {
-        let c = self.link.next_cycle()?;
+        let mut c = self.link.next_cycle()?;
         let x = c.tool_offset().z;
-        if x.is_finite() {
-            let at = self.world_position(&c, x);
-            sim::world::lock(&self.world).advance(Some(&Correction::along_z(at)));
+        let at = x.is_finite().then(|| self.world_position(&c, x));
+        let mut w = sim::world::lock(&self.world);
+        if let Some(at) = at {
+            w.advance(Some(&Correction::along_z(at)));
+        }
+        // A client that sends no `FcCmd` gets the scenario's program (if it has one) run on its
+        // behalf; one that does runs its own.
+        if c.process.is_none() {
+            c.process = w.process_command();
         }
         Ok(c)
     }
 
     fn reply(&mut self, correction: &Correction) -> Result<(), LinkError> {
+        sim::world::lock(&self.world).process_reply(correction.process);
         self.link.reply(correction)
     }
 }

@@ -24,6 +24,9 @@ pub struct RunSpec {
     pub plant: InnerLoopModel,
     /// The tuning, with the scenario's overrides applied.
     pub tuning: Tuning,
+    /// The robot is an outside RSI client (`--external-robot`): when it commands the process itself
+    /// (`FcCmd`), the run lasts until it ends its session, not the scenario's duration.
+    pub external: bool,
 }
 
 impl RunSpec {
@@ -54,6 +57,7 @@ impl RunSpec {
             plant: model,
             tuning,
             scenario,
+            external: false,
         })
     }
 
@@ -66,12 +70,17 @@ impl RunSpec {
 
     /// A fresh simulated world for this run.
     pub fn world(&self) -> SharedWorld {
-        World::new(
+        let w = World::new(
             self.scenario.environment.plant(),
             self.plant,
             self.scenario.sensor.clone(),
             self.scenario.start_position(),
         )
+        .with_form(self.scenario.environment.form.clone());
+        match &self.scenario.program {
+            Some(p) => w.with_program(p.clone()),
+            None => w,
+        }
         .shared()
     }
 
@@ -177,28 +186,59 @@ where
     S::Error: Send + Sync + 'static,
 {
     let law = spec.tuning.law.build().map_err(|e| anyhow!(e))?;
-    let f_r = law.set_point();
-    let mut lp = ControlLoop::new(robot, sensor, law, spec.tuning.loop_cfg);
+    let mut lp = ControlLoop::new(robot, sensor, law, spec.tuning.loop_config());
     let steps = spec.steps();
     let mut rows = Vec::with_capacity(steps as usize);
     let started = Instant::now();
     let mut ended_early = None;
     let every = (steps / 200).max(1);
     let mut interrupted = None;
-    for k in 0..steps {
+    let program_done = || {
+        sim::world::lock(world)
+            .program()
+            .map(|p| (p.done(), p.aborted().map(str::to_string)))
+    };
+    let mut finished = false;
+    // An outside robot that sends `FcCmd` runs its own program: the session is its to end.
+    let mut robot_driven = false;
+    let mut k = 0u64;
+    loop {
+        if k >= steps && !robot_driven {
+            finished = true;
+            break;
+        }
+        k += 1;
         if crate::stop::requested() {
+            break;
+        }
+        if let Some((true, aborted)) = program_done() {
+            // The robot program ended (its `RSI_OFF`): end the correction motion cleanly.
+            if let Some(why) = aborted {
+                ended_early = Some(format!("the robot program aborted: {why}"));
+            }
+            finished = true;
             break;
         }
         match lp.cycle() {
             Ok(r) => {
-                let rec = Record::from_report(&r, f_r, 0);
+                robot_driven = spec.external
+                    && r.cycle.process.is_some()
+                    && sim::world::lock(world).program().is_none();
+                let segment = r
+                    .cycle
+                    .process
+                    .map_or(0, |p| p.segment.clamp(0, u32::MAX as i64) as u32);
+                let rec = Record::from_report(&r, r.set_point, segment);
                 rows.push(rec.row);
                 if let Some(tx) = &mut recorder {
                     tx.push(rec);
                 }
             }
             Err(e) => {
-                if !crate::stop::requested() {
+                if robot_driven && matches!(e, controller::LoopError::Robot(_)) {
+                    // The robot program ended its session (RSI_OFF): the normal end of its pass.
+                    println!("the robot ended its session ({e})");
+                } else if !crate::stop::requested() {
                     ended_early = Some(e.to_string());
                 }
                 break;
@@ -207,6 +247,18 @@ where
         if k % every == 0 {
             progress(k as f64 / steps as f64);
         }
+    }
+    if finished {
+        // The scenario's course or the simulated program is over: end the robot's correction
+        // motion cleanly with `Stop` rather than falling silent (a timeout stop on a real KRC).
+        if let Err(e) = lp.stop() {
+            ended_early.get_or_insert(format!("could not send Stop at the end: {e}"));
+        }
+    } else if let Some((false, _)) = program_done() {
+        ended_early.get_or_insert(format!(
+            "the robot program did not finish within the scenario's {} s",
+            spec.scenario.duration
+        ));
     }
     if crate::stop::requested() {
         // The operator's stop: end the robot's correction motion as `run` does (bounded: the link's
@@ -229,6 +281,7 @@ where
             r.f_true = tr.f;
             r.k_c = tr.k_c;
             r.x_c = tr.x_c;
+            r.s = tr.s;
         }
     }
     let metrics = Metrics::compute(&rows, 0.0, f64::INFINITY);

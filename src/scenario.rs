@@ -6,7 +6,7 @@ use std::path::Path;
 use anyhow::{Context, Result, anyhow, bail};
 use controller::{Overrides, Tuning};
 use serde::{Deserialize, Serialize};
-use sim::{ContactPlant, Event, InnerLoopModel, Schedule, SensorParams};
+use sim::{ContactPlant, Event, InnerLoopModel, Program, Schedule, SensorParams, SurfaceForm};
 
 mod builtin {
     include!(concat!(env!("OUT_DIR"), "/builtin.rs"));
@@ -71,6 +71,10 @@ pub struct Environment {
     /// Changes of the surface position.
     #[serde(default)]
     pub x_c_events: Vec<Event>,
+    /// The part's form along the path (tilt, waviness, steps, edge), added to the surface under the
+    /// tool as a robot program moves it.
+    #[serde(default)]
+    pub form: SurfaceForm,
 }
 
 impl Environment {
@@ -141,6 +145,10 @@ pub struct Scenario {
     /// Targets.
     #[serde(default)]
     pub targets: Vec<Target>,
+    /// A robot program the simulated controller runs over the process channels (`FcCmd`/`FcState`):
+    /// the run ends when it does (within `duration`), with `Stop`.
+    #[serde(default)]
+    pub program: Option<Program>,
 }
 
 fn default_tuning() -> String {
@@ -267,6 +275,13 @@ impl Scenario {
         }
         let plant = self.environment.plant();
         plant.validate().map_err(|e| anyhow!("environment: {e}"))?;
+        self.environment
+            .form
+            .validate()
+            .map_err(|e| anyhow!("environment: {e}"))?;
+        if let Some(p) = &self.program {
+            p.validate().map_err(|e| anyhow!("program: {e}"))?;
+        }
         let (lo, hi) = extent(&plant.x_c, self.duration);
         if !(lo >= -MAX_SURFACE && hi <= MAX_SURFACE) {
             bail!(

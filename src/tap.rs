@@ -74,6 +74,10 @@ impl<S: ForceSensor> ForceSensor for TapSensor<S> {
                 k_c: f64::NAN,
                 x_c: f64::NAN,
                 fault: 0,
+                phase: crate::record::NO_PROCESS,
+                segment: 0,
+                f_cmd: f64::NAN,
+                s: f64::NAN,
             });
             rec.wrench = s.wrench.to_array();
             rec.sensor_seq = s.seq;

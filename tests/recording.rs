@@ -28,6 +28,7 @@ fn record(k: u64) -> Record {
         k_c: f64::NAN,
         x_c: f64::NAN,
         fault: (k % 3) as u8,
+        ..Row::default()
     });
     rec.wrench = [0.1, -0.2, 5.0 + k as f64, 0.01, 0.02, -0.03];
     rec.wrench_raw = [0.1, -0.2, 25.0, 0.01, 0.02, -0.03];

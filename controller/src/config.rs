@@ -46,6 +46,21 @@ pub struct Tuning {
     pub loop_cfg: LoopConfig,
 }
 
+impl Tuning {
+    /// The loop's configuration, with the process's force limit and set-point rate taken from the
+    /// law where it has them (never above what the tuning's `[loop.process]` says): a ramp the
+    /// program asks for never outruns the law's own set-point rate, and a PRESS never asks for a
+    /// force at or above the law's limit.
+    pub fn loop_config(&self) -> LoopConfig {
+        let mut c = self.loop_cfg;
+        if let LawConfig::Robust(p) = &self.law {
+            c.process.max_force = c.process.max_force.min(p.limits.max_force);
+            c.process.default_rate = c.process.default_rate.min(p.response.set_point_rate);
+        }
+        c
+    }
+}
+
 /// Values a scenario may override in any tuning.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]

@@ -524,7 +524,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
                     let dt = self.law_dt(&cycle);
                     if self.process.ramp_step(dt) {
                         self.law
-                            .set_set_point(self.process.sp)
+                            .set_set_point(self.process.law_set_point())
                             .expect("a ramp between checked forces is a valid set-point");
                     }
                     let o = self.law.step(x, fv, dt);

@@ -27,6 +27,10 @@ pub struct ProcessConfig {
     pub contact_loss_time: f64,
     /// Time constant of the force filter behind the `PRESSING` test and `FcState.F`, s.
     pub force_filter: f64,
+    /// How far ahead along a ramp the set-point handed to the law runs, s: the force lags the law's
+    /// set-point by about the inner loop's lag and delay, so the law is led by that much and the
+    /// force follows the ramp itself (the lead never passes the ramp's end). 0: no lead.
+    pub ramp_lead: f64,
 }
 
 impl Default for ProcessConfig {
@@ -38,6 +42,7 @@ impl Default for ProcessConfig {
             default_rate: 50.0,
             contact_loss_time: 0.5,
             force_filter: 0.01,
+            ramp_lead: 0.05,
         }
     }
 }
@@ -66,6 +71,12 @@ impl ProcessConfig {
         pos("default_rate", self.default_rate)?;
         pos("contact_loss_time", self.contact_loss_time)?;
         pos("force_filter", self.force_filter)?;
+        if !(self.ramp_lead.is_finite() && (0.0..=1.0).contains(&self.ramp_lead)) {
+            return Err(format!(
+                "process.ramp_lead must be 0..1 s, got {}",
+                self.ramp_lead
+            ));
+        }
         Ok(())
     }
 
@@ -123,6 +134,8 @@ pub(super) struct Process {
     pub target: f64,
     /// Rate of the running ramp, N/s.
     pub rate: f64,
+    /// Where the running ramp ends, N.
+    pub ramp_to: f64,
     /// The program's `Ramp`, s.
     pub ramp: f64,
     pub f_filt: f64,
@@ -144,6 +157,7 @@ impl Process {
             sp: 0.0,
             target: 0.0,
             rate: cfg.default_rate,
+            ramp_to: 0.0,
             ramp: 0.0,
             f_filt: 0.0,
             had_contact: false,
@@ -192,9 +206,13 @@ impl Process {
         self.retract_target = (cmd - lift).max(floor);
     }
 
+    /// The rate of a ramp from `from` to `to` over the program's `Ramp`: never faster than
+    /// `default_rate` (the law's own set-point rate), so the set-point handed on is the one in effect.
     fn ramp_rate(&self, from: f64, to: f64) -> f64 {
         if self.ramp > 0.0 {
-            ((to - from).abs() / self.ramp).max(1e-9)
+            ((to - from).abs() / self.ramp)
+                .max(1e-9)
+                .min(self.cfg.default_rate)
         } else {
             self.cfg.default_rate
         }
@@ -226,6 +244,7 @@ impl Process {
                         c.force
                     };
                     self.rate = self.ramp_rate(self.sp, c.force);
+                    self.ramp_to = self.sp;
                     self.had_contact = false;
                     self.lost = 0.0;
                     Ok(true)
@@ -273,7 +292,17 @@ impl Process {
         let before = self.sp;
         let d = self.rate * dt;
         self.sp += (to - self.sp).clamp(-d, d);
+        self.ramp_to = to;
         self.sp != before
+    }
+
+    /// The set-point handed to the law: the ramp's, led by `ramp_lead` (never past the ramp's end).
+    pub fn law_set_point(&self) -> f64 {
+        if self.sp == self.ramp_to {
+            return self.sp;
+        }
+        let lead = self.rate * self.cfg.ramp_lead;
+        self.sp + (self.ramp_to - self.sp).clamp(-lead, lead)
     }
 
     /// What to do with the command this cycle, given the last command `cmd`.
@@ -421,9 +450,11 @@ mod tests {
         p.command(&press(10.0, 0.0)).unwrap();
         p.phase = ProcessPhase::Pressing;
         p.sp = 10.0;
-        assert_eq!(p.command(&press(30.0, 0.4)), Ok(false));
+        assert_eq!(p.command(&press(30.0, 0.5)), Ok(false));
         assert_eq!(p.phase, ProcessPhase::Ramp);
-        assert!((p.rate - 50.0).abs() < 1e-9, "20 N over 0.4 s");
+        assert!((p.rate - 40.0).abs() < 1e-9, "20 N over 0.5 s");
+        p.command(&press(10.0, 0.1)).unwrap();
+        assert_eq!(p.rate, 50.0, "never faster than the law's own rate");
     }
 
     #[test]
