@@ -433,10 +433,16 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         };
         self.stepped_t = Some(cycle.t);
         // A stamp that goes back or leaps past a hold the loop would have ended is not a clock.
-        if dt.is_finite() && dt > 0.0 && dt <= self.cfg.max_hold + 2.0 * cycle.period {
-            dt
+        if !(dt.is_finite() && dt > 0.0 && dt <= self.cfg.max_hold + 2.0 * cycle.period) {
+            return cycle.period;
+        }
+        // Whole robot cycles: the stamps count interpolation cycles (RSI's IPOC in ms), so the
+        // time between two steps is a whole number of periods; rounding keeps the stamps' jitter
+        // and float error out of the law.
+        if cycle.period > 0.0 {
+            (dt / cycle.period).round().max(1.0) * cycle.period
         } else {
-            cycle.period
+            dt
         }
     }
 
@@ -1066,5 +1072,64 @@ mod tests {
         let r = lp.cycle().unwrap();
         assert_eq!(r.fault, Some(Fault::StepLimited));
         assert_eq!(lp.stats().limited, 1);
+    }
+
+    /// A law that records the `dt` of every step.
+    #[derive(Default)]
+    struct DtLaw(Vec<f64>);
+
+    impl ForceLaw for DtLaw {
+        fn start(&mut self, _x: f64) {}
+        fn step(&mut self, x: f64, _f: f64, dt: f64) -> Output {
+            self.0.push(dt);
+            Output {
+                x_cmd: x,
+                ..Output::default()
+            }
+        }
+        fn set_point(&self) -> f64 {
+            0.0
+        }
+        fn set_set_point(&mut self, _f_r: f64) -> Result<(), String> {
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn the_laws_clock_is_the_robots_stamps_held_and_skipped_cycles_included() {
+        let mut robot = MockRobot::new();
+        // Cycles 0, 1, 2, then the robot skips 3 and 4 (a late PC), then 5, 6 (sensor timeout), 7.
+        let seqs = std::sync::Mutex::new(vec![0u64, 1, 2, 5, 6, 7].into_iter());
+        robot
+            .expect_next_cycle()
+            .returning(move || Ok(cycle_at(seqs.lock().unwrap().next().unwrap(), 0.001)));
+        robot.expect_reply().returning(|_| Ok(()));
+        let mut sensor = MockSensor::new();
+        let mut n = 0;
+        sensor.expect_read().returning(move || {
+            n += 1;
+            if n == 5 {
+                Err(ErrorKind::Timeout)
+            } else {
+                Ok(sample(1.0))
+            }
+        });
+        let mut lp = ControlLoop::new(robot, sensor, DtLaw::default(), LoopConfig::default());
+        for _ in 0..6 {
+            lp.cycle().unwrap();
+        }
+        let steps: Vec<u64> = lp
+            .law()
+            .0
+            .iter()
+            .map(|dt| (dt / 0.004).round() as u64)
+            .collect();
+        assert_eq!(steps, [1, 1, 1, 3, 2], "periods per step: {:?}", lp.law().0);
+        assert!(
+            lp.law()
+                .0
+                .iter()
+                .all(|dt| (dt / 0.004).fract().abs() < 1e-12 || (dt / 0.004).fract() > 1.0 - 1e-12)
+        );
     }
 }

@@ -598,11 +598,8 @@ impl RobustLaw {
                 let delta = e / k;
                 // Conditional integration: only near the set-point, where what is left is a ramp's lag
                 // (a transient's error is the proportional path's business, integrating it overshoots).
-                // Outside the band it may still unwind: an integral that holds the force off the
-                // set-point (left over from a ramp) must not be frozen there.
                 if (self.f_r - ff).abs()
                     <= INTEGRATION_BAND * self.f_r.max(self.p.contact.contact_force)
-                    || delta * self.integ < 0.0
                 {
                     let lim = r.integral_limit;
                     self.integ = (self.integ + dt * r.integral * delta).clamp(-lim, lim);
