@@ -711,6 +711,18 @@ fn report(spec: &RunSpec, run: &RunResult, out: &Path, check: bool) -> Result<Ex
         &run.rows,
     )?;
     println!("\nwrote {} and {}", csv.display(), png.display());
+    if run.rows.iter().any(|r| r.phase != record::NO_PROCESS) {
+        let pass_png = out.join(format!("{stem}-pass.png"));
+        plot::write_pass_png(
+            &pass_png,
+            &format!(
+                "{} along the path · plant {} · tuning {}",
+                spec.scenario.name, spec.plant_label, spec.tuning.name
+            ),
+            &run.rows,
+        )?;
+        println!("wrote {} (the pass along the path)", pass_png.display());
+    }
     let failed = verdicts.iter().any(|v| !v.pass);
     Ok(ExitCode::from(if run.interrupted.is_some() {
         forcecell::stop::INTERRUPTED

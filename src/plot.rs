@@ -46,6 +46,12 @@ fn range(rows: &[Row], lines: &[Line]) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
+/// The x axis of a panel: its label and its value.
+type Axis = (&'static str, fn(&Row) -> f64);
+
+/// Time, s.
+const TIME: Axis = ("t [s]", |r| r.t);
+
 fn panel(
     area: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
     rows: &[Row],
@@ -53,18 +59,38 @@ fn panel(
     y_label: &str,
     lines: &[Line],
 ) -> Result<()> {
-    let t_end = rows.last().map_or(1.0, |r| r.t.max(1e-3));
+    panel_over(area, rows, TIME, caption, y_label, lines)
+}
+
+fn panel_over(
+    area: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
+    rows: &[Row],
+    (x_desc, xv): Axis,
+    caption: &str,
+    y_label: &str,
+    lines: &[Line],
+) -> Result<()> {
+    let (x_lo, x_hi) = rows
+        .iter()
+        .map(xv)
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+    let (x_lo, x_hi) = if x_lo.is_finite() && x_hi > x_lo {
+        (x_lo.min(0.0), x_hi)
+    } else {
+        (0.0, 1.0)
+    };
     let (lo, hi) = range(rows, lines);
     let mut chart = ChartBuilder::on(area)
         .caption(caption, ("sans-serif", 20).into_font())
         .margin(8)
         .x_label_area_size(36)
         .y_label_area_size(70)
-        .build_cartesian_2d(0.0..t_end, lo..hi)
+        .build_cartesian_2d(x_lo..x_hi, lo..hi)
         .map_err(|e| anyhow!("plot: {e}"))?;
     chart
         .configure_mesh()
-        .x_desc("t [s]")
+        .x_desc(x_desc)
         .y_desc(y_label)
         .label_style(("sans-serif", 14))
         .light_line_style(WHITE.mix(0.0))
@@ -77,8 +103,8 @@ fn panel(
         let pts = rows
             .iter()
             .step_by(stride)
-            .map(|r| (r.t, (l.value)(r)))
-            .filter(|p| p.1.is_finite());
+            .map(|r| (xv(r), (l.value)(r)))
+            .filter(|p| p.0.is_finite() && p.1.is_finite());
         chart
             .draw_series(LineSeries::new(pts, color.stroke_width(l.width)))
             .map_err(|e| anyhow!("plot: {e}"))?
@@ -204,5 +230,84 @@ pub fn write_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
     )?;
     root.present()
         .map_err(|e| anyhow!("cannot write {}: {e}", path.display()))?;
+    Ok(())
+}
+
+/// Write the plot of a programmed pass along the path (mm): force against the program's `F` and the
+/// active set-point, the process state the program saw, and the segment.
+pub fn write_pass_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
+    fonts();
+    std::fs::File::create(path).map_err(|e| {
+        let t = e.to_string();
+        let t = t.split(" (os error").next().unwrap_or_default();
+        anyhow!("cannot write {}: {t}", path.display())
+    })?;
+    let rows: Vec<Row> = rows
+        .iter()
+        .filter(|r| r.phase != crate::record::NO_PROCESS)
+        .cloned()
+        .collect();
+    let along: Axis = ("path position s [mm]", |r| r.s * 1e3);
+    let root = BitMapBackend::new(path, (1200, 900)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| anyhow!("plot: {e}"))?;
+    let root = root
+        .titled(title, ("sans-serif", 24).into_font())
+        .map_err(|e| anyhow!("plot: {e}"))?;
+    let (top, bottom) = root.split_vertically(450);
+    let lower = bottom.split_evenly((2, 1));
+    panel_over(
+        &top,
+        &rows,
+        along,
+        "contact force along the path",
+        "force [N]",
+        &[
+            Line {
+                label: "f true",
+                color: BLUE_,
+                width: 2,
+                value: |r| r.f_true,
+            },
+            Line {
+                label: "F commanded (FcCmd)",
+                color: BLACK,
+                width: 1,
+                value: |r| r.f_cmd,
+            },
+            Line {
+                label: "set-point in effect",
+                color: RED_,
+                width: 2,
+                value: |r| r.f_r,
+            },
+        ],
+    )?;
+    panel_over(
+        &lower[0],
+        &rows,
+        along,
+        "process state (FcState: 0 OFF, 1 APPROACH, 2 RAMP, 3 PRESSING, 4 RELEASE, 9 FAULT)",
+        "state",
+        &[Line {
+            label: "state",
+            color: ORANGE_,
+            width: 2,
+            value: |r| f64::from(r.phase),
+        }],
+    )?;
+    panel_over(
+        &lower[1],
+        &rows,
+        along,
+        "program segment (FcCmd.Seg)",
+        "segment",
+        &[Line {
+            label: "segment",
+            color: GREEN_,
+            width: 2,
+            value: |r| r.segment as f64,
+        }],
+    )?;
+    root.present().map_err(|e| anyhow!("plot: {e}"))?;
     Ok(())
 }
