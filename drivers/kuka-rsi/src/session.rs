@@ -515,3 +515,315 @@ fn unusable() -> Pose {
         orientation: hal::UnitQuaternion::from_euler_angles(f64::NAN, f64::NAN, f64::NAN),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    //! The session on a virtual clock: no sockets, no sleeps.
+    use super::*;
+    use crate::config::EthernetConfig;
+    use crate::process::ProcessChannels;
+    use hal::{ProcessCommand, ProcessFault, ProcessMode, ProcessPhase, ProcessState};
+
+    const POSE: [&str; 6] = ["X", "Y", "Z", "A", "B", "C"];
+
+    fn robot() -> SocketAddr {
+        SocketAddr::from(([127, 0, 0, 1], 40_000))
+    }
+
+    fn session(process: bool) -> RsiSession {
+        let mut eth = EthernetConfig::forcecell([127, 0, 0, 1].into(), 0, false);
+        if process {
+            eth = eth.with_process(ProcessChannels::default());
+        }
+        RsiSession::new(LinkConfig::new(eth, RobotFilter::Ip(robot().ip()))).unwrap()
+    }
+
+    /// A `<Rob>` as the robot writes it: pose `z` mm, the given command.
+    fn rob(s: &RsiSession, ipoc: u64, z: f64, cmd: Option<ProcessCommand>) -> Vec<u8> {
+        let schema = s.rob_schema();
+        let mut f = Frame::new();
+        f.set6(schema.six("RIst", POSE).unwrap(), [500.0, 0.0, z, 0.0, 0.0, 180.0]);
+        f.set6(schema.six("RSol", POSE).unwrap(), [500.0, 0.0, z, 0.0, 0.0, 180.0]);
+        for a in ["A1", "A2", "A3", "A4", "A5", "A6"] {
+            for t in ["AIPos", "ASPos"] {
+                f.set(schema.slot(t, a).unwrap(), 0.0);
+            }
+        }
+        f.set(schema.slot("Delay", "D").unwrap(), 0.0);
+        if let Some(c) = cmd {
+            CommandSlots::find(schema)
+                .unwrap()
+                .unwrap()
+                .encode(&c, &mut f);
+        }
+        f.set_ipoc(Ipoc::new(ipoc));
+        let mut buf = [0u8; 2048];
+        let n = schema.write(&f, &mut buf).unwrap();
+        buf[..n].to_vec()
+    }
+
+    fn press(seg: i64) -> ProcessCommand {
+        ProcessCommand {
+            mode: ProcessMode::Press,
+            force: 20.0,
+            ramp: 0.5,
+            segment: seg,
+        }
+    }
+
+    fn ms(n: u64) -> Duration {
+        Duration::from_millis(n)
+    }
+
+    #[test]
+    fn first_cycle_starts_a_session_and_carries_the_command() {
+        let mut s = session(true);
+        let t0 = Instant::now();
+        assert_eq!(s.wait_budget(t0).unwrap(), None, "no session: wait freely");
+        let d = rob(&s, 1000, 300.0, Some(press(3)));
+        let c = s.receive(&d, robot(), t0).unwrap();
+        assert!(c.new_session);
+        assert_eq!((c.seq, c.t), (1000, 0.0));
+        assert_eq!(c.process, Some(press(3)));
+        assert!((c.actual.position.z - 0.3).abs() < 1e-12, "SI inside");
+        assert_eq!(s.diagnostics().counters.sessions, 1);
+        let d = rob(&s, 1004, 300.0, Some(press(4)));
+        let c = s.receive(&d, robot(), t0 + ms(4)).unwrap();
+        assert!(!c.new_session);
+        assert!((c.t - 0.004).abs() < 1e-12);
+        assert_eq!(c.process.unwrap().segment, 4);
+    }
+
+    #[test]
+    fn without_fc_cmd_the_cycle_has_no_process() {
+        let mut s = session(false);
+        let d = rob(&s, 1000, 300.0, None);
+        let c = s.receive(&d, robot(), Instant::now()).unwrap();
+        assert_eq!(c.process, None);
+        assert!(!s.has_process_command() && !s.has_process_state());
+    }
+
+    #[test]
+    fn ipoc_jump_or_reset_starts_a_new_session() {
+        let mut s = session(true);
+        let t0 = Instant::now();
+        let cmd = Some(press(1));
+        assert!(s.receive(&rob(&s, 1000, 300.0, cmd), robot(), t0).unwrap().new_session);
+        // Forward by more than session_jump (1000 IPOC units).
+        let c = s.receive(&rob(&s, 5000, 300.0, cmd), robot(), t0 + ms(4)).unwrap();
+        assert!(c.new_session);
+        assert_eq!(c.t, 0.0, "robot time restarts");
+        // Back to a small IPOC: RSI_OFF .. RSI_ON with a reset counter.
+        let c = s.receive(&rob(&s, 10, 300.0, cmd), robot(), t0 + ms(8)).unwrap();
+        assert!(c.new_session);
+        assert_eq!(s.diagnostics().counters.sessions, 3);
+    }
+
+    #[test]
+    fn stale_and_duplicate_ipocs_are_rejected_and_counted() {
+        let mut s = session(true);
+        let t0 = Instant::now();
+        let cmd = Some(press(1));
+        s.receive(&rob(&s, 1000, 300.0, cmd), robot(), t0).unwrap();
+        s.receive(&rob(&s, 1004, 300.0, cmd), robot(), t0 + ms(4)).unwrap();
+        let dup = rob(&s, 1004, 300.0, cmd);
+        assert_eq!(
+            s.receive(&dup, robot(), t0 + ms(5)),
+            Err(Rejected::Stale {
+                ipoc: 1004,
+                last: 1004
+            })
+        );
+        let old = rob(&s, 1000, 300.0, cmd);
+        assert!(matches!(
+            s.receive(&old, robot(), t0 + ms(6)),
+            Err(Rejected::Stale { .. })
+        ));
+        assert_eq!(s.diagnostics().counters.stale, 2);
+        use hal::Error as _;
+        assert_eq!(
+            Rejected::Stale { ipoc: 1, last: 2 }.kind(),
+            ErrorKind::Stale
+        );
+    }
+
+    #[test]
+    fn an_implausible_pose_is_delivered_unusable_and_counted() {
+        let mut s = session(false);
+        let t0 = Instant::now();
+        s.receive(&rob(&s, 1000, 300.0, None), robot(), t0).unwrap();
+        // 100 mm in 4 ms is 25 m/s: no arm under RSI moves like that.
+        let c = s.receive(&rob(&s, 1004, 400.0, None), robot(), t0 + ms(4)).unwrap();
+        assert!(!c.actual.is_finite() && !c.programmed.is_finite());
+        assert_eq!(s.diagnostics().counters.implausible, 1);
+        // It must still be answered.
+        let mut out = [0u8; 1024];
+        assert!(s.reply(&Correction::default(), &mut out).unwrap().is_some());
+        // A pose consistent with the last plausible one is usable again.
+        let c = s.receive(&rob(&s, 1008, 300.1, None), robot(), t0 + ms(8)).unwrap();
+        assert!(c.actual.is_finite());
+    }
+
+    #[test]
+    fn reply_before_a_cycle_and_reply_twice_are_errors() {
+        let mut s = session(true);
+        let mut out = [0u8; 1024];
+        assert!(matches!(
+            s.reply(&Correction::default(), &mut out),
+            Err(LinkError::NoCycle)
+        ));
+        let t0 = Instant::now();
+        s.receive(&rob(&s, 1000, 300.0, Some(press(1))), robot(), t0).unwrap();
+        let o = s.reply(&Correction::along_z(1e-5), &mut out).unwrap().unwrap();
+        assert_eq!(o.to, robot());
+        s.sent(t0 + Duration::from_micros(50));
+        assert!(matches!(
+            s.reply(&Correction::default(), &mut out),
+            Err(LinkError::NoCycle)
+        ));
+        let c = s.diagnostics().counters;
+        assert_eq!((c.answered, c.late), (1, 0));
+    }
+
+    #[test]
+    fn the_stop_reply_carries_fc_state_and_ends_the_session() {
+        let mut s = session(true);
+        let t0 = Instant::now();
+        s.receive(&rob(&s, 1000, 300.0, Some(press(1))), robot(), t0).unwrap();
+        let mut out = [0u8; 1024];
+        let stop = Correction {
+            stop: true,
+            process: ProcessState {
+                phase: ProcessPhase::Fault,
+                force: 31.456,
+                fault: ProcessFault::ForceLimit,
+            },
+            ..Correction::default()
+        };
+        let o = s.reply(&stop, &mut out).unwrap().unwrap();
+        let text = core::str::from_utf8(&out[..o.len]).unwrap();
+        assert_eq!(
+            text,
+            "<Sen Type=\"ImFree\"><RKorr X=\"0.0000\" Y=\"0.0000\" Z=\"0.0000\" A=\"0.0000\" B=\"0.0000\" C=\"0.0000\"/><Stop>1</Stop><FcState State=\"9\" F=\"31.46\" Fault=\"2\"/><IPOC>1000</IPOC></Sen>"
+        );
+        assert!(s.is_stopped());
+        let d = rob(&s, 1004, 300.0, Some(press(1)));
+        assert_eq!(s.receive(&d, robot(), t0 + ms(4)), Err(Rejected::Stopped));
+        assert!(matches!(
+            s.reply(&Correction::default(), &mut out),
+            Err(LinkError::Stopped)
+        ));
+    }
+
+    #[test]
+    fn every_reply_carries_fc_state_and_a_nan_force_is_written_as_zero() {
+        let mut s = session(true);
+        let t0 = Instant::now();
+        s.receive(&rob(&s, 1000, 300.0, Some(press(1))), robot(), t0).unwrap();
+        let mut out = [0u8; 1024];
+        let c = Correction {
+            process: ProcessState {
+                phase: ProcessPhase::Approach,
+                force: f64::NAN,
+                fault: ProcessFault::None,
+            },
+            ..Correction::default()
+        };
+        let o = s.reply(&c, &mut out).unwrap().unwrap();
+        let text = core::str::from_utf8(&out[..o.len]).unwrap();
+        assert!(
+            text.contains("<Stop>0</Stop><FcState State=\"1\" F=\"0.00\" Fault=\"0\"/>"),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn a_bad_process_command_is_malformed_never_a_default() {
+        let mut s = session(true);
+        let t0 = Instant::now();
+        let good = String::from_utf8(rob(&s, 1000, 300.0, Some(press(3)))).unwrap();
+        for (from, to) in [
+            ("Mode=\"1\"", "Mode=\"x\""),
+            ("Mode=\"1\"", "Mode=\"1.5\""),
+            ("Seg=\"3\"", "Seg=\"\""),
+            ("F=\"20.0000\"", "F=\"nan\""),
+            ("Ramp=\"0.5000\"", "Ramp=\"1e3\""),
+        ] {
+            assert!(good.contains(from), "{good}");
+            let bad = good.replace(from, to);
+            assert!(
+                matches!(
+                    s.receive(bad.as_bytes(), robot(), t0),
+                    Err(Rejected::Malformed(ParseError::BadNumber { .. }))
+                ),
+                "{to}"
+            );
+        }
+        // The whole element missing although the config declares it.
+        let start = good.find("<FcCmd").unwrap();
+        let end = start + good[start..].find("/>").unwrap() + 2;
+        let bad = format!("{}{}", &good[..start], &good[end..]);
+        assert!(matches!(
+            s.receive(bad.as_bytes(), robot(), t0),
+            Err(Rejected::Malformed(ParseError::MissingElement { .. }))
+        ));
+        assert_eq!(s.diagnostics().counters.malformed, 6);
+        // An undefined mode is delivered as such (the process faults with "bad command").
+        let odd = good.replace("Mode=\"1\"", "Mode=\"5\"");
+        let c = s.receive(odd.as_bytes(), robot(), t0).unwrap();
+        assert_eq!(c.process.unwrap().mode, ProcessMode::Unknown(5));
+    }
+
+    #[test]
+    fn a_backlog_answers_only_the_newest_and_counts_the_rest() {
+        let mut s = session(false);
+        let t0 = Instant::now();
+        for k in 0..3 {
+            s.offer(&rob(&s, 1000 + 4 * k, 300.0, None), robot(), t0)
+                .unwrap();
+        }
+        let c = s.take_cycle().unwrap();
+        assert_eq!(c.seq, 1008);
+        assert!(c.new_session, "the first of the burst started the session");
+        assert_eq!(s.diagnostics().counters.skipped, 2);
+        assert_eq!(s.take_cycle(), None);
+    }
+
+    #[test]
+    fn watchdog_unanswered_and_late_on_the_passed_clock() {
+        let mut s = session(false);
+        let t0 = Instant::now();
+        s.receive(&rob(&s, 1000, 300.0, None), robot(), t0).unwrap();
+        // Not answered before the next wait: counted.
+        assert_eq!(s.wait_budget(t0 + ms(1)).unwrap(), Some(ms(100)));
+        assert_eq!(s.diagnostics().counters.unanswered, 1);
+        assert_eq!(s.wait_budget(t0 + ms(40)).unwrap(), Some(ms(60)));
+        s.receive(&rob(&s, 1004, 300.0, None), robot(), t0 + ms(41)).unwrap();
+        let mut out = [0u8; 1024];
+        s.reply(&Correction::default(), &mut out).unwrap();
+        s.sent(t0 + ms(44));
+        assert_eq!(s.diagnostics().counters.late, 1, "3 ms > late_after 2 ms");
+        assert!(matches!(
+            s.wait_budget(t0 + ms(141)),
+            Err(LinkError::LinkLost { .. })
+        ));
+        assert!(!s.in_session());
+        // The next datagram starts a new session even with a close IPOC.
+        let c = s.receive(&rob(&s, 1008, 300.0, None), robot(), t0 + ms(150)).unwrap();
+        assert!(c.new_session);
+    }
+
+    #[test]
+    fn foreign_and_oversized_datagrams_are_rejected() {
+        let mut s = session(false);
+        let t0 = Instant::now();
+        let d = rob(&s, 1000, 300.0, None);
+        let other = SocketAddr::from(([127, 0, 0, 2], 40_000));
+        assert_eq!(s.receive(&d, other, t0), Err(Rejected::Foreign));
+        let mut big = d.clone();
+        big.resize(s.config().max_datagram + 1, b' ');
+        assert_eq!(s.receive(&big, robot(), t0), Err(Rejected::Oversized));
+        let c = s.diagnostics().counters;
+        assert_eq!((c.foreign, c.oversized, c.received), (1, 1, 2));
+    }
+}
