@@ -18,7 +18,10 @@ use std::time::{Duration, Instant};
 
 use hal::{Correction, Pose, ProcessCommand, ProcessState};
 use kuka_rsi::codec::{Frame, Ipoc, Schema};
-use kuka_rsi::{CorrectionMode, EthernetConfig, ParseError, PoscorrLimits, wire};
+use kuka_rsi::{
+    CommandSlots, CorrectionMode, EthernetConfig, ParseError, PoscorrLimits, ProcessError,
+    StateSlots, wire,
+};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -248,6 +251,10 @@ pub struct KrcCycle {
     pub correction: [f64; 6],
     /// POSCORR clamped something.
     pub clamped: bool,
+    /// The `FcCmd` sent (when the config declares it).
+    pub command: Option<ProcessCommand>,
+    /// The `FcState` in effect after this cycle's reply, HOLDON applied (when the config declares it).
+    pub state: Option<ProcessState>,
 }
 
 /// What happened.
@@ -265,6 +272,11 @@ pub struct KrcReport {
     pub bad: u64,
     /// Replies with the wrong `Type`.
     pub wrong_sentype: u64,
+    /// Replies whose `FcState` broke the contract (a State or Fault code it does not define); counted
+    /// as bad replies, not applied.
+    pub bad_process: u64,
+    /// The last such `FcState` error.
+    pub last_bad_process: Option<ProcessError>,
     /// Replies with an IPOC other than the cycle's.
     pub ipoc_mismatch: u64,
     /// Replies from a source other than the PC's address.
@@ -288,6 +300,8 @@ pub struct Krc {
     foreign: Option<UdpSocket>,
     rob: Schema,
     sen: Schema,
+    cmd_slots: Option<CommandSlots>,
+    state_slots: Option<StateSlots>,
     abort: Arc<AtomicBool>,
 }
 
@@ -306,10 +320,12 @@ impl Krc {
             .ethernet
             .rob_schema(cfg.precision)
             .map_err(|e| bad(e.to_string()))?;
-        let sen = cfg
+        let mut sen = cfg
             .ethernet
             .sen_schema(cfg.precision)
             .map_err(|e| bad(e.to_string()))?;
+        let cmd_slots = CommandSlots::find(&rob).map_err(bad)?;
+        let state_slots = StateSlots::find(&mut sen).map_err(bad)?;
         let sock = UdpSocket::bind(cfg.bind)?;
         let foreign = if cfg.faults.foreign.is_empty() {
             None
@@ -322,6 +338,8 @@ impl Krc {
             foreign,
             rob,
             sen,
+            cmd_slots,
+            state_slots,
             abort: Arc::new(AtomicBool::new(false)),
         })
     }
@@ -359,6 +377,8 @@ struct Run {
     rx_buf: Vec<u8>,
     /// Received values of the RECEIVE elements, by slot (HOLDON state).
     held: Vec<f64>,
+    /// The same values as a frame, for decoding `FcState` as the robot program sees it.
+    held_frame: Frame,
     total: [f64; 6],
     late_count: u32,
     stop_prev: bool,
@@ -378,6 +398,8 @@ impl Run {
                 late: 0,
                 bad: 0,
                 wrong_sentype: 0,
+                bad_process: 0,
+                last_bad_process: None,
                 ipoc_mismatch: 0,
                 foreign_replies: 0,
                 unexpected_replies: 0,
@@ -392,6 +414,7 @@ impl Run {
             rob_buf: vec![0; 65536],
             rx_buf: vec![0; 65536],
             held: vec![0.0; k.sen.slots()],
+            held_frame: Frame::new(),
             total: [0.0; 6],
             late_count: 0,
             stop_prev: false,
@@ -470,6 +493,17 @@ impl Run {
             if let Some(s) = delay_slot {
                 self.rob_frame.set(s, f64::from(delay));
             }
+            // The robot program's process command; a controller running no program sends OFF.
+            let command = k.cmd_slots.map(|slots| {
+                let c = mech.process_command().unwrap_or(ProcessCommand {
+                    mode: hal::ProcessMode::Off,
+                    force: 0.0,
+                    ramp: 0.0,
+                    segment: 0,
+                });
+                slots.encode(&c, &mut self.rob_frame);
+                c
+            });
             self.rob_frame.set_ipoc(Ipoc::new(ipoc));
             let len = match k.rob.write(&self.rob_frame, &mut self.rob_buf) {
                 Ok(len) => len,
@@ -511,7 +545,16 @@ impl Run {
                     } else if !f.holdon {
                         self.held[s] = 0.0;
                     }
+                    self.held_frame.set(s, self.held[s]);
                 }
+            }
+            // FcState as the robot program reads it (HOLDON applied). Only replies whose FcState
+            // decoded were accepted as good, so the held values always decode.
+            let state = k
+                .state_slots
+                .and_then(|slots| slots.decode(&self.held_frame).ok());
+            if let Some(st) = state {
+                mech.process_state(st);
             }
             if good {
                 self.report.good += 1;
@@ -544,6 +587,8 @@ impl Run {
                     on_time: good,
                     correction: clamped,
                     clamped: was_clamped,
+                    command,
+                    state,
                 });
             }
             let t_norm = clamped[..3].iter().map(|v| v * v).sum::<f64>().sqrt();
@@ -678,7 +723,13 @@ impl Run {
                 Ok(()) if self.sen_frame.ipoc().value() != ipoc => {
                     self.report.ipoc_mismatch += 1;
                 }
-                Ok(()) => return Ok(true),
+                Ok(()) => match k.state_slots.map(|s| s.decode(&self.sen_frame)) {
+                    Some(Err(e)) => {
+                        self.report.bad_process += 1;
+                        self.report.last_bad_process = Some(e);
+                    }
+                    _ => return Ok(true),
+                },
             }
         }
     }
