@@ -28,7 +28,7 @@ mod xml;
 pub use codec::{Direction, Frame, Ipoc, Schema, ValueType, WriteError};
 pub use config::{ConfigElement, ConfigError, EthernetConfig, Indx};
 pub use diag::{Counters, Diagnostics, Latency};
-pub use krl::RobotSetup;
+pub use krl::{ProcessIo, ProcessSetup, RobotSetup, Segment};
 pub use limits::{Limits, PoscorrLimits};
 pub use link::{CorrectionMode, LinkConfig, LinkError, RobotFilter, RsiLink};
 pub use process::{CommandSlots, ProcessChannels, ProcessError, StateSlots};
