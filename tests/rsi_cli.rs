@@ -174,13 +174,19 @@ fn rsi_config_writes_the_process_channels_and_a_polishing_template() {
     }
     // ... and used by the program.
     assert!(krl.contains("RSI_ON(#ABSOLUTE, #IPO_FAST)"), "{krl}");
-    assert!(krl.contains("$SEN_PREA[5] = 15.000\n  $SEN_PINT[12] = 1\n  $SEN_PINT[11] = 1"), "{krl}");
+    assert!(
+        krl.contains("$SEN_PREA[5] = 15.000\n  $SEN_PINT[12] = 1\n  $SEN_PINT[11] = 1"),
+        "{krl}"
+    );
     assert!(krl.contains("WAIT FOR ($SEN_PINT[13] == 3)"), "{krl}");
     assert!(krl.contains("DO $SEN_PREA[5] = 25.000"), "{krl}");
     assert!(krl.contains("DO $SEN_PINT[12] = 2"), "{krl}");
     assert!(krl.contains("LIN_REL {X 80.0}"), "{krl}");
     assert!(krl.contains("WAIT FOR ($SEN_PINT[13] == 0)"), "{krl}");
-    assert!(krl.contains("RETURN"), "the PRESSING timeout ends the program: {krl}");
+    assert!(
+        krl.contains("RETURN"),
+        "the PRESSING timeout ends the program: {krl}"
+    );
     let off = krl.rfind("RSI_OFF()").unwrap();
     let release = krl.rfind("$SEN_PINT[11] = 2").unwrap();
     assert!(release < off, "RELEASE before RSI_OFF");
@@ -188,13 +194,24 @@ fn rsi_config_writes_the_process_channels_and_a_polishing_template() {
     // Indices used twice, and bad segments, are refused with a reason.
     let o = forcecell(&["rsi-config", "--pint-state", "1"], dir.path());
     assert!(!o.status.success());
-    assert!(text(&o.stderr).contains("$SEN_PINT[1] is used for both"), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains("$SEN_PINT[1] is used for both"),
+        "{}",
+        text(&o.stderr)
+    );
     let o = forcecell(&["rsi-config", "--segments", "10:50,x"], dir.path());
     assert!(!o.status.success());
-    assert!(text(&o.stderr).contains("--segments"), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains("--segments"),
+        "{}",
+        text(&o.stderr)
+    );
 
     // Without the process channels: the config of before.
-    let o = forcecell(&["rsi-config", "--no-process", "--out", "plain"], dir.path());
+    let o = forcecell(
+        &["rsi-config", "--no-process", "--out", "plain"],
+        dir.path(),
+    );
     assert!(o.status.success(), "{}", text(&o.stderr));
     let xml = std::fs::read_to_string(dir.path().join("plain/forcecell_rsi.xml")).unwrap();
     assert_eq!(
@@ -203,7 +220,10 @@ fn rsi_config_writes_the_process_channels_and_a_polishing_template() {
     );
     roxmltree::Document::parse(&xml).unwrap();
     let krl = std::fs::read_to_string(dir.path().join("plain/forcecell_rsi.src")).unwrap();
-    assert!(krl.contains("RSI_MOVECORR()") && !krl.contains("SEN_PINT"), "{krl}");
+    assert!(
+        krl.contains("RSI_MOVECORR()") && !krl.contains("SEN_PINT"),
+        "{krl}"
+    );
 }
 
 fn rows(dir: &Path, file: &str) -> Vec<String> {

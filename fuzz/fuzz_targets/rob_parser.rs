@@ -3,7 +3,9 @@
 //! the process channels (`FcCmd`), whose decoding must never panic either.
 #![no_main]
 
-use kuka_rsi::{CommandSlots, ConfigElement, EthernetConfig, Frame, ProcessChannels, Schema, ValueType};
+use kuka_rsi::{
+    CommandSlots, ConfigElement, EthernetConfig, Frame, ProcessChannels, Schema, ValueType,
+};
 use libfuzzer_sys::fuzz_target;
 
 fn check(schema: &Schema, data: &[u8]) {

@@ -898,9 +898,7 @@ impl Run {
             // A reply lost on the way back never reaches the controller's judgement.
             if from == k.cfg.target
                 && !k.cfg.ethernet.onlysend
-                && self
-                    .rng
-                    .random_bool(k.cfg.faults.drop_sen.clamp(0.0, 1.0))
+                && self.rng.random_bool(k.cfg.faults.drop_sen.clamp(0.0, 1.0))
             {
                 continue;
             }
@@ -964,8 +962,14 @@ mod tests {
         let rob = c.next_cycle(&mut m).unwrap().to_vec();
         let ipoc = ipoc_of(&rob);
         assert_eq!(ipoc, "1000000");
-        assert_eq!(c.on_reply(&sen(&ipoc, "1.5", 0, None), pc()), ReplyVerdict::Good);
-        assert_eq!(c.on_reply(&sen(&ipoc, "1.5", 0, None), pc()), ReplyVerdict::Ignored);
+        assert_eq!(
+            c.on_reply(&sen(&ipoc, "1.5", 0, None), pc()),
+            ReplyVerdict::Good
+        );
+        assert_eq!(
+            c.on_reply(&sen(&ipoc, "1.5", 0, None), pc()),
+            ReplyVerdict::Ignored
+        );
         c.end_cycle(&mut m).unwrap();
         assert!((m.correction.translation.z - 0.0015).abs() < 1e-12);
         let r = c.report();
@@ -979,21 +983,38 @@ mod tests {
         let mut m = arm();
         let verdicts = [
             (sen("1", "0", 0, None), pc(), ReplyVerdict::IpocMismatch),
-            (b"<Sen Type=\"Other\"><IPOC>1</IPOC></Sen>".to_vec(), pc(), ReplyVerdict::WrongSentype),
+            (
+                b"<Sen Type=\"Other\"><IPOC>1</IPOC></Sen>".to_vec(),
+                pc(),
+                ReplyVerdict::WrongSentype,
+            ),
             (b"garbage".to_vec(), pc(), ReplyVerdict::Bad),
-            (sen("1", "0", 0, None), SocketAddr::from(([127, 0, 0, 1], 1)), ReplyVerdict::Foreign),
+            (
+                sen("1", "0", 0, None),
+                SocketAddr::from(([127, 0, 0, 1], 1)),
+                ReplyVerdict::Foreign,
+            ),
         ];
         let mut end = Ok(());
         for (bytes, from, v) in verdicts.iter().take(3) {
             c.next_cycle(&mut m).unwrap();
             assert_eq!(c.on_reply(bytes, *from), *v);
-            assert_eq!(c.on_reply(&verdicts[3].0, verdicts[3].1), ReplyVerdict::Foreign);
+            assert_eq!(
+                c.on_reply(&verdicts[3].0, verdicts[3].1),
+                ReplyVerdict::Foreign
+            );
             end = c.end_cycle(&mut m);
         }
         assert_eq!(end, Err(KrcEnd::Timeout));
         let r = c.report();
         assert_eq!(
-            (r.late, r.ipoc_mismatch, r.wrong_sentype, r.bad, r.foreign_replies),
+            (
+                r.late,
+                r.ipoc_mismatch,
+                r.wrong_sentype,
+                r.bad,
+                r.foreign_replies
+            ),
             (3, 1, 1, 1, 3)
         );
         assert_eq!(r.log.iter().map(|l| l.delay).collect::<Vec<_>>(), [0, 1, 2]);
@@ -1019,7 +1040,10 @@ mod tests {
         let mut m = arm();
         let rob = c.next_cycle(&mut m).unwrap().to_vec();
         let text = String::from_utf8(rob.clone()).unwrap();
-        assert!(text.contains("<FcCmd Mode=\"0\" F=\"0.0000\" Ramp=\"0.0000\" Seg=\"0\"/>"), "{text}");
+        assert!(
+            text.contains("<FcCmd Mode=\"0\" F=\"0.0000\" Ramp=\"0.0000\" Seg=\"0\"/>"),
+            "{text}"
+        );
         let ipoc = ipoc_of(&rob);
         let bad = sen(&ipoc, "0", 0, Some("State=\"7\" F=\"1.00\" Fault=\"0\""));
         assert_eq!(c.on_reply(&bad, pc()), ReplyVerdict::BadProcess);

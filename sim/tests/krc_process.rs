@@ -101,7 +101,10 @@ fn fc_cmd_goes_out_and_fc_state_comes_back_every_cycle() {
     for (k, s) in p.seen.iter().enumerate() {
         assert_eq!(s.phase, ProcessPhase::Pressing);
         // Two decimals on the wire.
-        assert!((s.force - (10.0 * (k + 1) as f64 - 0.0)).abs() < 0.006, "{s:?}");
+        assert!(
+            (s.force - (10.0 * (k + 1) as f64 - 0.0)).abs() < 0.006,
+            "{s:?}"
+        );
     }
     let log = &report.log;
     assert_eq!(log.len(), 20);

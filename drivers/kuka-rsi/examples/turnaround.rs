@@ -44,17 +44,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     let cycles: usize = args.get(1).map_or(Ok(100_000), |s| s.parse())?;
     let mut children = Vec::new();
-    let mut target = |k: usize, name: &str| -> Result<Option<SocketAddr>, Box<dyn std::error::Error>> {
-        match args.get(k).map(String::as_str) {
-            Some("-") => Ok(None),
-            Some(a) => Ok(Some(a.parse()?)),
-            None => {
-                let (c, a) = spawn(name)?;
-                children.push(c);
-                Ok(Some(a))
+    let mut target =
+        |k: usize, name: &str| -> Result<Option<SocketAddr>, Box<dyn std::error::Error>> {
+            match args.get(k).map(String::as_str) {
+                Some("-") => Ok(None),
+                Some(a) => Ok(Some(a.parse()?)),
+                None => {
+                    let (c, a) = spawn(name)?;
+                    children.push(c);
+                    Ok(Some(a))
+                }
             }
-        }
-    };
+        };
     let echo = target(2, "udp_echo")?;
     let fc = target(3, "rsi_answer")?;
 
@@ -63,10 +64,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let rob = eth.rob_schema(4)?;
     let cmd = CommandSlots::find(&rob)?.ok_or("no FcCmd")?;
     let mut frame = Frame::new();
-    frame.set6(rob.six("RIst", POSE).ok_or("RIst")?, [445.0, 0.0, 890.0, 180.0, 0.0, 180.0]);
-    frame.set6(rob.six("RSol", POSE).ok_or("RSol")?, [445.0, 0.0, 890.0, 180.0, 0.0, 180.0]);
+    frame.set6(
+        rob.six("RIst", POSE).ok_or("RIst")?,
+        [445.0, 0.0, 890.0, 180.0, 0.0, 180.0],
+    );
+    frame.set6(
+        rob.six("RSol", POSE).ok_or("RSol")?,
+        [445.0, 0.0, 890.0, 180.0, 0.0, 180.0],
+    );
     for t in ["AIPos", "ASPos"] {
-        frame.set6(rob.six(t, AXES).ok_or("axes")?, [0.0, -90.0, 90.0, 0.0, 90.0, 0.0]);
+        frame.set6(
+            rob.six(t, AXES).ok_or("axes")?,
+            [0.0, -90.0, 90.0, 0.0, 90.0, 0.0],
+        );
     }
     frame.set(rob.slot("Delay", "D").ok_or("Delay")?, 0.0);
     cmd.encode(
@@ -113,15 +123,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let _ = c.wait();
     }
     println!("lockstep round trips, {cycles} cycles each, interleaved (µs):");
-    println!("{:<28} {:>8} {:>8} {:>8} {:>8}", "", "p50", "p99", "p99.9", "max");
+    println!(
+        "{:<28} {:>8} {:>8} {:>8} {:>8}",
+        "", "p50", "p99", "p99.9", "max"
+    );
     let mut rows = Vec::new();
-    for (name, t) in [("bare UDP echo", &mut t_echo), ("forcecell RSI + FcCmd/FcState", &mut t_fc)] {
+    for (name, t) in [
+        ("bare UDP echo", &mut t_echo),
+        ("forcecell RSI + FcCmd/FcState", &mut t_fc),
+    ] {
         if t.is_empty() {
             continue;
         }
         t.sort_unstable();
         let r = [pct(t, 0.5), pct(t, 0.99), pct(t, 0.999), pct(t, 1.0)];
-        println!("{name:<28} {:>8.1} {:>8.1} {:>8.1} {:>8.1}", r[0], r[1], r[2], r[3]);
+        println!(
+            "{name:<28} {:>8.1} {:>8.1} {:>8.1} {:>8.1}",
+            r[0], r[1], r[2], r[3]
+        );
         rows.push(r);
     }
     if let [e, f] = rows[..] {

@@ -98,9 +98,7 @@ impl ProcessIo {
                     ));
                 }
                 if let Some((other, _)) = list[..k].iter().find(|(_, j)| j == i) {
-                    return Err(format!(
-                        "{array}[{i}] is used for both {other} and {name}"
-                    ));
+                    return Err(format!("{array}[{i}] is used for both {other} and {name}"));
                 }
             }
         }
@@ -569,11 +567,7 @@ impl RobotSetup {
                 krl_real(s.force)
             );
             let _ = writeln!(k, "  TRIGGER WHEN DISTANCE=0 DELAY=0 DO {sg} = {seg}");
-            let _ = writeln!(
-                k,
-                "  LIN_REL {{X {:.1}}}",
-                crate::wire::m_to_mm(s.length)
-            );
+            let _ = writeln!(k, "  LIN_REL {{X {:.1}}}", crate::wire::m_to_mm(s.length));
         }
         let _ = writeln!(k);
         let _ = writeln!(k, "  ; 5. RELEASE; wait for OFF (State 0)");

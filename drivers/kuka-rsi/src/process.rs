@@ -57,10 +57,9 @@ pub enum ProcessError {
 impl fmt::Display for ProcessError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Self::BadState(c) => write!(
-                f,
-                "FcState State={c} is not a process phase (0 1 2 3 4 9)"
-            ),
+            Self::BadState(c) => {
+                write!(f, "FcState State={c} is not a process phase (0 1 2 3 4 9)")
+            }
             Self::BadFault(c) => write!(f, "FcState Fault={c} is not a fault code (0..6)"),
         }
     }
@@ -102,7 +101,9 @@ fn find<const N: usize>(
                 f.ty.as_config()
             ));
         }
-        *o = f.slot.ok_or_else(|| format!("{tag}.{name} has no value slot"))?;
+        *o = f
+            .slot
+            .ok_or_else(|| format!("{tag}.{name} has no value slot"))?;
     }
     Ok(Some(out))
 }
@@ -119,12 +120,14 @@ pub struct CommandSlots {
 impl CommandSlots {
     /// The slots in `rob` (the `<Rob>` schema); `Ok(None)` when the config declares no `FcCmd`.
     pub fn find(rob: &Schema) -> Result<Option<Self>, String> {
-        Ok(find(rob, FC_CMD, FC_CMD_FIELDS)?.map(|[mode, force, ramp, seg]| Self {
-            mode,
-            force,
-            ramp,
-            seg,
-        }))
+        Ok(
+            find(rob, FC_CMD, FC_CMD_FIELDS)?.map(|[mode, force, ramp, seg]| Self {
+                mode,
+                force,
+                ramp,
+                seg,
+            }),
+        )
     }
 
     /// The command of a parsed frame (SI: N, s). The codec guarantees the values are present,

@@ -542,8 +542,14 @@ mod tests {
     fn rob(s: &RsiSession, ipoc: u64, z: f64, cmd: Option<ProcessCommand>) -> Vec<u8> {
         let schema = s.rob_schema();
         let mut f = Frame::new();
-        f.set6(schema.six("RIst", POSE).unwrap(), [500.0, 0.0, z, 0.0, 0.0, 180.0]);
-        f.set6(schema.six("RSol", POSE).unwrap(), [500.0, 0.0, z, 0.0, 0.0, 180.0]);
+        f.set6(
+            schema.six("RIst", POSE).unwrap(),
+            [500.0, 0.0, z, 0.0, 0.0, 180.0],
+        );
+        f.set6(
+            schema.six("RSol", POSE).unwrap(),
+            [500.0, 0.0, z, 0.0, 0.0, 180.0],
+        );
         for a in ["A1", "A2", "A3", "A4", "A5", "A6"] {
             for t in ["AIPos", "ASPos"] {
                 f.set(schema.slot(t, a).unwrap(), 0.0);
@@ -608,13 +614,21 @@ mod tests {
         let mut s = session(true);
         let t0 = Instant::now();
         let cmd = Some(press(1));
-        assert!(s.receive(&rob(&s, 1000, 300.0, cmd), robot(), t0).unwrap().new_session);
+        assert!(
+            s.receive(&rob(&s, 1000, 300.0, cmd), robot(), t0)
+                .unwrap()
+                .new_session
+        );
         // Forward by more than session_jump (1000 IPOC units).
-        let c = s.receive(&rob(&s, 5000, 300.0, cmd), robot(), t0 + ms(4)).unwrap();
+        let c = s
+            .receive(&rob(&s, 5000, 300.0, cmd), robot(), t0 + ms(4))
+            .unwrap();
         assert!(c.new_session);
         assert_eq!(c.t, 0.0, "robot time restarts");
         // Back to a small IPOC: RSI_OFF .. RSI_ON with a reset counter.
-        let c = s.receive(&rob(&s, 10, 300.0, cmd), robot(), t0 + ms(8)).unwrap();
+        let c = s
+            .receive(&rob(&s, 10, 300.0, cmd), robot(), t0 + ms(8))
+            .unwrap();
         assert!(c.new_session);
         assert_eq!(s.diagnostics().counters.sessions, 3);
     }
@@ -625,7 +639,8 @@ mod tests {
         let t0 = Instant::now();
         let cmd = Some(press(1));
         s.receive(&rob(&s, 1000, 300.0, cmd), robot(), t0).unwrap();
-        s.receive(&rob(&s, 1004, 300.0, cmd), robot(), t0 + ms(4)).unwrap();
+        s.receive(&rob(&s, 1004, 300.0, cmd), robot(), t0 + ms(4))
+            .unwrap();
         let dup = rob(&s, 1004, 300.0, cmd);
         assert_eq!(
             s.receive(&dup, robot(), t0 + ms(5)),
@@ -653,14 +668,18 @@ mod tests {
         let t0 = Instant::now();
         s.receive(&rob(&s, 1000, 300.0, None), robot(), t0).unwrap();
         // 100 mm in 4 ms is 25 m/s: no arm under RSI moves like that.
-        let c = s.receive(&rob(&s, 1004, 400.0, None), robot(), t0 + ms(4)).unwrap();
+        let c = s
+            .receive(&rob(&s, 1004, 400.0, None), robot(), t0 + ms(4))
+            .unwrap();
         assert!(!c.actual.is_finite() && !c.programmed.is_finite());
         assert_eq!(s.diagnostics().counters.implausible, 1);
         // It must still be answered.
         let mut out = [0u8; 1024];
         assert!(s.reply(&Correction::default(), &mut out).unwrap().is_some());
         // A pose consistent with the last plausible one is usable again.
-        let c = s.receive(&rob(&s, 1008, 300.1, None), robot(), t0 + ms(8)).unwrap();
+        let c = s
+            .receive(&rob(&s, 1008, 300.1, None), robot(), t0 + ms(8))
+            .unwrap();
         assert!(c.actual.is_finite());
     }
 
@@ -673,8 +692,12 @@ mod tests {
             Err(LinkError::NoCycle)
         ));
         let t0 = Instant::now();
-        s.receive(&rob(&s, 1000, 300.0, Some(press(1))), robot(), t0).unwrap();
-        let o = s.reply(&Correction::along_z(1e-5), &mut out).unwrap().unwrap();
+        s.receive(&rob(&s, 1000, 300.0, Some(press(1))), robot(), t0)
+            .unwrap();
+        let o = s
+            .reply(&Correction::along_z(1e-5), &mut out)
+            .unwrap()
+            .unwrap();
         assert_eq!(o.to, robot());
         s.sent(t0 + Duration::from_micros(50));
         assert!(matches!(
@@ -689,7 +712,8 @@ mod tests {
     fn the_stop_reply_carries_fc_state_and_ends_the_session() {
         let mut s = session(true);
         let t0 = Instant::now();
-        s.receive(&rob(&s, 1000, 300.0, Some(press(1))), robot(), t0).unwrap();
+        s.receive(&rob(&s, 1000, 300.0, Some(press(1))), robot(), t0)
+            .unwrap();
         let mut out = [0u8; 1024];
         let stop = Correction {
             stop: true,
@@ -719,7 +743,8 @@ mod tests {
     fn every_reply_carries_fc_state_and_a_nan_force_is_written_as_zero() {
         let mut s = session(true);
         let t0 = Instant::now();
-        s.receive(&rob(&s, 1000, 300.0, Some(press(1))), robot(), t0).unwrap();
+        s.receive(&rob(&s, 1000, 300.0, Some(press(1))), robot(), t0)
+            .unwrap();
         let mut out = [0u8; 1024];
         let c = Correction {
             process: ProcessState {
@@ -798,7 +823,8 @@ mod tests {
         assert_eq!(s.wait_budget(t0 + ms(1)).unwrap(), Some(ms(100)));
         assert_eq!(s.diagnostics().counters.unanswered, 1);
         assert_eq!(s.wait_budget(t0 + ms(40)).unwrap(), Some(ms(60)));
-        s.receive(&rob(&s, 1004, 300.0, None), robot(), t0 + ms(41)).unwrap();
+        s.receive(&rob(&s, 1004, 300.0, None), robot(), t0 + ms(41))
+            .unwrap();
         let mut out = [0u8; 1024];
         s.reply(&Correction::default(), &mut out).unwrap();
         s.sent(t0 + ms(44));
@@ -809,7 +835,9 @@ mod tests {
         ));
         assert!(!s.in_session());
         // The next datagram starts a new session even with a close IPOC.
-        let c = s.receive(&rob(&s, 1008, 300.0, None), robot(), t0 + ms(150)).unwrap();
+        let c = s
+            .receive(&rob(&s, 1008, 300.0, None), robot(), t0 + ms(150))
+            .unwrap();
         assert!(c.new_session);
     }
 

@@ -392,7 +392,10 @@ fn process_channels_golden_both_ways() {
     let c = process_cfg();
     // The config text round-trips with the new elements.
     let xml = c.to_xml();
-    assert!(xml.contains(r#"<ELEMENT TAG="FcCmd.Mode" TYPE="LONG" INDX="1" />"#), "{xml}");
+    assert!(
+        xml.contains(r#"<ELEMENT TAG="FcCmd.Mode" TYPE="LONG" INDX="1" />"#),
+        "{xml}"
+    );
     assert!(
         xml.contains(r#"<ELEMENT TAG="FcState.F" TYPE="DOUBLE" INDX="9" HOLDON="1" />"#),
         "{xml}"
@@ -418,7 +421,9 @@ fn process_channels_golden_both_ways() {
     let n = rob.write(&f, &mut buf).unwrap();
     let back = core::str::from_utf8(&buf[..n]).unwrap();
     assert!(
-        back.contains(r#"<FcCmd Mode="1" F="20.0000" Ramp="0.5000" Seg="3"/><IPOC>123645634563</IPOC>"#),
+        back.contains(
+            r#"<FcCmd Mode="1" F="20.0000" Ramp="0.5000" Seg="3"/><IPOC>123645634563</IPOC>"#
+        ),
         "{back}"
     );
 
@@ -426,7 +431,10 @@ fn process_channels_golden_both_ways() {
     let mut sen = c.sen_schema(4).unwrap();
     let st = StateSlots::find(&mut sen).unwrap().unwrap();
     let mut f = Frame::new();
-    f.set6(sen.six("RKorr", POSE).unwrap(), [0.0, 0.0, 0.012, 0.0, 0.0, 0.0]);
+    f.set6(
+        sen.six("RKorr", POSE).unwrap(),
+        [0.0, 0.0, 0.012, 0.0, 0.0, 0.0],
+    );
     f.set(sen.slot("Stop", "").unwrap(), 0.0);
     st.encode(
         &ProcessState {
