@@ -1,5 +1,6 @@
 //! [`RsiLink`]: the PC side of RSI over a real UDP socket, as a [`hal::RobotLink`].
 
+use core::cell::RefCell;
 use core::fmt;
 use core::time::Duration;
 use std::io::{self, IoSliceMut};
@@ -263,11 +264,17 @@ impl fmt::Debug for RsiLink {
     }
 }
 
-/// Receive buffers and headers for `recvmmsg`, allocated once.
+/// Receive buffers for `recvmmsg`, allocated once.
 struct RxBatch {
     bufs: [Box<[u8]>; BATCH],
-    headers: MultiHeaders<SockaddrStorage>,
     got: [(usize, Option<SocketAddr>); BATCH],
+}
+
+thread_local! {
+    /// `recvmmsg`'s message headers, allocated once per receiving thread. nix's `MultiHeaders` holds
+    /// raw pointers and is neither `Send` nor `Sync`; kept here, it leaves `RsiLink` `Send` (a link
+    /// is built on one thread and run on another) without any unsafe code.
+    static HEADERS: RefCell<Option<MultiHeaders<SockaddrStorage>>> = const { RefCell::new(None) };
 }
 
 impl RxBatch {
@@ -275,7 +282,6 @@ impl RxBatch {
         Self {
             // One byte more than the largest accepted datagram: a longer one shows as oversized.
             bufs: core::array::from_fn(|_| vec![0; max_datagram + 1].into_boxed_slice()),
-            headers: MultiHeaders::preallocate(BATCH, None),
             got: [(0, None); BATCH],
         }
     }
@@ -288,22 +294,27 @@ impl RxBatch {
         } else {
             MsgFlags::MSG_DONTWAIT
         };
-        let mut iovs = self.bufs.each_mut().map(|b| [IoSliceMut::new(&mut b[..])]);
-        let results = recvmmsg(sock.as_raw_fd(), &mut self.headers, &mut iovs, flags, None)
-            .map_err(io::Error::from)?;
-        let mut n = 0;
-        for (slot, r) in self.got.iter_mut().zip(results) {
-            let from = r.address.and_then(|a: SockaddrStorage| {
-                a.as_sockaddr_in()
-                    .map(|v4| SocketAddr::from(*v4))
-                    .or_else(|| a.as_sockaddr_in6().map(|v6| SocketAddr::from(*v6)))
-            });
-            // The buffers hold one byte more than the largest accepted datagram: a longer one is cut
-            // there and still reads as oversized.
-            *slot = (r.bytes, from);
-            n += 1;
-        }
-        Ok(n)
+        let (bufs, got) = (&mut self.bufs, &mut self.got);
+        HEADERS.with(|cell| {
+            let mut iovs = bufs.each_mut().map(|b| [IoSliceMut::new(&mut b[..])]);
+            let mut headers = cell.borrow_mut();
+            let headers = headers.get_or_insert_with(|| MultiHeaders::preallocate(BATCH, None));
+            let results = recvmmsg(sock.as_raw_fd(), headers, &mut iovs, flags, None)
+                .map_err(io::Error::from)?;
+            let mut n = 0;
+            for (slot, r) in got.iter_mut().zip(results) {
+                let from = r.address.and_then(|a: SockaddrStorage| {
+                    a.as_sockaddr_in()
+                        .map(|v4| SocketAddr::from(*v4))
+                        .or_else(|| a.as_sockaddr_in6().map(|v6| SocketAddr::from(*v6)))
+                });
+                // The buffers hold one byte more than the largest accepted datagram: a longer one is cut
+                // there and still reads as oversized.
+                *slot = (r.bytes, from);
+                n += 1;
+            }
+            Ok(n)
+        })
     }
 }
 
@@ -458,5 +469,17 @@ impl RobotLink for RsiLink {
                 Err(LinkError::Io(e))
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn link_and_session_can_move_to_another_thread() {
+        fn is_send<T: Send>() {}
+        is_send::<RsiLink>();
+        is_send::<RsiSession>();
     }
 }
