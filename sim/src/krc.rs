@@ -6,6 +6,10 @@
 //! stops on POSCORRMON and on `Stop`, and moves a [`Mechanism`] (the shared [`World`] in a cell
 //! simulation) with the correction it accepted. Fault injection covers what networks and peers do.
 //!
+//! The decisions live in [`KrcCore`], which does no I/O and reads no clock (unit-tested without sockets);
+//! [`Krc`] is its shell: the socket, the timing and the fault plan. With the process channels in the config
+//! it sends the [`Mechanism`]'s `FcCmd` every cycle and hands it every cycle's `FcState`.
+//!
 //! Timing is either **real time** (one `<Rob>` every period, a reply is on time when it arrives before
 //! the next one is due) or **lockstep** (the next `<Rob>` right after a good reply, or after a wall-clock
 //! deadline when none came), which runs a cell faster than real time with the same protocol.

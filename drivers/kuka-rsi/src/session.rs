@@ -131,8 +131,9 @@ pub struct RsiSession {
     candidate: Option<Accepted>,
     /// The cycle handed out and not yet answered.
     pending: Option<Accepted>,
-    /// Receive time of the reply just written, until the shell says it left.
-    in_flight: Option<Instant>,
+    /// Receive time of the reply just written, and whether it carries `Stop`, until the shell says
+    /// it left (or failed).
+    in_flight: Option<(Instant, bool)>,
     shaper: Shaper,
     last_wire: [f64; 6],
     stopped: bool,
@@ -481,17 +482,17 @@ impl RsiSession {
             .sen
             .write(&self.tx_frame, out)
             .map_err(LinkError::Encode)?;
-        self.stopped |= correction.stop;
-        self.in_flight = Some(p.rx_at);
+        self.in_flight = Some((p.rx_at, correction.stop));
         Ok(Some(Outgoing { len, to: p.peer }))
     }
 
     /// The reply written last left at `now`: its receive→send turnaround is recorded (late above
-    /// `late_after`).
+    /// `late_after`); a reply carrying `Stop` finishes the session.
     pub fn sent(&mut self, now: Instant) {
-        let Some(rx_at) = self.in_flight.take() else {
+        let Some((rx_at, stop)) = self.in_flight.take() else {
             return;
         };
+        self.stopped |= stop;
         let turnaround = now.saturating_duration_since(rx_at);
         self.diag.latency.record(turnaround);
         let c = &mut self.diag.counters;
@@ -501,7 +502,8 @@ impl RsiSession {
         }
     }
 
-    /// The reply written last could not be sent.
+    /// The reply written last could not be sent (a `Stop` in it did not finish the session: the
+    /// next cycle can carry it again).
     pub fn send_failed(&mut self) {
         self.in_flight = None;
         self.diag.counters.send_errors += 1;
@@ -725,6 +727,8 @@ mod tests {
             ..Correction::default()
         };
         let o = s.reply(&stop, &mut out).unwrap().unwrap();
+        assert!(!s.is_stopped(), "not before it left");
+        s.sent(t0 + Duration::from_micros(30));
         let text = core::str::from_utf8(&out[..o.len]).unwrap();
         assert_eq!(
             text,
@@ -737,6 +741,27 @@ mod tests {
             s.reply(&Correction::default(), &mut out),
             Err(LinkError::Stopped)
         ));
+    }
+
+    #[test]
+    fn a_stop_that_could_not_be_sent_does_not_finish_the_session() {
+        let mut s = session(false);
+        let t0 = Instant::now();
+        s.receive(&rob(&s, 1000, 300.0, None), robot(), t0).unwrap();
+        let mut out = [0u8; 1024];
+        let stop = Correction {
+            stop: true,
+            ..Correction::default()
+        };
+        s.reply(&stop, &mut out).unwrap().unwrap();
+        s.send_failed();
+        assert!(!s.is_stopped());
+        assert_eq!(s.diagnostics().counters.send_errors, 1);
+        s.receive(&rob(&s, 1004, 300.0, None), robot(), t0 + ms(4))
+            .unwrap();
+        s.reply(&stop, &mut out).unwrap().unwrap();
+        s.sent(t0 + ms(4));
+        assert!(s.is_stopped());
     }
 
     #[test]
