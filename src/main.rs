@@ -304,9 +304,12 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Sim(a) => sim(a),
-        Command::RsiConfig(a) => forcecell::rsi::rsi_config(&a).map(|files| {
+        Command::RsiConfig(a) => forcecell::rsi::rsi_config(&a).map(|(files, mapping)| {
             for f in files {
                 println!("wrote {}", f.display());
+            }
+            for line in mapping {
+                println!("{line}");
             }
             ExitCode::SUCCESS
         }),

@@ -14,7 +14,7 @@ use controller::LoopConfig;
 use hal::{Correction, Cycle, ForceSensor, RobotLink};
 use kuka_rsi::{
     CorrectionMode, Diagnostics, EthernetConfig, Limits, LinkConfig, LinkError, PoscorrLimits,
-    RobotFilter, RobotSetup, RsiLink,
+    ProcessChannels, ProcessIo, ProcessSetup, RobotFilter, RobotSetup, RsiLink, Segment,
 };
 use sim::krc::{Krc, KrcConfig, KrcEnd, KrcReport, Timing};
 use sim::{InProcRobot, InProcSensor, InnerLoopModel, SharedWorld};
@@ -508,6 +508,66 @@ pub struct RsiConfigArgs {
     /// Output directory.
     #[arg(long, default_value = "out/rsi")]
     pub out: PathBuf,
+    /// Leave out the process channels (FcCmd/FcState) and write the plain RSI_MOVECORR template:
+    /// force control then runs from the first cycle at the tuning's set-point.
+    #[arg(long)]
+    pub no_process: bool,
+    /// Polishing segments for the KRL template: FORCE_N:LENGTH_MM, comma-separated.
+    #[arg(long, default_value = "10:50,30:100,10:50")]
+    pub segments: String,
+    /// Feed speed along the path, mm/s.
+    #[arg(long, default_value_t = 20.0)]
+    pub feed_mm_s: f64,
+    /// FcCmd.Ramp for every set-point change, s (0: the tuning's own rate).
+    #[arg(long, default_value_t = 0.5)]
+    pub ramp: f64,
+    /// How long the program waits for PRESSING and for OFF before it ends the pass cleanly, s.
+    #[arg(long, default_value_t = 10.0)]
+    pub wait_timeout: f64,
+    /// $SEN_PINT index the program writes FcCmd.Mode to.
+    #[arg(long, default_value_t = 1)]
+    pub pint_mode: u8,
+    /// $SEN_PINT index the program writes FcCmd.Seg to.
+    #[arg(long, default_value_t = 2)]
+    pub pint_seg: u8,
+    /// $SEN_PINT index RSI writes FcState.State to.
+    #[arg(long, default_value_t = 3)]
+    pub pint_state: u8,
+    /// $SEN_PINT index RSI writes FcState.Fault to.
+    #[arg(long, default_value_t = 4)]
+    pub pint_fault: u8,
+    /// $SEN_PREA index the program writes FcCmd.F to.
+    #[arg(long, default_value_t = 1)]
+    pub prea_force: u8,
+    /// $SEN_PREA index the program writes FcCmd.Ramp to.
+    #[arg(long, default_value_t = 2)]
+    pub prea_ramp: u8,
+    /// $SEN_PREA index RSI writes FcState.F (measured force) to.
+    #[arg(long, default_value_t = 3)]
+    pub prea_measured: u8,
+}
+
+/// `FORCE_N:LENGTH_MM,...` → segments in SI.
+fn parse_segments(text: &str) -> Result<Vec<Segment>> {
+    text.split(',')
+        .map(|item| {
+            let (f, l) = item.trim().split_once(':').ok_or_else(|| {
+                anyhow!("--segments: {item:?} is not FORCE_N:LENGTH_MM (e.g. 30:100)")
+            })?;
+            let force: f64 = f
+                .trim()
+                .parse()
+                .map_err(|_| anyhow!("--segments: force {f:?} is not a number"))?;
+            let length_mm: f64 = l
+                .trim()
+                .parse()
+                .map_err(|_| anyhow!("--segments: length {l:?} is not a number"))?;
+            Ok(Segment {
+                force,
+                length: kuka_rsi::wire::mm_to_m(length_mm),
+            })
+        })
+        .collect()
 }
 
 /// The robot-side setup for these options.
@@ -532,8 +592,30 @@ pub fn robot_setup(a: &RsiConfigArgs) -> Result<RobotSetup> {
         }
         None => (PoscorrLimits::default(), PoscorrLimits::MONITOR_DEFAULT),
     };
-    Ok(RobotSetup {
-        ethernet: EthernetConfig::forcecell(a.ip, a.port, relative),
+    let mut ethernet = EthernetConfig::forcecell(a.ip, a.port, relative);
+    let process = if a.no_process {
+        None
+    } else {
+        ethernet = ethernet.with_process(ProcessChannels::default());
+        Some(ProcessSetup {
+            io: ProcessIo {
+                mode_pint: a.pint_mode,
+                seg_pint: a.pint_seg,
+                force_prea: a.prea_force,
+                ramp_prea: a.prea_ramp,
+                state_pint: a.pint_state,
+                fault_pint: a.pint_fault,
+                measured_prea: a.prea_measured,
+            },
+            segments: parse_segments(&a.segments)?,
+            feed: kuka_rsi::wire::mm_to_m(a.feed_mm_s),
+            ramp: a.ramp,
+            wait_timeout: a.wait_timeout,
+            timer: 1,
+        })
+    };
+    let setup = RobotSetup {
+        ethernet,
         mode: if relative {
             CorrectionMode::Relative
         } else {
@@ -545,11 +627,15 @@ pub fn robot_setup(a: &RsiConfigArgs) -> Result<RobotSetup> {
         poscorr,
         poscorrmon,
         name: a.name.clone(),
-    })
+        process,
+    };
+    setup.validate().map_err(|e| anyhow!("rsi-config: {e}"))?;
+    Ok(setup)
 }
 
-/// Write the robot-side files; returns their paths.
-pub fn rsi_config(a: &RsiConfigArgs) -> Result<Vec<PathBuf>> {
+/// Write the robot-side files; returns their paths and, with the process channels, the
+/// `$SEN_PINT`/`$SEN_PREA` mapping the integrator must build in RSI Visual.
+pub fn rsi_config(a: &RsiConfigArgs) -> Result<(Vec<PathBuf>, Vec<String>)> {
     let setup = robot_setup(a)?;
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create output directory {}", a.out.display()))?;
@@ -559,5 +645,10 @@ pub fn rsi_config(a: &RsiConfigArgs) -> Result<Vec<PathBuf>> {
         std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
         written.push(path);
     }
-    Ok(written)
+    let mapping = setup
+        .process
+        .as_ref()
+        .map(|p| p.mapping(&setup.ethernet))
+        .unwrap_or_default();
+    Ok((written, mapping))
 }

@@ -43,6 +43,8 @@ fn rsi_config_writes_matching_robot_files() {
     assert_eq!(
         cfg,
         EthernetConfig::forcecell([10, 0, 0, 5].into(), 6008, false)
+            .with_process(kuka_rsi::ProcessChannels::default()),
+        "the process channels are on by default"
     );
     let krl = std::fs::read_to_string(dir.path().join("robot/forcecell_rsi.src")).unwrap();
     assert!(krl.contains("RSI_ON(#ABSOLUTE, #IPO_FAST)"), "{krl}");
@@ -85,6 +87,143 @@ fn rsi_config_writes_matching_robot_files() {
     let o = forcecell(&["rsi-config", "--name", "bad name"], dir.path());
     assert!(!o.status.success());
     assert!(text(&o.stderr).contains("KRL names"), "{}", text(&o.stderr));
+}
+
+/// The element with `TAG="tag"` of a plain-XML-parsed config: its INDX.
+fn indx_of(doc: &roxmltree::Document<'_>, tag: &str) -> String {
+    doc.descendants()
+        .find(|n| n.has_tag_name("ELEMENT") && n.attribute("TAG") == Some(tag))
+        .and_then(|n| n.attribute("INDX"))
+        .unwrap_or_else(|| panic!("no ELEMENT {tag}"))
+        .to_owned()
+}
+
+#[test]
+fn rsi_config_writes_the_process_channels_and_a_polishing_template() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = forcecell(
+        &[
+            "rsi-config",
+            "--out",
+            "robot",
+            "--pint-mode",
+            "11",
+            "--pint-seg",
+            "12",
+            "--pint-state",
+            "13",
+            "--pint-fault",
+            "14",
+            "--prea-force",
+            "5",
+            "--prea-ramp",
+            "6",
+            "--prea-measured",
+            "7",
+            "--segments",
+            "15:40,25:80",
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let out = text(&o.stdout);
+    assert!(out.contains("$SEN_PINT[11]  -> FcCmd.Mode"), "{out}");
+    assert!(out.contains("$SEN_PREA[7]   <- FcState.F"), "{out}");
+    assert!(out.contains("UNVERIFIED"), "{out}");
+
+    let xml = std::fs::read_to_string(dir.path().join("robot/forcecell_rsi.xml")).unwrap();
+    // The project's own parser...
+    let cfg = EthernetConfig::parse(&xml).unwrap();
+    assert!(cfg.has_process_command());
+    // ... and a plain XML parser that knows nothing of RSI.
+    let doc = roxmltree::Document::parse(&xml).expect("well-formed XML");
+    assert_eq!(doc.root_element().tag_name().name(), "ROOT");
+    for (tag, indx) in [
+        ("FcCmd.Mode", "1"),
+        ("FcCmd.F", "2"),
+        ("FcCmd.Ramp", "3"),
+        ("FcCmd.Seg", "4"),
+        ("FcState.State", "8"),
+        ("FcState.F", "9"),
+        ("FcState.Fault", "10"),
+    ] {
+        assert_eq!(indx_of(&doc, tag), indx, "{tag}");
+    }
+    let comment: String = doc
+        .root()
+        .children()
+        .filter(|n| n.is_comment())
+        .filter_map(|n| n.text())
+        .collect();
+    assert!(comment.contains("UNVERIFIED"), "{comment}");
+
+    let krl = std::fs::read_to_string(dir.path().join("robot/forcecell_rsi.src")).unwrap();
+    for (var, tag) in [
+        ("$SEN_PINT[11]", "FcCmd.Mode"),
+        ("$SEN_PINT[12]", "FcCmd.Seg"),
+        ("$SEN_PINT[13]", "FcState.State"),
+        ("$SEN_PINT[14]", "FcState.Fault"),
+        ("$SEN_PREA[5]", "FcCmd.F"),
+        ("$SEN_PREA[6]", "FcCmd.Ramp"),
+        ("$SEN_PREA[7]", "FcState.F"),
+    ] {
+        // Listed in both headers with the same element...
+        let line = |t: &str| t.lines().any(|l| l.contains(var) && l.contains(tag));
+        assert!(line(&xml), "XML header lacks {var} {tag}");
+        assert!(line(&krl), "KRL header lacks {var} {tag}");
+    }
+    // ... and used by the program.
+    assert!(krl.contains("RSI_ON(#ABSOLUTE, #IPO_FAST)"), "{krl}");
+    assert!(
+        krl.contains("$SEN_PREA[5] = 15.000\n  $SEN_PINT[12] = 1\n  $SEN_PINT[11] = 1"),
+        "{krl}"
+    );
+    assert!(krl.contains("WAIT FOR ($SEN_PINT[13] == 3)"), "{krl}");
+    assert!(krl.contains("DO $SEN_PREA[5] = 25.000"), "{krl}");
+    assert!(krl.contains("DO $SEN_PINT[12] = 2"), "{krl}");
+    assert!(krl.contains("LIN_REL {X 80.0}"), "{krl}");
+    assert!(krl.contains("WAIT FOR ($SEN_PINT[13] == 0)"), "{krl}");
+    assert!(
+        krl.contains("RETURN"),
+        "the PRESSING timeout ends the program: {krl}"
+    );
+    let off = krl.rfind("RSI_OFF()").unwrap();
+    let release = krl.rfind("$SEN_PINT[11] = 2").unwrap();
+    assert!(release < off, "RELEASE before RSI_OFF");
+
+    // Indices used twice, and bad segments, are refused with a reason.
+    let o = forcecell(&["rsi-config", "--pint-state", "1"], dir.path());
+    assert!(!o.status.success());
+    assert!(
+        text(&o.stderr).contains("$SEN_PINT[1] is used for both"),
+        "{}",
+        text(&o.stderr)
+    );
+    let o = forcecell(&["rsi-config", "--segments", "10:50,x"], dir.path());
+    assert!(!o.status.success());
+    assert!(
+        text(&o.stderr).contains("--segments"),
+        "{}",
+        text(&o.stderr)
+    );
+
+    // Without the process channels: the config of before.
+    let o = forcecell(
+        &["rsi-config", "--no-process", "--out", "plain"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let xml = std::fs::read_to_string(dir.path().join("plain/forcecell_rsi.xml")).unwrap();
+    assert_eq!(
+        EthernetConfig::parse(&xml).unwrap(),
+        EthernetConfig::forcecell([192, 168, 1, 10].into(), 49152, false)
+    );
+    roxmltree::Document::parse(&xml).unwrap();
+    let krl = std::fs::read_to_string(dir.path().join("plain/forcecell_rsi.src")).unwrap();
+    assert!(
+        krl.contains("RSI_MOVECORR()") && !krl.contains("SEN_PINT"),
+        "{krl}"
+    );
 }
 
 fn rows(dir: &Path, file: &str) -> Vec<String> {

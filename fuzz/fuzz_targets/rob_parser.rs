@@ -1,19 +1,20 @@
 //! Fuzz the `<Rob>` parser (the bytes a network peer controls) and, when it accepts, check that
-//! writing what it parsed and parsing that again gives the same frame.
+//! writing what it parsed and parsing that again gives the same frame. Two configs: without and with
+//! the process channels (`FcCmd`), whose decoding must never panic either.
 #![no_main]
 
-use kuka_rsi::{ConfigElement, EthernetConfig, Frame, ValueType};
+use kuka_rsi::{
+    CommandSlots, ConfigElement, EthernetConfig, Frame, ProcessChannels, Schema, ValueType,
+};
 use libfuzzer_sys::fuzz_target;
 
-fuzz_target!(|data: &[u8]| {
-    let mut cfg = EthernetConfig::forcecell([127, 0, 0, 1].into(), 49152, false);
-    cfg.send
-        .push(ConfigElement::channel("User.V", ValueType::Double, 1, None));
-    cfg.send
-        .push(ConfigElement::channel("Txt", ValueType::String, 2, None));
-    let schema = cfg.rob_schema(4).expect("valid schema");
+fn check(schema: &Schema, data: &[u8]) {
     let mut frame = Frame::new();
     if schema.parse(data, &mut frame).is_ok() {
+        if let Some(slots) = CommandSlots::find(schema).expect("valid process channels") {
+            let c = slots.decode(&frame);
+            assert!(c.force.is_finite() && c.ramp.is_finite());
+        }
         let mut buf = vec![0u8; 65536];
         if let Ok(n) = schema.write(&frame, &mut buf) {
             let mut again = Frame::new();
@@ -23,4 +24,18 @@ fuzz_target!(|data: &[u8]| {
             assert_eq!(again.ipoc(), frame.ipoc());
         }
     }
+}
+
+fuzz_target!(|data: &[u8]| {
+    let mut cfg = EthernetConfig::forcecell([127, 0, 0, 1].into(), 49152, false);
+    cfg.send
+        .push(ConfigElement::channel("User.V", ValueType::Double, 1, None));
+    cfg.send
+        .push(ConfigElement::channel("Txt", ValueType::String, 2, None));
+    check(&cfg.rob_schema(4).expect("valid schema"), data);
+    let cfg = cfg.with_process(ProcessChannels {
+        cmd: [3, 4, 5, 6],
+        state: [8, 9, 10],
+    });
+    check(&cfg.rob_schema(4).expect("valid schema"), data);
 });

@@ -69,6 +69,8 @@ pub struct Field {
     pub slot: Option<usize>,
     /// HOLDON of the config (what the robot does with this value on a late reply).
     pub holdon: bool,
+    /// Decimals written for this double, when they differ from the schema's precision.
+    decimals: Option<u8>,
     key: u64,
 }
 
@@ -215,6 +217,7 @@ impl Schema {
             ty,
             slot,
             holdon,
+            decimals: None,
             key: short_key(name.as_bytes()),
         })
     }
@@ -274,6 +277,29 @@ impl Schema {
             content: Content::Text(field),
             key: short_key(tag.as_bytes()),
         });
+        Ok(())
+    }
+
+    /// Write attribute `attr` of `tag` (the text of `tag` when `attr` is empty) with `decimals`
+    /// decimals instead of the schema's precision (e.g. `FcState.F`: 2). Only doubles have decimals.
+    pub fn set_decimals(&mut self, tag: &str, attr: &str, decimals: u8) -> Result<(), String> {
+        if decimals > 9 {
+            return Err(format!("decimals must be 0..=9, got {decimals}"));
+        }
+        let e = self
+            .elements
+            .iter_mut()
+            .find(|e| e.tag == tag)
+            .ok_or_else(|| format!("no element {tag}"))?;
+        let f = match &mut e.content {
+            Content::Attributes(fields) => fields.iter_mut().find(|f| f.name == attr),
+            Content::Text(f) => attr.is_empty().then_some(f),
+        }
+        .ok_or_else(|| format!("{tag} has no value {attr:?}"))?;
+        if f.ty != ValueType::Double {
+            return Err(format!("{tag}.{attr} is not a DOUBLE"));
+        }
+        f.decimals = Some(decimals);
         Ok(())
     }
 
@@ -394,7 +420,7 @@ impl Schema {
         match f.ty {
             ValueType::Bool => w.put(if v != 0.0 { b"1" } else { b"0" }),
             ValueType::Long => w.fixed(v, 0, slot),
-            ValueType::Double => w.fixed(v, self.precision, slot),
+            ValueType::Double => w.fixed(v, f.decimals.unwrap_or(self.precision), slot),
             ValueType::String => Ok(()),
         }
     }

@@ -1,18 +1,21 @@
 //! [`RsiLink`]: the PC side of RSI over a real UDP socket, as a [`hal::RobotLink`].
 
+use core::cell::RefCell;
 use core::fmt;
 use core::time::Duration;
-use std::io;
+use std::io::{self, IoSliceMut};
 use std::net::{IpAddr, SocketAddr, UdpSocket};
+use std::os::fd::AsRawFd;
 use std::time::Instant;
 
-use hal::{Correction, Cycle, ErrorKind, Pose, RobotLink};
+use hal::{Correction, Cycle, ErrorKind, RobotLink};
+use nix::sys::socket::{MsgFlags, MultiHeaders, SockaddrStorage, recvmmsg};
 
-use crate::codec::{Frame, Ipoc, Schema, WriteError};
+use crate::codec::{Schema, WriteError};
 use crate::config::EthernetConfig;
 use crate::diag::Diagnostics;
-use crate::limits::{Limits, PoscorrLimits, Shaper, split};
-use crate::wire;
+use crate::limits::{Limits, PoscorrLimits};
+use crate::session::RsiSession;
 
 /// How the robot interprets `RKorr`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -231,125 +234,104 @@ impl hal::Error for LinkError {
     }
 }
 
+/// Largest datagram the link can be configured to take (`max_datagram` stays below it).
 const RX_BUFFER: usize = 65536;
 const TX_BUFFER: usize = 16384;
-
-struct RobSlots {
-    rist: [usize; 6],
-    rsol: [usize; 6],
-    delay: Option<usize>,
-}
-
-struct SenSlots {
-    rkorr: [Option<usize>; 6],
-    stop: Option<usize>,
-}
-
-struct Session {
-    ipoc0: u64,
-    last_ipoc: u64,
-    last_rx: Instant,
-    peer: SocketAddr,
-    /// The last plausible `RIst` and `RSol` positions (m) and their IPOC.
-    plausible: Option<([hal::Vector3<f64>; 2], u64)>,
-}
-
-struct Pending {
-    ipoc: Ipoc,
-    rx_at: Instant,
-    peer: SocketAddr,
-}
+/// Datagrams read by one receive call (a burst after a stall is read whole, the newest answered).
+const BATCH: usize = 16;
 
 /// The PC side of RSI: a UDP server on the configured address answering the robot's cycles.
+///
+/// A thin shell around [`RsiSession`], which makes every decision: the shell only reads the clock,
+/// receives and sends. Two system calls per cycle in the steady state: one blocking `recvmmsg`
+/// (`MSG_WAITFORONE`: it waits for the first datagram, then also takes whatever else is queued, so a
+/// backlog is drained in the same call), and one `sendto`. The socket stays blocking; the watchdog is
+/// its receive timeout (`SO_RCVTIMEO`), set only when its value changes.
 pub struct RsiLink {
-    cfg: LinkConfig,
+    session: RsiSession,
     sock: UdpSocket,
-    rob: Schema,
-    sen: Schema,
-    rob_slots: RobSlots,
-    sen_slots: SenSlots,
-    rx: Box<[u8]>,
+    rx: RxBatch,
     tx: Box<[u8]>,
-    rx_frame: Box<Frame>,
-    tx_frame: Box<Frame>,
-    session: Option<Session>,
-    pending: Option<Pending>,
-    shaper: Shaper,
-    last_wire: [f64; 6],
-    stopped: bool,
     timeout_set: Option<Duration>,
-    diag: Diagnostics,
 }
 
 impl fmt::Debug for RsiLink {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.debug_struct("RsiLink")
             .field("local", &self.sock.local_addr().ok())
-            .field("robot", &self.cfg.robot)
-            .field("counters", &self.diag.counters)
+            .field("session", &self.session)
             .finish()
     }
 }
 
-/// What [`RsiLink::accept`] made of one good datagram.
-struct Accepted {
-    cycle: Cycle,
-    ipoc: Ipoc,
-    peer: SocketAddr,
-    rx_at: Instant,
+/// Receive buffers for `recvmmsg`, allocated once.
+struct RxBatch {
+    bufs: [Box<[u8]>; BATCH],
+    got: [(usize, Option<SocketAddr>); BATCH],
+}
+
+thread_local! {
+    /// `recvmmsg`'s message headers, allocated once per receiving thread. nix's `MultiHeaders` holds
+    /// raw pointers and is neither `Send` nor `Sync`; kept here, it leaves `RsiLink` `Send` (a link
+    /// is built on one thread and run on another) without any unsafe code.
+    static HEADERS: RefCell<Option<MultiHeaders<SockaddrStorage>>> = const { RefCell::new(None) };
+}
+
+impl RxBatch {
+    fn new(max_datagram: usize) -> Self {
+        Self {
+            // One byte more than the largest accepted datagram: a longer one shows as oversized.
+            bufs: core::array::from_fn(|_| vec![0; max_datagram + 1].into_boxed_slice()),
+            got: [(0, None); BATCH],
+        }
+    }
+
+    /// One `recvmmsg`: `wait` blocks (up to the socket's timeout) for the first datagram, then takes
+    /// what is queued; otherwise nothing blocks. Returns how many were read into `got`.
+    fn recv(&mut self, sock: &UdpSocket, wait: bool) -> io::Result<usize> {
+        let flags = if wait {
+            MsgFlags::MSG_WAITFORONE
+        } else {
+            MsgFlags::MSG_DONTWAIT
+        };
+        let (bufs, got) = (&mut self.bufs, &mut self.got);
+        HEADERS.with(|cell| {
+            let mut iovs = bufs.each_mut().map(|b| [IoSliceMut::new(&mut b[..])]);
+            let mut headers = cell.borrow_mut();
+            let headers = headers.get_or_insert_with(|| MultiHeaders::preallocate(BATCH, None));
+            let results = recvmmsg(sock.as_raw_fd(), headers, &mut iovs, flags, None)
+                .map_err(io::Error::from)?;
+            let mut n = 0;
+            for (slot, r) in got.iter_mut().zip(results) {
+                let from = r.address.and_then(|a: SockaddrStorage| {
+                    a.as_sockaddr_in()
+                        .map(|v4| SocketAddr::from(*v4))
+                        .or_else(|| a.as_sockaddr_in6().map(|v6| SocketAddr::from(*v6)))
+                });
+                // The buffers hold one byte more than the largest accepted datagram: a longer one is cut
+                // there and still reads as oversized.
+                *slot = (r.bytes, from);
+                n += 1;
+            }
+            Ok(n)
+        })
+    }
 }
 
 impl RsiLink {
     /// Bind the configured address (never sharing the port) and get ready for the robot.
     pub fn bind(cfg: LinkConfig) -> Result<Self, LinkError> {
-        cfg.validate().map_err(LinkError::Config)?;
-        let rob = cfg
-            .ethernet
-            .rob_schema(cfg.precision)
-            .map_err(|e| LinkError::Config(e.to_string()))?;
-        let sen = cfg
-            .ethernet
-            .sen_schema(cfg.precision)
-            .map_err(|e| LinkError::Config(e.to_string()))?;
-        let pose = ["X", "Y", "Z", "A", "B", "C"];
-        let need = |tag: &str| {
-            rob.six(tag, pose).ok_or_else(|| {
-                LinkError::Config(format!(
-                    "the robot must send DEF_{tag} (add it to the SEND section)"
-                ))
-            })
-        };
-        let rob_slots = RobSlots {
-            rist: need("RIst")?,
-            rsol: need("RSol")?,
-            delay: rob.slot("Delay", "D"),
-        };
-        let sen_slots = SenSlots {
-            rkorr: pose.map(|a| sen.slot("RKorr", a)),
-            stop: sen.slot("Stop", ""),
-        };
+        let session = RsiSession::new(cfg)?;
+        let cfg = session.config();
         let addr = cfg.bind_addr();
         // std's bind sets no SO_REUSEADDR / SO_REUSEPORT: a held port fails here, loudly.
         let sock = UdpSocket::bind(addr).map_err(|source| LinkError::Bind { addr, source })?;
-        let shaper = Shaper::new(cfg.limits, sen_slots.rkorr.map(|s| s.is_some()));
         Ok(Self {
-            sock,
-            rob,
-            sen,
-            rob_slots,
-            sen_slots,
-            rx: vec![0; RX_BUFFER].into_boxed_slice(),
+            rx: RxBatch::new(cfg.max_datagram),
             tx: vec![0; TX_BUFFER].into_boxed_slice(),
-            rx_frame: Box::default(),
-            tx_frame: Box::default(),
-            session: None,
-            pending: None,
-            shaper,
-            last_wire: [0.0; 6],
-            stopped: false,
+            sock,
+            session,
             timeout_set: None,
-            diag: Diagnostics::default(),
-            cfg,
         })
     }
 
@@ -360,138 +342,32 @@ impl RsiLink {
 
     /// Counters and the latency distribution.
     pub fn diagnostics(&self) -> &Diagnostics {
-        &self.diag
+        self.session.diagnostics()
     }
 
     /// The configuration.
     pub fn config(&self) -> &LinkConfig {
-        &self.cfg
+        self.session.config()
+    }
+
+    /// The sans-IO session inside.
+    pub fn session(&self) -> &RsiSession {
+        &self.session
     }
 
     /// Change whose datagrams are accepted (e.g. once a simulated controller has bound its port).
     pub fn set_robot_filter(&mut self, robot: RobotFilter) {
-        self.cfg.robot = robot;
+        self.session.set_robot_filter(robot);
     }
 
     /// True after a stop was sent.
     pub fn is_stopped(&self) -> bool {
-        self.stopped
+        self.session.is_stopped()
     }
 
     /// The `<Rob>` schema in use.
     pub fn rob_schema(&self) -> &Schema {
-        &self.rob
-    }
-
-    fn allowed(&self, from: SocketAddr) -> bool {
-        match self.cfg.robot {
-            RobotFilter::Exact(a) => from == a,
-            RobotFilter::Ip(ip) => from.ip() == ip,
-            RobotFilter::Any => self.session.as_ref().is_none_or(|s| s.peer == from),
-        }
-    }
-
-    /// Judge one datagram of `n` bytes in `self.rx`; `Some` for a good, current `<Rob>`.
-    fn accept(&mut self, n: usize, from: SocketAddr, rx_at: Instant) -> Option<Accepted> {
-        let allowed = self.allowed(from);
-        let c = &mut self.diag.counters;
-        c.received += 1;
-        if !allowed {
-            c.foreign += 1;
-            return None;
-        }
-        if n > self.cfg.max_datagram || n >= self.rx.len() {
-            c.oversized += 1;
-            return None;
-        }
-        if let Err(e) = self.rob.parse(&self.rx[..n], &mut self.rx_frame) {
-            c.malformed += 1;
-            self.diag.last_malformed = Some(e);
-            return None;
-        }
-        let ipoc = *self.rx_frame.ipoc();
-        let v = ipoc.value();
-        let jump = self.cfg.session_jump;
-        let new_session = match &self.session {
-            None => true,
-            Some(s) if v > s.last_ipoc.saturating_add(jump) => true,
-            Some(s) if v.saturating_add(jump) < s.last_ipoc => true,
-            Some(s) if v <= s.last_ipoc => {
-                c.stale += 1;
-                return None;
-            }
-            Some(_) => false,
-        };
-        if new_session {
-            c.sessions += 1;
-            self.session = Some(Session {
-                ipoc0: v,
-                last_ipoc: v,
-                last_rx: rx_at,
-                peer: from,
-                plausible: None,
-            });
-            // A new RSI_ON starts the robot's relative total from zero; the rate limit starts from the
-            // correction the robot reports in effect (set below, once the poses are decoded).
-            self.last_wire = [0.0; 6];
-        }
-        let s = self.session.as_mut()?;
-        s.last_ipoc = v;
-        s.last_rx = rx_at;
-        s.peer = from;
-        let f = &self.rx_frame;
-        let delay = self
-            .rob_slots
-            .delay
-            .map_or(0, |d| f.get(d).clamp(0.0, u32::MAX as f64) as u32);
-        self.diag.robot_delay = delay;
-        if delay > 0 {
-            c.delay_alarms += 1;
-        }
-        let mut cycle = Cycle {
-            seq: v,
-            t: (v - s.ipoc0) as f64 * self.cfg.ipoc_unit,
-            period: self.cfg.period.as_secs_f64(),
-            actual: pose(f.get6(self.rob_slots.rist)),
-            programmed: pose(f.get6(self.rob_slots.rsol)),
-            late_replies: delay,
-            new_session,
-            process: None,
-        };
-        // The one plausibility check of the robot's poses: a jump no arm makes in the IPOC time since
-        // the last plausible pose is a counted fault. The cycle is still delivered (it must be answered,
-        // with the last command) but its poses are marked unusable, so no controller acts on them.
-        let now = [cycle.actual.position, cycle.programmed.position];
-        if now.iter().all(|p| p.iter().all(|v| v.is_finite())) {
-            let plausible = match s.plausible {
-                Some((last, at)) => {
-                    let dt = v.saturating_sub(at) as f64 * self.cfg.ipoc_unit;
-                    // 0.1 mm slack: the wire's decimals and the robot's own jitter.
-                    let reach = self.cfg.max_speed * dt + 1e-4;
-                    now.iter().zip(&last).all(|(p, q)| (p - q).norm() <= reach)
-                }
-                None => true,
-            };
-            if plausible {
-                s.plausible = Some((now, v));
-            } else {
-                c.implausible += 1;
-                cycle.actual = unusable();
-                cycle.programmed = unusable();
-            }
-        }
-        if new_session {
-            let t = cycle.tool_offset();
-            let r =
-                (cycle.programmed.orientation.inverse() * cycle.actual.orientation).scaled_axis();
-            self.shaper.reset_to([t.x, t.y, t.z, r.x, r.y, r.z]);
-        }
-        Some(Accepted {
-            cycle,
-            ipoc,
-            peer: from,
-            rx_at,
-        })
+        self.session.rob_schema()
     }
 
     fn set_timeout(&mut self, t: Option<Duration>) -> Result<(), LinkError> {
@@ -503,86 +379,16 @@ impl RsiLink {
         Ok(())
     }
 
-    /// Block until one good datagram arrives, the watchdog fires, or first contact times out.
-    fn wait_first(&mut self) -> Result<Accepted, LinkError> {
-        let started = Instant::now();
-        let watchdog = self.cfg.period * self.cfg.watchdog_cycles;
-        loop {
-            let now = Instant::now();
-            let remaining = match &self.session {
-                Some(s) => {
-                    let silent = now.duration_since(s.last_rx);
-                    if silent >= watchdog {
-                        self.session = None;
-                        return Err(LinkError::LinkLost { silent_for: silent });
-                    }
-                    // A full watchdog when nothing ate into it (keeps the steady state free of syscalls).
-                    Some(if silent < self.cfg.period {
-                        watchdog
-                    } else {
-                        watchdog - silent
-                    })
-                }
-                None => match self.cfg.first_contact_timeout {
-                    Some(t) => {
-                        let waited = now.duration_since(started);
-                        if waited >= t {
-                            return Err(LinkError::NoContact { waited });
-                        }
-                        Some(t - waited)
-                    }
-                    None => None,
-                },
-            };
-            self.set_timeout(remaining)?;
-            match self.sock.recv_from(&mut self.rx) {
-                Ok((n, from)) => {
-                    if let Some(a) = self.accept(n, from, Instant::now()) {
-                        return Ok(a);
-                    }
-                }
-                Err(e) if is_transient(&e) => {}
-                Err(e) => return Err(LinkError::Io(e)),
-            }
+    /// Hand the `n` datagrams just read to the session, oldest first.
+    fn offer_batch(&mut self, n: usize, rx_at: Instant) {
+        for k in 0..n {
+            let (len, from) = self.rx.got[k];
+            let Some(from) = from else { continue };
+            let bytes = &self.rx.bufs[k][..len.min(self.rx.bufs[k].len())];
+            // Rejected datagrams are counted by the session; nothing else to do here.
+            let _ = self.session.offer(bytes, from, rx_at);
         }
     }
-
-    /// Read whatever is already queued without waiting; the newest good datagram wins, every good
-    /// one it supersedes counts as skipped.
-    fn drain(&mut self) -> Result<Option<Accepted>, LinkError> {
-        self.sock.set_nonblocking(true).map_err(LinkError::Io)?;
-        let mut newest: Option<Accepted> = None;
-        let result = loop {
-            match self.sock.recv_from(&mut self.rx) {
-                Ok((n, from)) => {
-                    if let Some(mut a) = self.accept(n, from, Instant::now()) {
-                        if let Some(old) = newest.take() {
-                            self.diag.counters.skipped += 1;
-                            a.cycle.new_session |= old.cycle.new_session;
-                        }
-                        newest = Some(a);
-                    }
-                }
-                Err(e) if e.kind() == io::ErrorKind::WouldBlock => break Ok(newest),
-                Err(e) if is_transient(&e) => {}
-                Err(e) => break Err(LinkError::Io(e)),
-            }
-        };
-        self.sock.set_nonblocking(false).map_err(LinkError::Io)?;
-        result
-    }
-}
-
-/// A pose no controller can use (every component NaN).
-fn unusable() -> Pose {
-    Pose {
-        position: hal::Vector3::repeat(f64::NAN),
-        orientation: hal::UnitQuaternion::from_euler_angles(f64::NAN, f64::NAN, f64::NAN),
-    }
-}
-
-fn pose(v: [f64; 6]) -> Pose {
-    wire::pose_from_wire(v)
 }
 
 /// A UDP receive error that only means "nothing usable arrived yet" (timeout, signal, or an ICMP
@@ -604,88 +410,76 @@ impl RobotLink for RsiLink {
     /// The newest robot cycle. A cycle left unanswered is counted (`unanswered`) and forgotten.
     /// After [`ErrorKind::LinkLost`] the next call waits for a new session.
     fn next_cycle(&mut self) -> Result<Cycle, LinkError> {
-        if self.stopped {
+        if self.session.is_stopped() {
             return Err(LinkError::Stopped);
         }
-        if self.pending.take().is_some() {
-            self.diag.counters.unanswered += 1;
-        }
-        // A backlog (the application was late) is drained before waiting, so only its newest
-        // datagram is answered. The wait wakes on the first datagram to arrive; when the network
-        // delivered several at once (a burst after a stall), whatever else is queued already is read
-        // too and the newest answered — a reply to an older one would reach the robot stale.
-        let a = match self.drain()? {
-            Some(a) => a,
-            None => {
-                let first = self.wait_first()?;
-                match self.drain()? {
-                    Some(mut newer) => {
-                        self.diag.counters.skipped += 1;
-                        newer.cycle.new_session |= first.cycle.new_session;
-                        newer
+        let started = Instant::now();
+        let first_contact = self.session.config().first_contact_timeout;
+        loop {
+            let now = Instant::now();
+            let remaining = match self.session.wait_budget(now)? {
+                Some(d) => Some(d),
+                None => match first_contact {
+                    Some(t) => {
+                        let waited = now.duration_since(started);
+                        if waited >= t {
+                            return Err(LinkError::NoContact { waited });
+                        }
+                        Some(t - waited)
                     }
-                    None => first,
+                    None => None,
+                },
+            };
+            self.set_timeout(remaining)?;
+            // One call waits for the first datagram and takes the rest of a burst with it; a full
+            // batch means there may be more queued, read without waiting.
+            let mut wait = true;
+            loop {
+                match self.rx.recv(&self.sock, wait) {
+                    Ok(n) => {
+                        self.offer_batch(n, Instant::now());
+                        if n < BATCH {
+                            break;
+                        }
+                        wait = false;
+                    }
+                    Err(e) if is_transient(&e) => break,
+                    Err(e) => return Err(LinkError::Io(e)),
                 }
             }
-        };
-        self.pending = Some(Pending {
-            ipoc: a.ipoc,
-            rx_at: a.rx_at,
-            peer: a.peer,
-        });
-        Ok(a.cycle)
+            if let Some(c) = self.session.take_cycle() {
+                return Ok(c);
+            }
+        }
     }
 
     /// Shape the correction (non-finite → hold; envelope; rate), convert it to mm/deg (and to an
     /// increment in relative mode), and send `<Sen>` with the cycle's IPOC to the datagram's source.
     fn reply(&mut self, correction: &Correction) -> Result<(), LinkError> {
-        if self.stopped {
-            return Err(LinkError::Stopped);
-        }
-        if correction.stop && self.sen_slots.stop.is_none() {
-            return Err(LinkError::NoStopElement);
-        }
-        let p = self.pending.take().ok_or(LinkError::NoCycle)?;
-        let total = self.shaper.shape(correction, &mut self.diag.counters);
-        let (t, r) = split(total);
-        let wire_total = wire::offset_to_wire(&t, &r);
-        let out = match self.cfg.mode {
-            CorrectionMode::Absolute => wire_total,
-            CorrectionMode::Relative => core::array::from_fn(|i| wire_total[i] - self.last_wire[i]),
-        };
-        self.last_wire = wire_total;
-        if self.cfg.ethernet.onlysend {
-            self.diag.counters.suppressed += 1;
+        let Some(out) = self.session.reply(correction, &mut self.tx)? else {
             return Ok(());
-        }
-        for (slot, v) in self.sen_slots.rkorr.iter().zip(out) {
-            if let Some(s) = *slot {
-                self.tx_frame.set(s, v);
+        };
+        match self.sock.send_to(&self.tx[..out.len], out.to) {
+            Ok(_) => {
+                self.session.sent(Instant::now());
+                Ok(())
+            }
+            Err(e) => {
+                self.session.send_failed();
+                Err(LinkError::Io(e))
             }
         }
-        if let Some(s) = self.sen_slots.stop {
-            self.tx_frame
-                .set(s, if correction.stop { 1.0 } else { 0.0 });
-        }
-        self.tx_frame.set_ipoc(p.ipoc);
-        let n = self
-            .sen
-            .write(&self.tx_frame, &mut self.tx)
-            .map_err(LinkError::Encode)?;
-        if let Err(e) = self.sock.send_to(&self.tx[..n], p.peer) {
-            self.diag.counters.send_errors += 1;
-            return Err(LinkError::Io(e));
-        }
-        let turnaround = p.rx_at.elapsed();
-        self.diag.latency.record(turnaround);
-        let c = &mut self.diag.counters;
-        c.answered += 1;
-        if turnaround > self.cfg.late_after {
-            c.late += 1;
-        }
-        if correction.stop {
-            self.stopped = true;
-        }
-        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn link_and_session_can_move_to_another_thread() {
+        fn is_send<T: Send>() {}
+        is_send::<RsiLink>();
+        is_send::<RsiSession>();
     }
 }

@@ -59,9 +59,42 @@ pub fn mm_to_m(mm: f64) -> f64 {
     mm / MM_PER_M
 }
 
+/// The process channels' force (`FcCmd.F`, `FcState.F`) is in newtons on the wire, as in SI; this is
+/// still the one place where it crosses, so a robot program in other units changes only here.
+pub fn force_from_wire(n: f64) -> f64 {
+    n
+}
+
+/// The largest force magnitude written to the wire, N (a plausible sensor never reports more; it keeps
+/// every value inside plain fixed-point).
+pub const MAX_WIRE_FORCE: f64 = 1.0e6;
+
+/// Newtons → the wire's force (`FcState.F`). Never non-finite: NaN is written as 0 (no force known —
+/// the `FcState.State`/`Fault` fields say why), ±inf and anything beyond [`MAX_WIRE_FORCE`] are clamped.
+pub fn force_to_wire(n: f64) -> f64 {
+    if n.is_nan() {
+        0.0
+    } else {
+        n.clamp(-MAX_WIRE_FORCE, MAX_WIRE_FORCE)
+    }
+}
+
+/// The process channels' ramp time (`FcCmd.Ramp`) is in seconds on the wire, as in SI.
+pub fn seconds_from_wire(s: f64) -> f64 {
+    s
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn force_out_is_always_finite() {
+        assert_eq!(force_to_wire(19.98), 19.98);
+        assert_eq!(force_to_wire(f64::NAN), 0.0);
+        assert_eq!(force_to_wire(f64::INFINITY), MAX_WIRE_FORCE);
+        assert_eq!(force_to_wire(f64::NEG_INFINITY), -MAX_WIRE_FORCE);
+    }
 
     #[test]
     fn kuka_abc_is_zyx() {

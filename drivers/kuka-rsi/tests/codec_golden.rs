@@ -374,3 +374,116 @@ fn bad_configs_are_refused_with_a_reason() {
     assert_eq!(EthernetConfig::parse(&commented).unwrap(), cfg());
     assert!(Schema::new(Direction::Sen, "bad type", 4).is_err());
 }
+
+/// The process contract's example `<Rob>`: the spec's message with `FcCmd` before `IPOC`.
+const ROB_PROCESS: &str = r#"<Rob Type="KUKA"><RIst X="445.0000" Y="0.0000" Z="890.0000" A="180.0000" B="0.0000" C="180.0000"/><RSol X="445.0000" Y="0.0000" Z="890.0000" A="180.0000" B="0.0000" C="180.0000"/><AIPos A1="0.0000" A2="-90.0000" A3="90.0000" A4="0.0000" A5="90.0000" A6="0.0000"/><ASPos A1="0.0000" A2="-90.0000" A3="90.0000" A4="0.0000" A5="90.0000" A6="0.0000"/><Delay D="0"/><FcCmd Mode="1" F="20.00" Ramp="0.50" Seg="3"/><IPOC>123645634563</IPOC></Rob>"#;
+
+/// The process contract's example `<Sen>` (the spec's reply with `FcState`).
+const SEN_PROCESS: &str = r#"<Sen Type="ImFree"><RKorr X="0.0000" Y="0.0000" Z="0.0120" A="0.0000" B="0.0000" C="0.0000"/><Stop>0</Stop><FcState State="3" F="19.98" Fault="0"/><IPOC>123645634563</IPOC></Sen>"#;
+
+fn process_cfg() -> EthernetConfig {
+    cfg().with_process(kuka_rsi::ProcessChannels::default())
+}
+
+#[test]
+fn process_channels_golden_both_ways() {
+    use hal::{ProcessCommand, ProcessFault, ProcessMode, ProcessPhase, ProcessState};
+    use kuka_rsi::{CommandSlots, StateSlots};
+    let c = process_cfg();
+    // The config text round-trips with the new elements.
+    let xml = c.to_xml();
+    assert!(
+        xml.contains(r#"<ELEMENT TAG="FcCmd.Mode" TYPE="LONG" INDX="1" />"#),
+        "{xml}"
+    );
+    assert!(
+        xml.contains(r#"<ELEMENT TAG="FcState.F" TYPE="DOUBLE" INDX="9" HOLDON="1" />"#),
+        "{xml}"
+    );
+    assert_eq!(EthernetConfig::parse(&xml).unwrap(), c);
+
+    // <Rob> with FcCmd: parsed into SI, and written back byte for byte at precision 2 for FcCmd.
+    let rob = c.rob_schema(4).unwrap();
+    let cmd = CommandSlots::find(&rob).unwrap().unwrap();
+    let mut f = Frame::new();
+    rob.parse(ROB_PROCESS.as_bytes(), &mut f).unwrap();
+    assert_eq!(
+        cmd.decode(&f),
+        ProcessCommand {
+            mode: ProcessMode::Press,
+            force: 20.0,
+            ramp: 0.5,
+            segment: 3
+        }
+    );
+    // The robot writes FcCmd with its own precision; the simulated one uses the schema's.
+    let mut buf = [0u8; 2048];
+    let n = rob.write(&f, &mut buf).unwrap();
+    let back = core::str::from_utf8(&buf[..n]).unwrap();
+    assert!(
+        back.contains(
+            r#"<FcCmd Mode="1" F="20.0000" Ramp="0.5000" Seg="3"/><IPOC>123645634563</IPOC>"#
+        ),
+        "{back}"
+    );
+
+    // <Sen> with FcState: byte-exact, F with 2 decimals whatever the schema's precision.
+    let mut sen = c.sen_schema(4).unwrap();
+    let st = StateSlots::find(&mut sen).unwrap().unwrap();
+    let mut f = Frame::new();
+    f.set6(
+        sen.six("RKorr", POSE).unwrap(),
+        [0.0, 0.0, 0.012, 0.0, 0.0, 0.0],
+    );
+    f.set(sen.slot("Stop", "").unwrap(), 0.0);
+    st.encode(
+        &ProcessState {
+            phase: ProcessPhase::Pressing,
+            force: 19.98,
+            fault: ProcessFault::None,
+        },
+        &mut f,
+    );
+    f.set_ipoc(Ipoc::parse(b"123645634563").unwrap());
+    let n = sen.write(&f, &mut buf).unwrap();
+    assert_eq!(core::str::from_utf8(&buf[..n]).unwrap(), SEN_PROCESS);
+    let mut g = Frame::new();
+    sen.parse(SEN_PROCESS.as_bytes(), &mut g).unwrap();
+    assert_eq!(st.decode(&g).unwrap().phase, ProcessPhase::Pressing);
+
+    // The config without FcCmd does not need it, and ignores one that arrives.
+    let mut plain = Frame::new();
+    cfg()
+        .rob_schema(4)
+        .unwrap()
+        .parse(ROB_PROCESS.as_bytes(), &mut plain)
+        .unwrap();
+    assert_eq!(CommandSlots::find(&cfg().rob_schema(4).unwrap()), Ok(None));
+}
+
+#[test]
+fn process_values_that_break_the_contract_are_rejected() {
+    let rob = process_cfg().rob_schema(4).unwrap();
+    let mut f = Frame::new();
+    for (good, bad) in [
+        (r#"Mode="1""#, r#"Mode="PRESS""#),
+        (r#"Mode="1""#, r#"Mode="1.0""#),
+        (r#"F="20.00""#, r#"F="inf""#),
+        (r#"F="20.00""#, r#"F="2e1""#),
+        (r#"Seg="3""#, r#"Seg="99999999999999999999""#),
+    ] {
+        let msg = ROB_PROCESS.replace(good, bad);
+        assert!(
+            matches!(
+                rob.parse(msg.as_bytes(), &mut f),
+                Err(ParseError::BadNumber { .. })
+            ),
+            "{bad}"
+        );
+    }
+    let msg = ROB_PROCESS.replace(r#" Ramp="0.50""#, "");
+    assert!(matches!(
+        rob.parse(msg.as_bytes(), &mut f),
+        Err(ParseError::MissingElement { .. })
+    ));
+}

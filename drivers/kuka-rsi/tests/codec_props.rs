@@ -87,6 +87,63 @@ proptest! {
     }
 
     #[test]
+    fn process_channels_round_trip(
+        mode in -3i64..6,
+        force in -1.0e5f64..1.0e5,
+        ramp in 0.0f64..100.0,
+        seg in any::<i32>(),
+        phase in proptest::sample::select(vec![0i64, 1, 2, 3, 4, 9]),
+        fault in 0i64..=6,
+        measured in proptest::num::f64::ANY,
+    ) {
+        use hal::{ProcessCommand, ProcessFault, ProcessMode, ProcessPhase, ProcessState};
+        use kuka_rsi::{CommandSlots, ProcessChannels, StateSlots};
+        let c = EthernetConfig::forcecell([127, 0, 0, 1].into(), 49152, false)
+            .with_process(ProcessChannels::default());
+        // Robot -> PC.
+        let rob = c.rob_schema(4).unwrap();
+        let cs = CommandSlots::find(&rob).unwrap().unwrap();
+        let mut f = Frame::new();
+        for slot in 0..rob.slots() {
+            f.set(slot, 0.0);
+        }
+        let cmd = ProcessCommand { mode: ProcessMode::from_code(mode), force, ramp, segment: i64::from(seg) };
+        cs.encode(&cmd, &mut f);
+        f.set_ipoc(Ipoc::new(1));
+        let mut buf = [0u8; 2048];
+        let n = rob.write(&f, &mut buf).unwrap();
+        let mut back = Frame::new();
+        rob.parse(&buf[..n], &mut back).unwrap();
+        let got = cs.decode(&back);
+        prop_assert_eq!(got.mode, cmd.mode);
+        prop_assert_eq!(got.segment, cmd.segment);
+        prop_assert!((got.force - force).abs() <= 0.5e-4 + 1e-9);
+        prop_assert!((got.ramp - ramp).abs() <= 0.5e-4 + 1e-9);
+        // PC -> robot: any force, even NaN or inf, is written as a plain number with 2 decimals.
+        let mut sen = c.sen_schema(4).unwrap();
+        let ss = StateSlots::find(&mut sen).unwrap().unwrap();
+        let mut f = Frame::new();
+        for slot in 0..sen.slots() {
+            f.set(slot, 0.0);
+        }
+        let st = ProcessState {
+            phase: ProcessPhase::from_code(phase).unwrap(),
+            force: measured,
+            fault: ProcessFault::from_code(fault).unwrap(),
+        };
+        ss.encode(&st, &mut f);
+        f.set_ipoc(Ipoc::new(1));
+        let n = sen.write(&f, &mut buf).unwrap();
+        let mut back = Frame::new();
+        sen.parse(&buf[..n], &mut back).unwrap();
+        let got = ss.decode(&back).unwrap();
+        prop_assert_eq!(got.phase, st.phase);
+        prop_assert_eq!(got.fault, st.fault);
+        let expect = kuka_rsi::wire::force_to_wire(measured);
+        prop_assert!((got.force - expect).abs() <= 0.5e-2 + 1e-9, "{} -> {}", measured, got.force);
+    }
+
+    #[test]
     fn parser_never_panics_on_bytes(bytes in proptest::collection::vec(any::<u8>(), 0..600)) {
         let s = cfg().rob_schema(4).unwrap();
         let mut f = Frame::new();
