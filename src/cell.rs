@@ -84,6 +84,12 @@ pub struct RobotConfig {
     /// fault (`implausible`), never a control input.
     #[serde(default = "default_max_speed")]
     pub max_speed: f64,
+    /// The robot program commands the process over RSI's process channels (`FcCmd` in, `FcState`
+    /// out; `shared/specs/rsi-process.md`), as `forcecell rsi-config` configures a robot by default.
+    /// Used when `ethernet_config` is not given (a given file says it itself). `false`: force
+    /// control from the first cycle at the tuning's set-point.
+    #[serde(default)]
+    pub process: bool,
 }
 
 /// Correction mode by name.
@@ -482,7 +488,12 @@ impl CellConfig {
                 let IpAddr::V4(ip) = r.listen.ip() else {
                     bail!("robot.listen must be an IPv4 address (RSI is IPv4)");
                 };
-                EthernetConfig::forcecell(ip, r.listen.port(), relative)
+                let e = EthernetConfig::forcecell(ip, r.listen.port(), relative);
+                if r.process {
+                    e.with_process(kuka_rsi::ProcessChannels::default())
+                } else {
+                    e
+                }
             }
         };
         let mut lc = LinkConfig::new(ethernet, RobotFilter::Ip(r.robot_ip));
@@ -589,7 +600,6 @@ where
     S::Error: Send + Sync + 'static,
 {
     let law = tuning.law.build().map_err(|e| anyhow!(e))?;
-    let f_r = law.set_point();
     let orientation = shared_orientation();
     let robot = OrientationTap::new(robot, orientation.clone());
     let sensor = CompensatedSensor::new(sensor, cfg.compensator(), orientation);
@@ -602,13 +612,17 @@ where
         match lp.cycle() {
             Ok(r) => {
                 if let Some(tx) = &mut recorder {
-                    let mut rec = Record::from_report(&r, f_r, 0);
+                    let segment = r
+                        .cycle
+                        .process
+                        .map_or(0, |p| p.segment.clamp(0, u32::MAX as i64) as u32);
+                    let mut rec = Record::from_report(&r, r.set_point, segment);
                     if let Some(raw) = lp.sensor_mut().last_raw() {
                         rec.wrench_raw = raw.to_array();
                     }
                     tx.push(rec);
                 } else {
-                    rows.push(Row::from_report(&r, f_r));
+                    rows.push(Row::from_report(&r, r.set_point));
                 }
                 if cfg.duration.is_some_and(|d| r.cycle.t >= d) {
                     break (format!("{} s of robot time done", r.cycle.t), CellEnd::Done);

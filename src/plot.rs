@@ -74,7 +74,9 @@ fn panel_over(
         .iter()
         .map(xv)
         .filter(|v| v.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(v), b.max(v))
+        });
     let (x_lo, x_hi) = if x_lo.is_finite() && x_hi > x_lo {
         (x_lo.min(0.0), x_hi)
     } else {
@@ -233,8 +235,8 @@ pub fn write_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
     Ok(())
 }
 
-/// Write the plot of a programmed pass along the path (mm): force against the program's `F` and the
-/// active set-point, the process state the program saw, and the segment.
+/// Write the plot of a programmed pass: force against the program's `F` and the set-point in effect,
+/// the process state the program saw, its segment and the tool's position along the path, over time.
 pub fn write_pass_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
     fonts();
     std::fs::File::create(path).map_err(|e| {
@@ -247,19 +249,17 @@ pub fn write_pass_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
         .filter(|r| r.phase != crate::record::NO_PROCESS)
         .cloned()
         .collect();
-    let along: Axis = ("path position s [mm]", |r| r.s * 1e3);
-    let root = BitMapBackend::new(path, (1200, 900)).into_drawing_area();
+    let root = BitMapBackend::new(path, (1200, 1100)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| anyhow!("plot: {e}"))?;
     let root = root
         .titled(title, ("sans-serif", 24).into_font())
         .map_err(|e| anyhow!("plot: {e}"))?;
-    let (top, bottom) = root.split_vertically(450);
-    let lower = bottom.split_evenly((2, 1));
-    panel_over(
+    let (top, bottom) = root.split_vertically(440);
+    let lower = bottom.split_evenly((3, 1));
+    panel(
         &top,
         &rows,
-        along,
-        "contact force along the path",
+        "contact force",
         "force [N]",
         &[
             Line {
@@ -269,7 +269,7 @@ pub fn write_pass_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
                 value: |r| r.f_true,
             },
             Line {
-                label: "F commanded (FcCmd)",
+                label: "F commanded (FcCmd.F)",
                 color: BLACK,
                 width: 1,
                 value: |r| r.f_cmd,
@@ -282,10 +282,9 @@ pub fn write_pass_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
             },
         ],
     )?;
-    panel_over(
+    panel(
         &lower[0],
         &rows,
-        along,
         "process state (FcState: 0 OFF, 1 APPROACH, 2 RAMP, 3 PRESSING, 4 RELEASE, 9 FAULT)",
         "state",
         &[Line {
@@ -295,10 +294,9 @@ pub fn write_pass_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
             value: |r| f64::from(r.phase),
         }],
     )?;
-    panel_over(
+    panel(
         &lower[1],
         &rows,
-        along,
         "program segment (FcCmd.Seg)",
         "segment",
         &[Line {
@@ -306,6 +304,18 @@ pub fn write_pass_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
             color: GREEN_,
             width: 2,
             value: |r| r.segment as f64,
+        }],
+    )?;
+    panel(
+        &lower[2],
+        &rows,
+        "tool along the path",
+        "s [mm]",
+        &[Line {
+            label: "path position",
+            color: PURPLE_,
+            width: 2,
+            value: |r| r.s * 1e3,
         }],
     )?;
     root.present().map_err(|e| anyhow!("plot: {e}"))?;

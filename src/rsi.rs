@@ -45,6 +45,12 @@ pub struct RsiArgs {
     /// simulator); the simulated sensor computes force from the pose that client reports.
     #[arg(long, value_name = "ADDR:PORT")]
     pub external_robot: Option<SocketAddr>,
+    /// With `--external-robot`: the client runs its own robot program over the process channels
+    /// (sends `FcCmd`, reads `FcState`, as `forcecell rsi-config` configures a robot by default); the
+    /// run lasts until it ends its session. Without it the client sends plain `<Rob>` datagrams and
+    /// gets the scenario's own course (its program, if it has one, run on the client's behalf).
+    #[arg(long, requires = "external_robot")]
+    pub process_channels: bool,
 }
 
 /// The default wire: the RSI driver against the simulated KUKA controller over loopback UDP, in lockstep.
@@ -54,6 +60,7 @@ impl Default for RsiArgs {
             robot: RobotBackend::Rsi,
             realtime: false,
             external_robot: None,
+            process_channels: false,
         }
     }
 }
@@ -198,7 +205,7 @@ impl RobotSide {
     /// The robot the options ask for.
     pub fn start(spec: &RunSpec, args: &RsiArgs) -> Result<Self> {
         if let Some(addr) = args.external_robot {
-            return Self::external(spec, addr);
+            return Self::external(spec, addr, args.process_channels);
         }
         match args.robot {
             RobotBackend::Inproc if args.realtime => {
@@ -233,7 +240,12 @@ impl RobotSide {
     fn simulated(spec: &RunSpec, realtime: bool) -> Result<Self> {
         let world = spec.world();
         let local = SocketAddr::from((Ipv4Addr::LOCALHOST, 0));
-        let ethernet = EthernetConfig::forcecell(Ipv4Addr::LOCALHOST, 0, false);
+        let mut ethernet = EthernetConfig::forcecell(Ipv4Addr::LOCALHOST, 0, false);
+        // A scenario with a robot program runs it on the simulated controller, over the process
+        // channels as a robot configured by `forcecell rsi-config` would.
+        if spec.scenario.program.is_some() {
+            ethernet = ethernet.with_process(ProcessChannels::default());
+        }
         let (limits, poscorr, poscorrmon) = cell_limits(&spec.tuning.loop_cfg);
         let mut lc = LinkConfig::new(ethernet.clone(), RobotFilter::Any);
         lc.bind = Some(local);
@@ -292,7 +304,7 @@ impl RobotSide {
         })
     }
 
-    fn external(spec: &RunSpec, addr: SocketAddr) -> Result<Self> {
+    fn external(spec: &RunSpec, addr: SocketAddr, process: bool) -> Result<Self> {
         let mut spec = spec.clone();
         // The client is the clock and the inner loop: the world just follows what it reports.
         spec.plant = InnerLoopModel {
@@ -307,7 +319,10 @@ impl RobotSide {
             std::net::IpAddr::V4(ip) => ip,
             std::net::IpAddr::V6(_) => bail!("RSI is IPv4: give an IPv4 ADDR:PORT"),
         };
-        let ethernet = EthernetConfig::forcecell(ip, addr.port(), false);
+        let mut ethernet = EthernetConfig::forcecell(ip, addr.port(), false);
+        if process {
+            ethernet = ethernet.with_process(ProcessChannels::default());
+        }
         let (limits, poscorr, poscorrmon) = cell_limits(&spec.tuning.loop_cfg);
         let mut lc = LinkConfig::new(ethernet, RobotFilter::Any);
         lc.limits = limits;
