@@ -306,6 +306,10 @@ impl RobotSide {
 
     fn external(spec: &RunSpec, addr: SocketAddr, process: bool) -> Result<Self> {
         let mut spec = spec.clone();
+        if process {
+            // The client runs its own robot program: the scenario's is not run on its behalf.
+            spec.scenario.program = None;
+        }
         // The client is the clock and the inner loop: the world just follows what it reports.
         spec.plant = InnerLoopModel {
             period: 0.004,

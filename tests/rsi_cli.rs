@@ -241,10 +241,11 @@ fn sim_over_rsi_matches_the_in_process_robot() {
     assert!(o.status.success(), "{}", text(&o.stderr));
     let out = text(&o.stdout);
     assert!(
-        out.contains("RSI link: 2000 received, 2000 answered"),
-        "{out}"
+        out.contains("RSI link: 2001 received, 2001 answered"),
+        "2000 steps and the Stop that ends the session: {out}"
     );
-    assert!(out.contains("2000 good, 0 late"), "{out}");
+    assert!(out.contains("2001 good, 0 late"), "{out}");
+    assert!(out.contains("ended Stopped"), "{out}");
     let o = forcecell(&["sim", "--robot", "inproc", "--out", "mem"], dir.path());
     assert!(o.status.success(), "{}", text(&o.stderr));
     assert!(!text(&o.stdout).contains("RSI link"));
@@ -315,8 +316,13 @@ fn sim_with_an_external_robot_client() {
     assert!(o.status.success(), "{}", text(&o.stderr));
     let out = text(&o.stdout);
     assert!(out.contains("listening for an RSI client"), "{out}");
-    assert!(out.contains("500 answered"), "{out}");
+    assert!(out.contains("501 answered"), "500 steps, then Stop: {out}");
     assert!(report.good >= 500, "{report:?}");
+    assert_eq!(
+        report.end,
+        sim::KrcEnd::Stopped,
+        "the session ends with <Stop>1</Stop>, not silence: {report:?}"
+    );
     // The client's reported pose drove the simulated sensor: contact was made and force controlled.
     // Without --tuning, an external robot runs the robust tuning.
     assert!(out.contains("tuning robust"), "{out}");

@@ -1,0 +1,176 @@
+//! The dry run against an RSI client that is not ours: a plain UDP socket that writes `<Rob>` by hand,
+//! moves like a stiff arm (the measured pose is the programmed one plus the last correction), and reads
+//! the replies with string matching — no forcecell codec on this side.
+
+use std::net::UdpSocket;
+use std::path::Path;
+use std::process::{Child, Command, Output, Stdio};
+use std::time::Duration;
+
+/// Start `forcecell sim --external-robot` on a free loopback port.
+fn start(dir: &Path, extra: &[&str]) -> (Child, String) {
+    let port = UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let listen = format!("127.0.0.1:{port}");
+    let mut args = vec!["sim", "--external-robot", &listen, "--out", "dry"];
+    args.extend_from_slice(extra);
+    let child = Command::new(env!("CARGO_BIN_EXE_forcecell"))
+        .args(&args)
+        .current_dir(dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    (child, listen)
+}
+
+/// The hand-written robot.
+struct Robot {
+    sock: UdpSocket,
+    ipoc: u64,
+    /// The correction along the tool's z in effect, mm.
+    z_corr: f64,
+}
+
+impl Robot {
+    fn connect(to: &str) -> Self {
+        let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+        sock.connect(to).unwrap();
+        sock.set_read_timeout(Some(Duration::from_millis(200))).unwrap();
+        Self {
+            sock,
+            ipoc: 5_000_000,
+            z_corr: 0.0,
+        }
+    }
+
+    /// One cycle: send `<Rob>` (with `fc` inside if given), wait for the reply. The tool points down
+    /// (A 180, C 180): its +z is the base's −Z, so a correction of +z mm lowers the measured Z.
+    fn cycle(&mut self, fc: Option<&str>) -> Option<String> {
+        let z_sol = 890.0;
+        let z_ist = z_sol - self.z_corr;
+        let rob = format!(
+            "<Rob Type=\"KUKA\"><RIst X=\"445.0000\" Y=\"0.0000\" Z=\"{z_ist:.4}\" A=\"180.0000\" B=\"0.0000\" C=\"180.0000\"/>\
+             <RSol X=\"445.0000\" Y=\"0.0000\" Z=\"{z_sol:.4}\" A=\"180.0000\" B=\"0.0000\" C=\"180.0000\"/>\
+             <Delay D=\"0\"/>{}<IPOC>{}</IPOC></Rob>",
+            fc.unwrap_or(""),
+            self.ipoc
+        );
+        let mut buf = [0u8; 2048];
+        // The server may still be starting: resend until it answers (bounded).
+        for _ in 0..100 {
+            self.sock.send(rob.as_bytes()).unwrap();
+            if let Ok(n) = self.sock.recv(&mut buf) {
+                let sen = String::from_utf8_lossy(&buf[..n]).into_owned();
+                self.ipoc += 4;
+                self.z_corr = attr(&sen, "RKorr", "Z").expect("every reply corrects");
+                return Some(sen);
+            }
+        }
+        None
+    }
+}
+
+/// The value of `name="…"` in the first `<tag …>` of `xml`.
+fn attr(xml: &str, tag: &str, name: &str) -> Option<f64> {
+    let start = xml.find(&format!("<{tag} "))?;
+    let el = &xml[start..start + xml[start..].find('>')?];
+    let at = el.find(&format!(" {name}=\""))? + name.len() + 3;
+    el[at..at + el[at..].find('"')?].parse().ok()
+}
+
+fn finish(child: Child) -> Output {
+    child.wait_with_output().unwrap()
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+#[test]
+fn a_client_with_its_own_program_presses_holds_releases_and_ends_its_session() {
+    let dir = tempfile::tempdir().unwrap();
+    let (child, listen) = start(
+        dir.path(),
+        &["--scenario", "pass-flat-20n", "--process-channels"],
+    );
+    let mut robot = Robot::connect(&listen);
+    let fc = |mode: u8, f: f64| format!("<FcCmd Mode=\"{mode}\" F=\"{f:.2}\" Ramp=\"0.30\" Seg=\"7\"/>");
+    let mut states = Vec::new();
+    let mut pressing_forces = Vec::new();
+    let mut step = |robot: &mut Robot, mode: u8| {
+        let sen = robot.cycle(Some(&fc(mode, 20.0))).expect("forcecell answers");
+        let state = attr(&sen, "FcState", "State").expect("every reply carries FcState") as u8;
+        let f = attr(&sen, "FcState", "F").unwrap();
+        if states.last() != Some(&state) {
+            states.push(state);
+        }
+        (state, f)
+    };
+    for _ in 0..10 {
+        assert_eq!(step(&mut robot, 0).0, 0, "OFF");
+    }
+    // PRESS, then wait for PRESSING (the KRL template's WAIT FOR, bounded).
+    let mut n = 0;
+    while step(&mut robot, 1).0 != 3 {
+        n += 1;
+        assert!(n < 5000, "no PRESSING within 20 s of robot time: {states:?}");
+    }
+    for _ in 0..250 {
+        let (state, f) = step(&mut robot, 1);
+        assert_eq!(state, 3);
+        pressing_forces.push(f);
+    }
+    // RELEASE, then wait for OFF.
+    let mut n = 0;
+    while step(&mut robot, 2).0 != 0 {
+        n += 1;
+        assert!(n < 5000, "no OFF after RELEASE: {states:?}");
+    }
+    for _ in 0..10 {
+        step(&mut robot, 0);
+    }
+    let final_corr = robot.z_corr;
+    drop(robot); // RSI_OFF: the robot falls silent.
+    let o = finish(child);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(text(&o.stdout).contains("the robot ended its session"), "{}", text(&o.stdout));
+    assert_eq!(states, [0, 1, 2, 3, 4, 0], "the states the program saw");
+    assert!(
+        pressing_forces.iter().all(|f| (f - 20.0).abs() <= 1.0),
+        "FcState.F while pressing: {pressing_forces:?}"
+    );
+    assert_eq!(final_corr, 0.0, "the correction is back at zero");
+}
+
+#[test]
+fn a_client_without_fc_cmd_gets_the_scenarios_program_and_then_stop() {
+    let dir = tempfile::tempdir().unwrap();
+    let (child, listen) = start(dir.path(), &["--scenario", "pass-flat-20n", "--check"]);
+    let mut robot = Robot::connect(&listen);
+    let mut last = String::new();
+    let mut deepest: f64 = 0.0;
+    for _ in 0..10_000 {
+        let Some(sen) = robot.cycle(None) else { break };
+        assert!(!sen.contains("FcState"), "no process channels configured");
+        deepest = deepest.max(robot.z_corr);
+        let stop = sen.contains("<Stop>1</Stop>");
+        last = sen;
+        if stop {
+            break;
+        }
+    }
+    assert!(last.contains("<Stop>1</Stop>"), "the session ends with Stop: {last}");
+    let o = finish(child);
+    let out = text(&o.stdout);
+    assert!(o.status.success(), "{out}\n{}", text(&o.stderr));
+    // The virtual part sits 1 mm beyond where the session started: the tool reached it and pressed
+    // (20 N on 10 N/mm is 2 mm more), within POSCORR's 5 mm.
+    assert!(deepest > 2.5 && deepest < 5.0, "deepest correction {deepest} mm");
+    assert!(out.contains("pressing_in_band_pct"), "{out}");
+    assert!(!out.contains("FAIL"), "{out}");
+    assert_eq!(robot.z_corr, 0.0, "the correction is back at zero");
+}
