@@ -5,4 +5,5 @@
 
 pub mod metrics;
 pub mod record;
+pub mod run;
 pub mod scenario;
