@@ -70,6 +70,29 @@ impl ContactParams {
     }
 }
 
+/// The detector's thresholds for one step, scaled to the set-point and the measured noise (see
+/// [`ContactMachine::thresholds`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Thresholds {
+    /// Conditioned force that means contact, N.
+    pub contact: f64,
+    /// Raw force below which a sample counts towards a lift-off, N.
+    pub lift: f64,
+    /// Consecutive samples below `lift` a lift-off needs (never one: a single bad or zero sample, or
+    /// the first sample after a dropout, is not a lift-off; more under noise).
+    pub samples: u32,
+}
+
+/// Speeds out of contact for one step, bounded by what the cell can stop (see
+/// [`ContactMachine::speeds`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Speeds {
+    /// Approach and slow search, m/s.
+    pub approach: f64,
+    /// Fast search after a loss of contact, m/s.
+    pub reacquire: f64,
+}
+
 /// What a step of the state machine did.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Transition {
@@ -91,8 +114,9 @@ pub enum Transition {
 pub struct ContactMachine {
     p: ContactParams,
     state: ContactState,
-    /// Time the raw force has been below the lift force, s.
+    /// Time the raw force has been below the lift force, s, and for how many samples.
     below: f64,
+    below_samples: u32,
     /// Distance travelled in the current re-acquire or retract, m.
     travelled: f64,
     /// Time since contact was last detected, s.
@@ -108,6 +132,7 @@ impl ContactMachine {
             p,
             state: ContactState::Approach,
             below: 0.0,
+            below_samples: 0,
             travelled: 0.0,
             in_contact: f64::INFINITY,
             v_lost: 0.0,
@@ -125,9 +150,15 @@ impl ContactMachine {
     pub fn reset(&mut self) {
         self.state = ContactState::Approach;
         self.below = 0.0;
+        self.below_samples = 0;
         self.travelled = 0.0;
         self.in_contact = f64::INFINITY;
         self.v_lost = 0.0;
+    }
+
+    /// Whether the contact has lasted longer than a bounce (a steady contact), s.
+    pub fn steady(&self) -> bool {
+        self.state == ContactState::Contact && self.in_contact >= self.p.bounce_time
     }
 
     /// The state.
@@ -135,9 +166,49 @@ impl ContactMachine {
         self.state
     }
 
+    /// The thresholds for set-point `f_r` (N) and the conditioned force's noise `sigma_ff` (N) and the
+    /// raw force's `sigma` (N): `contact_force` and `lift_force` as configured for a set-point of at
+    /// least twice `contact_force`, scaled down with a smaller set-point (contact at half of it), and
+    /// raised to four standard deviations of the conditioned force's noise; a lift-off needs two
+    /// samples, and one more per `lift_force` of raw noise.
+    pub fn thresholds(&self, f_r: f64, sigma: f64, sigma_ff: f64) -> Thresholds {
+        let c = &self.p;
+        let contact = c.contact_force.min(0.5 * f_r).max(4.0 * sigma_ff);
+        let lift = c.lift_force * contact / c.contact_force;
+        let extra = (sigma / lift.max(1e-9)).ceil().min(64.0);
+        Thresholds {
+            contact,
+            lift,
+            samples: 2 + extra as u32,
+        }
+    }
+
+    /// Speeds for stiffness estimate `k` (N/m), set-point `f_r` (N), force limit `max_force` (N) and
+    /// stopping time `stop` (s: after a stop command the tool still travels for the delay and one
+    /// cycle): the approach and the slow search no faster than stops within `2·f_r`, the fast search
+    /// no faster than stops below the force limit.
+    pub fn speeds(&self, k: f64, f_r: f64, max_force: f64, stop: f64) -> Speeds {
+        let c = &self.p;
+        let per_newton = 1.0 / (k * stop).max(1e-12);
+        let approach = c
+            .approach_speed
+            .min(2.0 * f_r.max(c.contact_force) * per_newton);
+        Speeds {
+            approach,
+            reacquire: c.reacquire_speed.min(max_force * per_newton).max(approach),
+        }
+    }
+
     /// Advance with this step's signals; `max_force` is the force limit, N, and `receding` the observed
     /// surface's velocity away from the tool, m/s.
-    pub fn step(&mut self, s: &Signals, max_force: f64, receding: f64, dt: f64) -> Transition {
+    pub fn step(
+        &mut self,
+        s: &Signals,
+        th: &Thresholds,
+        max_force: f64,
+        receding: f64,
+        dt: f64,
+    ) -> Transition {
         let c = self.p;
         if s.ff > max_force && self.state != ContactState::Retract {
             self.state = ContactState::Retract;
@@ -148,21 +219,21 @@ impl ContactMachine {
             ContactState::Approach | ContactState::Reacquire => {
                 // The conditioned force, confirmed by the raw one (the filter still remembers a
                 // contact just lost), or one strong raw sample.
-                if (s.ff >= c.contact_force && s.f >= c.lift_force)
-                    || s.f >= c.strong_contact * c.contact_force
-                {
+                if (s.ff >= th.contact && s.f >= th.lift) || s.f >= c.strong_contact * th.contact {
                     let from_approach = self.state == ContactState::Approach;
                     self.state = ContactState::Contact;
                     self.below = 0.0;
+                    self.below_samples = 0;
                     self.in_contact = 0.0;
                     return Transition::Contact { from_approach };
                 }
             }
             ContactState::Contact => {
                 self.in_contact += dt;
-                if s.f < c.lift_force {
+                if s.f < th.lift {
                     self.below += dt;
-                    if self.below >= c.lift_time {
+                    self.below_samples += 1;
+                    if self.below >= c.lift_time && self.below_samples >= th.samples {
                         self.state = ContactState::Reacquire;
                         // The fast search is for a surface that went away. A contact lost while the
                         // tool itself was moving away (the law's own answer to a force jump), or lost
@@ -179,10 +250,11 @@ impl ContactMachine {
                     }
                 } else {
                     self.below = 0.0;
+                    self.below_samples = 0;
                 }
             }
             ContactState::Retract => {
-                if self.travelled >= c.retract_distance && s.ff < c.lift_force {
+                if self.travelled >= c.retract_distance && s.ff < th.lift {
                     self.state = ContactState::Approach;
                 }
             }
@@ -192,23 +264,23 @@ impl ContactMachine {
 
     /// The command out of contact (`None` in contact): from the last command `u` and the measured
     /// position `x`, never more than `anchor` (s at approach speed) ahead of the robot.
-    pub fn command(&mut self, x: f64, u: f64, anchor: f64, dt: f64) -> Option<f64> {
+    pub fn command(&mut self, x: f64, u: f64, sp: &Speeds, anchor: f64, dt: f64) -> Option<f64> {
         let c = self.p;
         match self.state {
             ContactState::Approach => {
-                let gap = c.approach_speed * anchor;
-                Some((u + c.approach_speed * dt).min(x + gap))
+                let gap = sp.approach * anchor;
+                Some((u + sp.approach * dt).min(x + gap))
             }
             ContactState::Reacquire => {
                 // Fast first; then at approach speed, or faster when the surface was seen receding at
                 // lift-off (a receding surface outruns a slow search).
                 let speed = if self.travelled < c.reacquire_distance {
-                    c.reacquire_speed
+                    sp.reacquire
                 } else {
-                    (c.approach_speed + 1.5 * self.v_lost).min(c.reacquire_speed)
+                    (sp.approach + 1.5 * self.v_lost).min(sp.reacquire)
                 };
                 self.travelled += speed * dt;
-                let gap = c.reacquire_distance + c.approach_speed * anchor;
+                let gap = c.reacquire_distance + sp.approach * anchor;
                 Some((u + speed * dt).min(x + gap))
             }
             ContactState::Retract => {
@@ -239,6 +311,16 @@ mod tests {
         }
     }
 
+    const TH: Thresholds = Thresholds {
+        contact: 1.0,
+        lift: 0.3,
+        samples: 2,
+    };
+    const SP: Speeds = Speeds {
+        approach: 0.002,
+        reacquire: 0.05,
+    };
+
     fn sig(f: f64, ff: f64) -> Signals {
         Signals {
             x: 0.0,
@@ -253,29 +335,59 @@ mod tests {
     #[test]
     fn contact_lift_off_after_lift_time_and_force_limit() {
         let mut m = ContactMachine::new(params());
-        assert_eq!(m.step(&sig(0.5, 0.5), 60.0, 0.0, 1e-3), Transition::None);
         assert_eq!(
-            m.step(&sig(1.2, 1.1), 60.0, 0.0, 1e-3),
+            m.step(&sig(0.5, 0.5), &TH, 60.0, 0.0, 1e-3),
+            Transition::None
+        );
+        assert_eq!(
+            m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3),
             Transition::Contact {
                 from_approach: true
             }
         );
         // One low sample is not a lift-off; `lift_time` of them is.
-        assert_eq!(m.step(&sig(0.0, 1.0), 60.0, 0.0, 1e-3), Transition::None);
-        assert_eq!(m.step(&sig(5.0, 1.0), 60.0, 0.0, 1e-3), Transition::None);
-        m.step(&sig(0.0, 1.0), 60.0, 0.0, 1e-3);
-        assert_eq!(m.step(&sig(0.0, 1.0), 60.0, 0.0, 1e-3), Transition::LiftOff);
+        assert_eq!(
+            m.step(&sig(0.0, 1.0), &TH, 60.0, 0.0, 1e-3),
+            Transition::None
+        );
+        assert_eq!(
+            m.step(&sig(5.0, 1.0), &TH, 60.0, 0.0, 1e-3),
+            Transition::None
+        );
+        m.step(&sig(0.0, 1.0), &TH, 60.0, 0.0, 1e-3);
+        assert_eq!(
+            m.step(&sig(0.0, 1.0), &TH, 60.0, 0.0, 1e-3),
+            Transition::LiftOff
+        );
         assert_eq!(m.state(), ContactState::Reacquire);
         // A bounce: the search goes on at approach speed.
-        let u = m.command(0.0, 0.0, 0.1, 1e-3).unwrap();
+        let u = m.command(0.0, 0.0, &SP, 0.1, 1e-3).unwrap();
         assert!((u - 0.002e-3).abs() < 1e-15, "{u}");
         assert_eq!(
-            m.step(&sig(70.0, 61.0), 60.0, 0.0, 1e-3),
+            m.step(&sig(70.0, 61.0), &TH, 60.0, 0.0, 1e-3),
             Transition::ForceLimit
         );
-        assert!(m.command(0.0, 0.0, 0.1, 1e-3).unwrap() < 0.0);
+        assert!(m.command(0.0, 0.0, &SP, 0.1, 1e-3).unwrap() < 0.0);
         m.reset();
         assert_eq!(m.state(), ContactState::Approach);
+    }
+
+    #[test]
+    fn thresholds_scale_with_set_point_and_noise_and_speeds_with_stiffness() {
+        let m = ContactMachine::new(params());
+        assert_eq!(m.thresholds(5.0, 0.0, 0.0), TH);
+        let small = m.thresholds(1.0, 0.0, 0.0);
+        assert!((small.contact - 0.5).abs() < 1e-12 && (small.lift - 0.15).abs() < 1e-12);
+        let noisy = m.thresholds(5.0, 1.0, 0.4);
+        assert!(
+            (noisy.contact - 1.6).abs() < 1e-12 && noisy.samples > 3,
+            "{noisy:?}"
+        );
+        // 70 kN/m, 16 ms to stop: 2·5 N is 8.9 mm/s, 60 N is 54 mm/s.
+        assert_eq!(m.speeds(70_000.0, 5.0, 60.0, 0.016), SP);
+        let stiff = m.speeds(500_000.0, 5.0, 60.0, 0.016);
+        assert!((stiff.approach - 0.00125).abs() < 1e-12);
+        assert!((stiff.reacquire - 0.0075).abs() < 1e-12);
     }
 
     #[test]

@@ -21,6 +21,9 @@ use crate::onset::OnsetFit;
 pub struct IdentifyParams {
     /// How long after contact is declared the contact transient is fitted, s.
     pub onset_window: f64,
+    /// How long the transient after a jump in a steady contact on a still surface (a stiffness
+    /// change, a surface step) is fitted to re-identify `k̂_c`, s.
+    pub refit_window: f64,
     /// Forgetting time of the steady-contact estimator, s.
     pub steady_memory: f64,
     /// How long the steady-contact estimator must have run before it is used, s.
@@ -37,6 +40,7 @@ impl Default for IdentifyParams {
     fn default() -> Self {
         Self {
             onset_window: 0.1,
+            refit_window: 0.3,
             steady_memory: 3600.0,
             steady_min_age: 1.0,
             steady_confidence: 0.1,
@@ -50,6 +54,7 @@ impl IdentifyParams {
     /// Checks the values.
     pub fn validate(&self) -> Result<(), String> {
         positive("identify.onset_window", self.onset_window)?;
+        positive("identify.refit_window", self.refit_window)?;
         positive("identify.steady_memory", self.steady_memory)?;
         positive("identify.steady_min_age", self.steady_min_age)?;
         positive("identify.steady_confidence", self.steady_confidence)?;
@@ -83,6 +88,13 @@ pub struct Identifier {
     steady: SteadyEstimator,
     /// The variance the steady-contact estimator starts with, N².
     steady_var0: f64,
+    /// How long the force has been out of its band, s, and whether the contact was calm (steady, on a
+    /// still surface, nothing being fitted) when it left.
+    off_band: f64,
+    calm_at_start: bool,
+    /// Where the transient being re-fitted started, `(x, f)`: its fit is taken at the window's end
+    /// only, and only if the surface stayed still (a surface that starts moving makes a transient too).
+    refit_from: Option<(f64, f64)>,
 }
 
 impl Identifier {
@@ -94,6 +106,9 @@ impl Identifier {
             onset: OnsetFit::new(),
             steady: SteadyEstimator::new(p.steady_memory),
             steady_var0: f64::INFINITY,
+            off_band: 0.0,
+            calm_at_start: false,
+            refit_from: None,
         }
     }
 
@@ -109,6 +124,20 @@ impl Identifier {
         self.onset.clear();
         self.steady.stop();
         self.steady_var0 = f64::INFINITY;
+        self.off_band = 0.0;
+        self.refit_from = None;
+    }
+
+    /// Count whether the force is out of its band this step (`calm`: the contact is steady, on a
+    /// still surface); true when it has just been out for `persist` s after leaving it in a calm
+    /// contact (noise leaves the band for a sample, a changed environment for a transient).
+    pub fn excursion(&mut self, off: bool, calm: bool, persist: f64, dt: f64) -> bool {
+        let before = self.off_band;
+        if off && before == 0.0 {
+            self.calm_at_start = calm;
+        }
+        self.off_band = if off { self.off_band + dt } else { 0.0 };
+        self.calm_at_start && before < persist && self.off_band >= persist && !self.fitting()
     }
 
     /// `k̂_c`, N/m.
@@ -131,6 +160,22 @@ impl Identifier {
         }
         self.steady.stop();
         self.steady_var0 = f64::INFINITY;
+    }
+
+    /// The force jumped in a steady contact on a still surface at `(x, f)`: the environment changed
+    /// (a stiffness change, a surface step). Fit the transient that follows, as at a contact onset: the
+    /// samples lie on the new spring line whatever moved. The recursion restarts there, agile.
+    pub fn refit(&mut self, x: f64, f: f64) {
+        self.onset.clear();
+        self.onset.begin(x, self.est.scale(), self.p.refit_window);
+        self.refit_from = Some((x, f));
+        self.steady.stop();
+        self.steady_var0 = f64::INFINITY;
+    }
+
+    /// Whether a transient is being fitted.
+    pub fn fitting(&self) -> bool {
+        self.onset.active() || self.refit_from.is_some()
     }
 
     /// Contact is lost: the transient is over.
@@ -156,15 +201,31 @@ impl Identifier {
     ) -> Identified {
         if moving {
             self.onset.stop();
+            self.refit_from = None;
         }
         let onset = self.onset.active();
         if onset && !first {
             self.onset.add(x, f, dt);
         }
-        let fit = if onset {
-            self.onset.fit(noise_var)
-        } else {
-            None
+        let fit = match self.refit_from {
+            // A contact onset: the fit so far, every step.
+            None if onset => self.onset.fit(noise_var),
+            None => None,
+            Some(_) if self.onset.active() => None,
+            // A re-fit: once, at the window's end, if significant.
+            Some((x0, f0)) => {
+                self.refit_from = None;
+                let scale = self.est.scale();
+                self.onset
+                    .fit(noise_var)
+                    .filter(|fit| {
+                        fit.b > 0.0
+                            && fit.var_b.sqrt() <= self.p.steady_confidence * fit.b
+                            && (fit.b / scale - self.est.kc()).abs()
+                                > self.p.steady_confidence * self.est.kc()
+                    })
+                    .inspect(|_| self.est.begin_contact(x0, f0))
+            }
         };
         match fit {
             Some(fit) => {

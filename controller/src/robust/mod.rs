@@ -169,6 +169,15 @@ impl RobustLaw {
         self.response.set_point().max(self.p.contact.contact_force)
     }
 
+    /// The contact detector's thresholds now: scaled to the active set-point and the measured noise
+    /// (the conditioned force's noise from the raw one through the conditioning's noise bandwidth).
+    fn thresholds(&self, cycle: f64) -> contact::Thresholds {
+        let sigma = self.noise.std();
+        let sigma_ff = sigma * self.signals.noise_gain(cycle);
+        self.contact
+            .thresholds(self.response.set_point(), sigma, sigma_ff)
+    }
+
     /// How far ahead of the robot the approach may command, in time at approach speed, s.
     fn anchor_time(&self, cycle: f64) -> f64 {
         let c = &self.p.cell;
@@ -242,7 +251,11 @@ impl ForceLaw for RobustLaw {
             self.identify.remember(x, f);
         }
         let receding = self.observer.receding();
-        match self.contact.step(&s, self.p.limits.max_force, receding, dt) {
+        let th = self.thresholds(cycle);
+        match self
+            .contact
+            .step(&s, &th, self.p.limits.max_force, receding, dt)
+        {
             Transition::None => {}
             Transition::ForceLimit => ev.force_limit = true,
             Transition::Contact { from_approach } => {
@@ -262,6 +275,21 @@ impl ForceLaw for RobustLaw {
             .observer
             .hold(s.v_x, self.p.estimator.max_surface_speed, in_contact, dt);
         if in_contact {
+            // The environment changed under a steady contact on a still surface: the observed
+            // surface jumped, or the force left its band (a stiffness change the observer follows
+            // smoothly). Re-identify from the transient that follows.
+            let band = (0.2 * self.force_scale())
+                .max(5.0 * self.noise.std() * self.signals.noise_gain(cycle));
+            let off = (s.ff - self.response.set_point()).abs() > band;
+            let persist = 0.5 * self.signals.step_time(cycle);
+            let calm = self.contact.steady()
+                && !moving
+                && !self.identify.fitting()
+                && self.observer.still();
+            let excursion = self.identify.excursion(off, calm, persist, dt);
+            if excursion || (calm && self.observer.jump_on_still_surface()) {
+                self.identify.refit(x, f);
+            }
             let disturbed = self.observer.disturbed();
             let id = self.identify.step(
                 x,
@@ -282,7 +310,16 @@ impl ForceLaw for RobustLaw {
             ev.estimator_bound |= id.projected;
         }
         let anchor = self.anchor_time(cycle);
-        let want = match self.contact.command(x, self.limiter.command(), anchor, dt) {
+        let speeds = self.contact.speeds(
+            self.identify.kc(),
+            self.response.set_point(),
+            self.p.limits.max_force,
+            self.p.cell.stopping_time(cycle),
+        );
+        let want = match self
+            .contact
+            .command(x, self.limiter.command(), &speeds, anchor, dt)
+        {
             Some(u) => u,
             None => self.in_contact(&s, cycle, dt),
         };

@@ -107,6 +107,7 @@ pub struct SurfaceObserver {
     zc: f64,
     vc: f64,
     jump_time: f64,
+    jump_started: bool,
     pred: SurfacePredictor,
     pred_jump_time: f64,
     motion_hold: f64,
@@ -125,6 +126,7 @@ impl SurfaceObserver {
             zc: f64::NAN,
             vc: 0.0,
             jump_time: 0.0,
+            jump_started: false,
             pred: SurfacePredictor::new(),
             pred_jump_time: 0.0,
             motion_hold: 0.0,
@@ -158,6 +160,7 @@ impl SurfaceObserver {
         self.zc = z;
         self.vc = 0.0;
         self.jump_time = 0.0;
+        self.jump_started = false;
         self.pred.clear();
         self.pred_jump_time = 0.0;
         self.motion_time = 0.0;
@@ -172,6 +175,17 @@ impl SurfaceObserver {
     /// Observed surface velocity away from the tool (for the search after a lift-off), m/s.
     pub fn receding(&self) -> f64 {
         self.vc.max(0.0)
+    }
+
+    /// Whether the observed surface started a jump at the last step while no motion was established
+    /// (on a still surface: the environment changed under a steady contact).
+    pub fn jump_on_still_surface(&self) -> bool {
+        self.jump_started && self.motion_hold <= 0.0 && self.est_hold <= 0.0
+    }
+
+    /// Whether no surface motion is established.
+    pub fn still(&self) -> bool {
+        self.motion_hold <= 0.0 && self.est_hold <= 0.0
     }
 
     /// Whether anything moved or jumped lately (the steady-contact estimator waits for calm).
@@ -201,6 +215,7 @@ impl SurfaceObserver {
         let z = s.xf - s.ff / s.k;
         let e = z - self.zc;
         let jump = e.abs() > self.p.step_innovation * s.force_scale / s.k;
+        self.jump_started = jump && self.jump_time == 0.0;
         self.jump_time = if jump { self.jump_time + dt } else { 0.0 };
         if jump && self.jump_time <= s.step_time {
             self.zc = z;

@@ -91,6 +91,13 @@ impl Conditioner {
         core::f64::consts::SQRT_2 / (core::f64::consts::TAU * self.p.cutoff.min(0.45 / cycle))
     }
 
+    /// How much of white noise's standard deviation passes the conditioning at control period
+    /// `cycle`: `√(2·B·cycle)`, `B = 1.11·f_c` the second-order low-pass's noise bandwidth.
+    pub fn noise_gain(&self, cycle: f64) -> f64 {
+        let fc = self.p.cutoff.min(0.45 / cycle);
+        (2.0 * 1.11 * fc * cycle).sqrt().min(1.0)
+    }
+
     /// How long a step takes to pass the conditioning, s (about two of its low-pass time constants
     /// beyond the group delay: 30 ms at 20 Hz). Innovations that last this long are no longer a jump.
     pub fn step_time(&self, cycle: f64) -> f64 {

@@ -149,3 +149,46 @@ fn validation_names_what_is_wrong() {
     p.limits.max_force = 1.0;
     assert!(RobustLaw::new(p).unwrap_err().contains("max_force"));
 }
+
+#[test]
+fn a_stiffness_change_on_a_still_surface_is_re_identified() {
+    // (Contact losses after the change are the closed-loop scenarios' business, B2 on P1 and P2.)
+    for factor in [0.5, 2.0] {
+        let mut law = RobustLaw::new(params()).unwrap();
+        let mut x = 0.0095;
+        law.start(x);
+        drive(&mut law, &mut x, 3000, 70_000.0, |_| 0.010);
+        let k = 70_000.0 * factor;
+        let outs = drive(&mut law, &mut x, 2000, k, |_| 0.010);
+        let end = outs.last().unwrap();
+        assert!(
+            (end.kc_hat - k).abs() <= 0.1 * k,
+            "×{factor}: k̂ {} after 2 s, k {k}",
+            end.kc_hat
+        );
+    }
+}
+
+#[test]
+fn one_zero_sample_or_a_short_dropout_is_not_a_lift_off_even_on_a_slow_cycle() {
+    let mut law = RobustLaw::new(params()).unwrap();
+    let (k, dt) = (70_000.0, 0.004);
+    let mut x = 0.0099;
+    law.start(x);
+    for i in 0..1500 {
+        let f = (k * (x - 0.010)).max(0.0);
+        // One zero sample every 0.4 s once in contact, and a NaN (a dropout) beside it.
+        let f = match i % 100 {
+            50 if i > 500 => 0.0,
+            51 if i > 500 => f64::NAN,
+            _ => f,
+        };
+        let out = law.step(x, f, dt);
+        assert!(
+            !out.events.lift_off,
+            "step {i}: a glitch taken for a lift-off"
+        );
+        x += 0.3 * (out.x_cmd - x);
+    }
+    assert_eq!(law.counters().contacts, 1);
+}
