@@ -60,6 +60,7 @@ pub mod cell;
 pub mod contact;
 pub mod identify;
 pub mod limiter;
+pub mod motion;
 pub mod noise;
 pub mod observer;
 mod params;

@@ -11,6 +11,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::motion::Motion;
 use super::positive;
 use crate::estimator::surface_moving;
 use crate::predictor::SurfacePredictor;
@@ -110,12 +111,7 @@ pub struct SurfaceObserver {
     jump_started: bool,
     pred: SurfacePredictor,
     pred_jump_time: f64,
-    motion_hold: f64,
-    motion_time: f64,
-    run_sign: f64,
-    run_with: f64,
-    run_against: f64,
-    est_hold: f64,
+    motion: Motion,
 }
 
 impl SurfaceObserver {
@@ -129,12 +125,7 @@ impl SurfaceObserver {
             jump_started: false,
             pred: SurfacePredictor::new(),
             pred_jump_time: 0.0,
-            motion_hold: 0.0,
-            motion_time: 0.0,
-            run_sign: 0.0,
-            run_with: 0.0,
-            run_against: 0.0,
-            est_hold: 0.0,
+            motion: Motion::default(),
         };
         o.reset();
         o
@@ -148,10 +139,7 @@ impl SurfaceObserver {
     /// Forget everything.
     pub fn reset(&mut self) {
         self.restart(f64::NAN);
-        self.motion_hold = 0.0;
-        self.est_hold = 0.0;
-        self.run_with = 0.0;
-        self.run_against = 0.0;
+        self.motion.reset();
     }
 
     /// Restart at rest on the surface `z` (a new contact, a new `k̂_c`), keeping what was learnt about
@@ -163,8 +151,7 @@ impl SurfaceObserver {
         self.jump_started = false;
         self.pred.clear();
         self.pred_jump_time = 0.0;
-        self.motion_time = 0.0;
-        self.run_sign = 0.0;
+        self.motion.restart();
     }
 
     /// Observed surface, m (NaN before the first contact).
@@ -180,33 +167,24 @@ impl SurfaceObserver {
     /// Whether the observed surface started a jump at the last step while no motion was established
     /// (on a still surface: the environment changed under a steady contact).
     pub fn jump_on_still_surface(&self) -> bool {
-        self.jump_started && self.motion_hold <= 0.0 && self.est_hold <= 0.0
+        self.jump_started && self.motion.still()
     }
 
     /// Whether no surface motion is established.
     pub fn still(&self) -> bool {
-        self.motion_hold <= 0.0 && self.est_hold <= 0.0
+        self.motion.still()
     }
 
     /// Whether anything moved or jumped lately (the steady-contact estimator waits for calm).
     pub fn disturbed(&self) -> bool {
-        self.motion_hold > 0.0
-            || self.est_hold > 0.0
-            || self.jump_time > 0.0
-            || self.pred_jump_time > 0.0
+        !self.motion.still() || self.jump_time > 0.0 || self.pred_jump_time > 0.0
     }
 
     /// Run the motion holds for a step; `v_x` is the conditioned position's velocity. Returns whether
     /// the estimator is to take the surface for a moving one.
     pub fn hold(&mut self, v_x: f64, max_surface_speed: f64, in_contact: bool, dt: f64) -> bool {
         let moving = surface_moving(self.vc, v_x, max_surface_speed);
-        self.motion_hold = if moving && in_contact {
-            self.p.motion_hold
-        } else {
-            (self.motion_hold - dt).max(0.0)
-        };
-        self.est_hold = (self.est_hold - dt).max(0.0);
-        moving || self.est_hold > 0.0
+        self.motion.hold(&self.p, moving && in_contact, dt) || moving
     }
 
     /// Track the conditioned surface with natural frequency `bandwidth` (Hz).
@@ -265,11 +243,14 @@ impl SurfaceObserver {
         let ahead = self.pred.command(0.0, delay, lag, cycle, 1.0, 1.0);
         let z_f = s.xf - s.ff / k;
         let [_, v, a] = self.pred.state();
-        self.motion_tests(v, s.v_raw, max_surface_speed, jumped, dt);
+        if !jumped {
+            // A jump says nothing about motion either way.
+            self.motion.observe(&p, v, s.v_raw, max_surface_speed, dt);
+        }
         let sv = p.motion_significance * self.pred.velocity_std();
         let sa = p.motion_significance * self.pred.acceleration_std();
         let m2 = v * v / (sv * sv + 1e-30) + a * a / (sa * sa + 1e-30);
-        let weight = if self.motion_hold > 0.0 {
+        let weight = if self.motion.established() {
             m2 / (m2 + 1.0)
         } else {
             0.0
@@ -280,46 +261,6 @@ impl SurfaceObserver {
             weight,
             predicted: ahead - z_f,
             fallback: lead * v_ff,
-        }
-    }
-
-    /// Real surface motion, from the predictor's velocity `v` and the robot's raw velocity `v_raw`:
-    /// the motion test on the unfiltered pair, held for a while (the apparent motion of a stale `k̂_c`
-    /// passes it briefly where the robot turns); and a surface velocity that keeps its sign while the
-    /// robot has moved both with it and against it (a stale `k̂_c`'s is tied to the robot's).
-    fn motion_tests(&mut self, v: f64, v_raw: f64, thr: f64, jumped: bool, dt: f64) {
-        let p = self.p;
-        if jumped {
-            // A jump says nothing about motion either way.
-            return;
-        }
-        if surface_moving(v, v_raw, thr) {
-            self.motion_time += dt;
-            if self.motion_time >= p.motion_confirm {
-                self.motion_hold = p.motion_hold;
-            }
-        } else {
-            self.motion_time = 0.0;
-        }
-        if v.abs() > thr {
-            if v.signum() != self.run_sign {
-                self.run_sign = v.signum();
-                self.run_with = 0.0;
-                self.run_against = 0.0;
-            }
-            if v_raw.abs() > thr {
-                if v_raw * v > 0.0 {
-                    self.run_with += dt;
-                } else {
-                    self.run_against += dt;
-                }
-            }
-            if self.run_with >= p.opposed_confirm && self.run_against >= p.opposed_confirm {
-                self.est_hold = p.motion_hold;
-                self.motion_hold = p.motion_hold;
-            }
-        } else {
-            self.run_sign = 0.0;
         }
     }
 }
