@@ -50,7 +50,7 @@
 //! tests; [`RobustLaw::step`] composes them:
 //! [`signals`] (conditioning of force and position) → [`noise`] (sensor noise, measured) →
 //! [`contact`] (the state machine) → [`identify`] (`k̂_c`: onset fit, recursion, steady-contact fit) →
-//! [`observer`] (surface observer, predictor, feed-forward) and [`response`] (proportional, integral,
+//! [`observer`] (surface observer, predictor, feed-forward; [`motion`]: real motion or a stale `k̂_c`) and [`response`] (proportional, integral,
 //! set-point) → [`limiter`] (deviation, velocity, acceleration). [`cell`] is the inner loop's model.
 //! Every limit that acts is an [`Events`] flag of the step and a counter ([`ForceLaw::counters`]).
 
