@@ -17,6 +17,7 @@ fn args(robot: RobotBackend) -> RsiArgs {
         robot,
         realtime: false,
         external_robot: None,
+        process_channels: false,
     }
 }
 

@@ -8,16 +8,15 @@ pub mod bench;
 pub mod candump;
 pub mod cell;
 pub mod live;
-pub mod metrics;
 pub mod plot;
 pub mod readout;
-pub mod record;
 pub mod recorder;
 pub mod rig;
 pub mod robotiq;
 pub mod rsi;
 pub mod runner;
-pub mod scenario;
 pub mod stop;
 pub mod tap;
 pub mod tune;
+
+pub use ::scenario::{metrics, record, scenario};

@@ -39,6 +39,8 @@ impl RunSpec {
         let model = spec.model()?;
         let mut tuning = load_tuning(tuning.unwrap_or(&scenario.tuning))?;
         tuning.law.apply(&scenario.controller);
+        // The law's model of the inner loop is the cell's: here, the simulated plant's.
+        tuning.law.set_cell(::scenario::run::cell_model(&model));
         tuning
             .validate()
             .map_err(|e| anyhow!("tuning {} with the scenario's overrides: {e}", tuning.name))?;
@@ -272,18 +274,7 @@ where
     let law_events = lp.law().counters();
     drop(lp);
     let truth = sim::world::lock(world).truth_log();
-    let period = spec.plant.period;
-    for r in &mut rows {
-        let k = (r.t / period).round();
-        if k >= 0.0
-            && let Some(tr) = truth.get(k as usize)
-        {
-            r.f_true = tr.f;
-            r.k_c = tr.k_c;
-            r.x_c = tr.x_c;
-            r.s = tr.s;
-        }
-    }
+    ::scenario::run::fill_truth(&mut rows, &truth, spec.plant.period);
     let metrics = Metrics::compute(&rows, 0.0, f64::INFINITY);
     Ok(RunResult {
         rows,

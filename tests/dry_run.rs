@@ -39,7 +39,8 @@ impl Robot {
     fn connect(to: &str) -> Self {
         let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
         sock.connect(to).unwrap();
-        sock.set_read_timeout(Some(Duration::from_millis(200))).unwrap();
+        sock.set_read_timeout(Some(Duration::from_millis(200)))
+            .unwrap();
         Self {
             sock,
             ipoc: 5_000_000,
@@ -98,11 +99,14 @@ fn a_client_with_its_own_program_presses_holds_releases_and_ends_its_session() {
         &["--scenario", "pass-flat-20n", "--process-channels"],
     );
     let mut robot = Robot::connect(&listen);
-    let fc = |mode: u8, f: f64| format!("<FcCmd Mode=\"{mode}\" F=\"{f:.2}\" Ramp=\"0.30\" Seg=\"7\"/>");
+    let fc =
+        |mode: u8, f: f64| format!("<FcCmd Mode=\"{mode}\" F=\"{f:.2}\" Ramp=\"0.30\" Seg=\"7\"/>");
     let mut states = Vec::new();
     let mut pressing_forces = Vec::new();
     let mut step = |robot: &mut Robot, mode: u8| {
-        let sen = robot.cycle(Some(&fc(mode, 20.0))).expect("forcecell answers");
+        let sen = robot
+            .cycle(Some(&fc(mode, 20.0)))
+            .expect("forcecell answers");
         let state = attr(&sen, "FcState", "State").expect("every reply carries FcState") as u8;
         let f = attr(&sen, "FcState", "F").unwrap();
         if states.last() != Some(&state) {
@@ -117,7 +121,10 @@ fn a_client_with_its_own_program_presses_holds_releases_and_ends_its_session() {
     let mut n = 0;
     while step(&mut robot, 1).0 != 3 {
         n += 1;
-        assert!(n < 5000, "no PRESSING within 20 s of robot time: {states:?}");
+        assert!(
+            n < 5000,
+            "no PRESSING within 20 s of robot time: {states:?}"
+        );
     }
     for _ in 0..250 {
         let (state, f) = step(&mut robot, 1);
@@ -137,7 +144,11 @@ fn a_client_with_its_own_program_presses_holds_releases_and_ends_its_session() {
     drop(robot); // RSI_OFF: the robot falls silent.
     let o = finish(child);
     assert!(o.status.success(), "{}", text(&o.stderr));
-    assert!(text(&o.stdout).contains("the robot ended its session"), "{}", text(&o.stdout));
+    assert!(
+        text(&o.stdout).contains("the robot ended its session"),
+        "{}",
+        text(&o.stdout)
+    );
     assert_eq!(states, [0, 1, 2, 3, 4, 0], "the states the program saw");
     assert!(
         pressing_forces.iter().all(|f| (f - 20.0).abs() <= 1.0),
@@ -163,13 +174,19 @@ fn a_client_without_fc_cmd_gets_the_scenarios_program_and_then_stop() {
             break;
         }
     }
-    assert!(last.contains("<Stop>1</Stop>"), "the session ends with Stop: {last}");
+    assert!(
+        last.contains("<Stop>1</Stop>"),
+        "the session ends with Stop: {last}"
+    );
     let o = finish(child);
     let out = text(&o.stdout);
     assert!(o.status.success(), "{out}\n{}", text(&o.stderr));
     // The virtual part sits 1 mm beyond where the session started: the tool reached it and pressed
     // (20 N on 10 N/mm is 2 mm more), within POSCORR's 5 mm.
-    assert!(deepest > 2.5 && deepest < 5.0, "deepest correction {deepest} mm");
+    assert!(
+        deepest > 2.5 && deepest < 5.0,
+        "deepest correction {deepest} mm"
+    );
     assert!(out.contains("pressing_in_band_pct"), "{out}");
     assert!(!out.contains("FAIL"), "{out}");
     assert_eq!(robot.z_corr, 0.0, "the correction is back at zero");

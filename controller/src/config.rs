@@ -113,6 +113,13 @@ impl LawConfig {
         }
     }
 
+    /// Give a robust law the cell's inner-loop model (the other laws have none).
+    pub fn set_cell(&mut self, cell: crate::robust::CellParams) {
+        if let Self::Robust(p) = self {
+            p.cell = cell;
+        }
+    }
+
     /// Build the law, validating every parameter.
     pub fn build(&self) -> Result<Box<dyn ForceLaw + Send>, String> {
         Ok(match *self {

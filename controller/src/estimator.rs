@@ -167,6 +167,11 @@ impl StiffnessEstimator {
         }
     }
 
+    /// The parameters.
+    pub fn params(&self) -> &EstimatorParams {
+        &self.p
+    }
+
     /// Change the configuration keeping the estimate (projected into the new bounds).
     pub fn set_params(&mut self, p: EstimatorParams) {
         self.p = p;

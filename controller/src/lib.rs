@@ -32,4 +32,4 @@ pub use law::{
     AdaptiveParams, ContactState, EventCounts, Events, ForceLaw, ImpedanceLaw, ImpedanceParams,
     Output, Reference, fixed_reference_steady_state_error,
 };
-pub use robust::{ContactParams, LimitParams, ResponseParams, RobustLaw, RobustParams};
+pub use robust::{CellParams, ContactParams, LimitParams, ResponseParams, RobustLaw, RobustParams};

@@ -1,21 +1,27 @@
 //! Scenarios B1–B9 of `specs/controller.md` in closed loop against the simulated cell, robust tuning,
 //! on P1 and on P2. Deterministic: seeded sensor, simulated time only. (B10 gravity lives with
 //! `controller::gravity`; B11 cost is `benches/step.rs` and `tests/no_alloc.rs`.)
+//!
+//! One source of truth: the scenarios and their targets are the files `scenarios/b*.toml` that
+//! `forcecell sim` and `bench-scenarios` run, run by `forcecell-scenario` and measured by its metric
+//! code. This file only adds what a target file cannot say: sweeps around a file, bounds on every step,
+//! other initial guesses of the tuning.
 
-mod common;
+use controller::{LawConfig, Tuning};
+use scenario::run::{Run, run};
+use scenario::scenario::{Scenario, load_tuning};
+use sim::InnerLoopModel;
 
-use common::{Cell, PLANTS, Trace, robust, run_tuning};
-use controller::Tuning;
-use sim::{Event, InnerLoopModel, Schedule, SensorParams, Window};
+/// The plants the targets must hold on.
+const PLANTS: [(&str, InnerLoopModel); 2] =
+    [("P1", InnerLoopModel::P1), ("P2", InnerLoopModel::P2)];
 
-/// Record a failed target instead of stopping, so a run prints every number before it fails.
-macro_rules! check {
-    ($fails:ident, $cond:expr, $($msg:tt)+) => {
-        let ok: bool = $cond;
-        if !ok {
-            $fails.push(format!($($msg)+));
-        }
-    };
+fn robust() -> Tuning {
+    load_tuning("robust").expect("the shipped robust tuning")
+}
+
+fn scenario(name: &str) -> Scenario {
+    Scenario::load(name).expect("a built-in scenario")
 }
 
 /// Every target is asserted: a run prints every number first, then fails listing what it missed.
@@ -23,433 +29,254 @@ fn verdict(fails: Vec<String>) {
     assert!(fails.is_empty(), "targets missed:\n{}", fails.join("\n"));
 }
 
-fn show(id: &str, plant: &str, what: &str, value: f64, target: &str) {
-    println!("{id:4} {plant:3} {what:28} {value:>12.4}   target {target}");
+/// The plants a scenario is judged on: P1 and P2, or its own when it names an explicit inner loop.
+fn plants(s: &Scenario) -> Vec<(String, InnerLoopModel)> {
+    match &s.plant {
+        scenario::scenario::PlantSpec::Model(m) => vec![(s.plant.label(), *m)],
+        _ => PLANTS.iter().map(|(n, p)| (n.to_string(), *p)).collect(),
+    }
 }
 
-// ---------------------------------------------------------------- B1
-fn b1(t: &Tuning, plant: InnerLoopModel) -> Trace {
-    run_tuning(t, &Cell::nominal(plant, 3.0))
+/// Run `s` on `plant` and check its targets, each miss labelled.
+fn judge(
+    t: &Tuning,
+    s: &Scenario,
+    name: &str,
+    plant: &InnerLoopModel,
+    fails: &mut Vec<String>,
+) -> Run {
+    let r = run(s, plant, t).expect("the simulated cell never fails");
+    for c in r.check(&s.targets) {
+        let bound = match (c.target.min, c.target.max) {
+            (Some(lo), Some(hi)) => format!("in [{lo}, {hi}]"),
+            (Some(lo), None) => format!(">= {lo}"),
+            (None, Some(hi)) => format!("<= {hi}"),
+            (None, None) => String::new(),
+        };
+        println!(
+            "{:24} {name:5} {:22} {:>12.4}   target {bound}",
+            s.name, c.target.metric, c.value
+        );
+        if !c.pass {
+            fails.push(format!(
+                "{} {name}: {} {} (target {bound})",
+                s.name, c.target.metric, c.value
+            ));
+        }
+    }
+    r
+}
+
+/// Every target of the scenario files named `prefix*`, on their plants.
+fn files(t: &Tuning, prefix: &str, fails: &mut Vec<String>) {
+    let all = Scenario::builtins().expect("built-in scenarios parse");
+    let chosen: Vec<&Scenario> = all.iter().filter(|s| s.name.starts_with(prefix)).collect();
+    assert!(!chosen.is_empty(), "no scenario file {prefix}*");
+    for s in chosen {
+        for (name, plant) in plants(s) {
+            judge(t, s, &name, &plant, fails);
+        }
+    }
+}
+
+// ---------------------------------------------------------------- B1–B5, B7
+fn b1_targets(t: &Tuning, fails: &mut Vec<String>) {
+    for (name, plant) in PLANTS {
+        let r = judge(t, &scenario("b01-approach"), name, &plant, fails);
+        let t0 = r.metrics(0.0, f64::INFINITY).first_contact;
+        // 1 mm at 2 mm/s.
+        assert!((0.4..0.6).contains(&t0), "{name}: contact at {t0} s");
+    }
 }
 
 #[test]
 fn b1_approach_contact_hold() {
-    let mut fails: Vec<String> = Vec::new();
+    let mut fails = Vec::new();
     b1_targets(&robust(), &mut fails);
     verdict(fails);
 }
 
-fn b1_targets(t: &Tuning, fails: &mut Vec<String>) {
-    for (name, plant) in PLANTS {
-        let tr = b1(t, plant);
-        let t0 = tr.first_contact();
-        let peak = tr.peak(0.0, 10.0);
-        let settle = tr.settle(0.0, 10.0);
-        let overshoot = ((peak - 5.0) / 5.0 * 100.0).max(0.0);
-        let ss = tr.max_error(2.5, 3.0);
-        show("B1", name, "first contact s", t0, "≈0.5 (1 mm at 2 mm/s)");
-        show("B1", name, "impact peak N", peak, "<= 10");
-        show("B1", name, "settle after contact s", settle, "<= 0.5");
-        show("B1", name, "overshoot %", overshoot, "<= 10");
-        show("B1", name, "ss error N", ss, "<= 0.01");
-        assert!((0.4..0.6).contains(&t0), "{name}: contact at {t0} s");
-        check!(fails, peak <= 10.0, "{name}: peak {peak} N");
-        check!(fails, settle <= 0.5, "{name}: settle {settle} s");
-        check!(fails, overshoot <= 10.0, "{name}: overshoot {overshoot} %");
-        check!(fails, ss <= 0.01, "{name}: steady-state error {ss} N");
-    }
-}
-
-// ---------------------------------------------------------------- B2
-fn stiffness_change(t: &Tuning, plant: InnerLoopModel, factor: f64) -> Trace {
-    let mut cell = Cell::nominal(plant, 5.0);
-    cell.k_c = Schedule::constant(70_000.0).with(Event::Scale { at: 3.0, factor });
-    run_tuning(t, &cell)
-}
-
 #[test]
-fn b2_stiffness_halves_and_doubles() {
-    let mut fails: Vec<String> = Vec::new();
-    b2_targets(&robust(), &mut fails);
+fn b2_stiffness_halves_doubles_soft_stiff() {
+    let mut fails = Vec::new();
+    files(&robust(), "b02", &mut fails);
     verdict(fails);
 }
 
-fn b2_targets(t: &Tuning, fails: &mut Vec<String>) {
-    for (name, plant) in PLANTS {
-        for factor in [0.5, 2.0] {
-            let tr = stiffness_change(t, plant, factor);
-            let settle = tr.settle(3.0, 10.0);
-            let (losses, _) = tr.contact_losses(1.0, 10.0);
-            show(
-                "B2",
-                name,
-                &format!("k_c x{factor} settle s"),
-                settle,
-                "<= 0.3",
-            );
-            show(
-                "B2",
-                name,
-                &format!("k_c x{factor} losses"),
-                losses as f64,
-                "0",
-            );
-            check!(fails, settle <= 0.3, "{name} x{factor}: settle {settle} s");
-            check!(fails, losses == 0, "{name} x{factor}: contact lost");
+/// B2's "stable for any k_c in [10, 500] kN/m without retuning": the soft file's targets over the range.
+fn b2_range_targets(t: &Tuning, fails: &mut Vec<String>) {
+    for k in [10e3, 20e3, 40e3, 70e3, 150e3, 300e3, 500e3] {
+        let mut s = scenario("b02c-soft");
+        s.environment.k_c = k;
+        s.name = format!("b02-range-{:.0}kN", k / 1e3);
+        for (name, plant) in PLANTS {
+            let r = judge(t, &s, name, &plant, fails);
+            let settle = r.metrics(0.0, f64::INFINITY).settle_time;
+            if !settle.is_finite() {
+                fails.push(format!("{} {name}: never settled", s.name));
+            }
         }
     }
 }
 
 #[test]
 fn b2_stable_for_any_stiffness_in_10_to_500_kn_per_m() {
-    let mut fails: Vec<String> = Vec::new();
+    let mut fails = Vec::new();
     b2_range_targets(&robust(), &mut fails);
     verdict(fails);
 }
 
-fn b2_range_targets(t: &Tuning, fails: &mut Vec<String>) {
-    for (name, plant) in PLANTS {
-        for k in [10e3, 20e3, 40e3, 70e3, 150e3, 300e3, 500e3] {
-            let mut cell = Cell::nominal(plant, 4.0);
-            cell.k_c = Schedule::constant(k);
-            let tr = run_tuning(t, &cell);
-            let err = tr.max_error(3.0, 4.0);
-            let settle = tr.settle(0.0, 10.0);
-            show(
-                "B2",
-                name,
-                &format!("k_c {:.0} kN/m settle s", k / 1e3),
-                settle,
-                "finite",
-            );
-            check!(
-                fails,
-                err <= 0.1 && settle.is_finite(),
-                "{name} k_c {k}: error {err} N at the end, settle {settle} s"
-            );
-        }
-    }
-}
-
-// ---------------------------------------------------------------- B3
-fn surface_step(t: &Tuning, plant: InnerLoopModel, delta: f64) -> Trace {
-    let mut cell = Cell::nominal(plant, 5.0);
-    cell.x_c = Schedule::constant(0.010).with(Event::Step { at: 3.0, delta });
-    run_tuning(t, &cell)
-}
-
 #[test]
 fn b3_surface_steps() {
-    let mut fails: Vec<String> = Vec::new();
-    b3_targets(&robust(), &mut fails);
+    let mut fails = Vec::new();
+    files(&robust(), "b03", &mut fails);
     verdict(fails);
 }
 
-fn b3_targets(t: &Tuning, fails: &mut Vec<String>) {
-    for (name, plant) in PLANTS {
-        let tr = surface_step(t, plant, 0.001);
-        let settle = tr.settle(3.0, 10.0);
-        let (_, lost) = tr.contact_losses(3.0, 10.0);
-        show("B3", name, "retreat 1 mm settle s", settle, "<= 0.5");
-        show("B3", name, "retreat 1 mm contact lost s", lost, "<= 0.05");
-        show(
-            "B3",
-            name,
-            "retreat 1 mm re-contact peak N",
-            tr.peak(3.0, 10.0),
-            "(reported)",
-        );
-        check!(fails, settle <= 0.5, "{name} retreat: settle {settle} s");
-        check!(fails, lost <= 0.05, "{name} retreat: contact lost {lost} s");
-
-        let tr = surface_step(t, plant, -0.0005);
-        let settle = tr.settle(3.0, 10.0);
-        show("B3", name, "advance 0.5 mm settle s", settle, "<= 0.5");
-        show(
-            "B3",
-            name,
-            "advance 0.5 mm peak N",
-            tr.peak(3.0, 10.0),
-            "(reported)",
-        );
-        check!(fails, settle <= 0.5, "{name} advance: settle {settle} s");
-    }
-}
-
-// ---------------------------------------------------------------- B4
 #[test]
 fn b4_incline() {
-    let mut fails: Vec<String> = Vec::new();
-    b4_targets(&robust(), &mut fails);
+    let mut fails = Vec::new();
+    files(&robust(), "b04", &mut fails);
     verdict(fails);
 }
 
-fn b4_targets(t: &Tuning, fails: &mut Vec<String>) {
-    for (name, plant) in PLANTS {
-        for rate in [0.002, -0.002] {
-            let mut cell = Cell::nominal(plant, 6.0);
-            cell.x_c = Schedule::constant(0.010).with(Event::Ramp {
-                start: 2.0,
-                end: None,
-                rate,
-            });
-            let tr = run_tuning(t, &cell);
-            let rms = tr.rms_error(2.5, 6.0);
-            let max = tr.max_error(2.5, 6.0);
-            let (losses, _) = tr.contact_losses(1.0, 6.0);
-            show(
-                "B4",
-                name,
-                &format!("ramp {rate} m/s rms N"),
-                rms,
-                "<= 0.25",
-            );
-            show(
-                "B4",
-                name,
-                &format!("ramp {rate} m/s max N"),
-                max,
-                "<= 0.75",
-            );
-            check!(fails, rms <= 0.25, "{name} {rate}: rms {rms} N");
-            check!(fails, max <= 0.75, "{name} {rate}: max {max} N");
-            check!(fails, losses == 0, "{name} {rate}: contact lost");
-        }
-    }
-}
-
-// ---------------------------------------------------------------- B5
 #[test]
 fn b5_curved_surface() {
-    let mut fails: Vec<String> = Vec::new();
-    b5_targets(&robust(), &mut fails);
+    let mut fails = Vec::new();
+    files(&robust(), "b05", &mut fails);
     verdict(fails);
 }
 
-fn b5_targets(t: &Tuning, fails: &mut Vec<String>) {
-    for (name, plant) in PLANTS {
-        for (amp, freq, target) in [(0.0005, 0.5, 0.25), (0.001, 1.0, 1.0)] {
-            let mut cell = Cell::nominal(plant, 8.0);
-            cell.x_c = Schedule::constant(0.010).with(Event::Sine {
-                start: 2.0,
-                amplitude: amp,
-                frequency: freq,
-            });
-            let tr = run_tuning(t, &cell);
-            let rms = tr.rms_error(3.0, 8.0);
-            show(
-                "B5",
-                name,
-                &format!("{amp} m at {freq} Hz rms N"),
-                rms,
-                &format!("<= {target}"),
-            );
-            check!(fails, rms <= target, "{name} {freq} Hz: rms {rms} N");
+/// B7's sweep: the 16 ms file's targets up to 16 ms of delay, the 32 ms file's up to 32 ms, contact
+/// and finite commands at 48 ms.
+fn b7_targets(t: &Tuning, fails: &mut Vec<String>) {
+    let (fast, slow) = (scenario("b07-delay-16ms"), scenario("b07-delay-32ms"));
+    for cycles in [0u32, 4, 8, 16, 24, 32, 48] {
+        let plant = InnerLoopModel {
+            delay_cycles: cycles,
+            ..InnerLoopModel::P1
+        };
+        let label = format!("{cycles}ms");
+        let base = if cycles <= 16 { &fast } else { &slow };
+        let mut s = base.clone();
+        if cycles > 32 {
+            s.targets.clear();
         }
-    }
-}
-
-// ---------------------------------------------------------------- B7
-fn with_delay(delay: f64) -> InnerLoopModel {
-    InnerLoopModel {
-        period: 0.001,
-        tau: 0.010,
-        delay_cycles: (delay / 0.001).round() as u32,
+        let r = judge(t, &s, &label, &plant, fails);
+        assert!(r.metrics(0.0, f64::INFINITY).first_contact.is_finite());
+        assert!(r.rows.iter().all(|r| r.x_cmd.is_finite()), "{label}");
     }
 }
 
 #[test]
 fn b7_delay_sweep() {
-    let mut fails: Vec<String> = Vec::new();
+    let mut fails = Vec::new();
     b7_targets(&robust(), &mut fails);
     verdict(fails);
 }
 
-fn b7_targets(t: &Tuning, fails: &mut Vec<String>) {
-    for delay in [0.0, 0.004, 0.008, 0.016, 0.024, 0.032, 0.048] {
-        let mut cell = Cell::nominal(with_delay(delay), 4.0);
-        // A stiffness step as well, so the loop is exercised in contact and not only at the approach.
-        cell.k_c = Schedule::constant(70_000.0).with(Event::Scale {
-            at: 2.5,
-            factor: 2.0,
-        });
-        let tr = run_tuning(t, &cell);
-        let t0 = tr.first_contact();
-        let overshoot = ((tr.peak(0.0, 2.4) - 5.0) / 5.0 * 100.0).max(0.0);
-        let settle = tr.settle(0.0, 2.4);
-        let end = tr.max_error(3.5, 4.0);
-        let label = format!("delay {:.0} ms", delay * 1e3);
-        show(
-            "B7",
-            "-",
-            &format!("{label} overshoot %"),
-            overshoot,
-            "<= 20 up to 16 ms",
-        );
-        show(
-            "B7",
-            "-",
-            &format!("{label} settle s"),
-            settle,
-            "finite up to 32 ms",
-        );
-        assert!(t0.is_finite());
-        if delay <= 0.016 + 1e-9 {
-            check!(fails, overshoot <= 20.0, "{label}: overshoot {overshoot} %");
-        }
-        if delay <= 0.032 + 1e-9 {
-            // "Stable (slower)": settles after the approach and stays bounded after the stiffness step.
-            check!(
-                fails,
-                settle.is_finite() && end <= 0.5,
-                "{label}: settle {settle} s, end error {end} N"
-            );
+// ---------------------------------------------------------------- B8
+fn b8_targets(t: &Tuning, fails: &mut Vec<String>) {
+    let LawConfig::Robust(p) = &t.law else {
+        panic!("robust tuning is robust")
+    };
+    let (lo, hi) = (p.estimator.kc_min, p.estimator.kc_max);
+    for (name, plant) in PLANTS {
+        let r = judge(t, &scenario("b08-identification"), name, &plant, fails);
+        if let Some(row) = r.rows.iter().find(|r| !(lo..=hi).contains(&r.kc_hat)) {
+            fails.push(format!(
+                "B8 {name}: k̂ {} out of bounds at {} s",
+                row.kc_hat, row.t
+            ));
         }
     }
 }
 
-// ---------------------------------------------------------------- B8
 #[test]
 fn b8_identification() {
-    let mut fails: Vec<String> = Vec::new();
+    let mut fails = Vec::new();
     b8_targets(&robust(), &mut fails);
     verdict(fails);
 }
 
-fn b8_targets(t: &Tuning, fails: &mut Vec<String>) {
-    let controller::LawConfig::Robust(p) = &t.law else {
-        panic!("robust tuning is robust")
-    };
-    let bounds = (p.estimator.kc_min, p.estimator.kc_max);
-    for (name, plant) in PLANTS {
-        // The workpiece is 3.2 times stiffer than the tuning's initial guess (50 kN/m); two surface transients (0.05 mm
-        // towards the tool and back, 8 N each) follow the approach, all within 2 s of first contact.
-        let k = 160_000.0;
-        let mut cell = Cell::nominal(plant, 4.0);
-        cell.k_c = Schedule::constant(k);
-        cell.x_c = Schedule::constant(0.010)
-            .with(Event::Step {
-                at: 1.2,
-                delta: -0.00005,
-            })
-            .with(Event::Step {
-                at: 1.8,
-                delta: 0.00005,
-            });
-        let tr = run_tuning(t, &cell);
-        let t0 = tr.first_contact();
-        let kc = tr.at(t0 + 2.0).kc_hat;
-        let rel = (kc - k).abs() / k;
-        show("B8", name, "|k̂−k|/k 2 s after contact", rel, "<= 0.10");
-        check!(fails, rel <= 0.10, "{name}: B8 k̂ {kc} N/m vs {k} N/m");
-        for r in &tr.rows {
-            check!(
-                fails,
-                r.kc_hat >= bounds.0 && r.kc_hat <= bounds.1,
-                "{name}: k̂ {} out of bounds",
-                r.kc_hat
-            );
-        }
-    }
-}
-
 // ---------------------------------------------------------------- B6 (long)
-#[test]
-fn b6_noise_and_drift_ten_minutes() {
-    let mut fails: Vec<String> = Vec::new();
-    b6_targets(&robust(), &mut fails);
-    verdict(fails);
-}
-
 fn b6_targets(t: &Tuning, fails: &mut Vec<String>) {
     for (name, plant) in PLANTS {
-        let mut cell = Cell::nominal(plant, 600.0);
-        cell.sensor = SensorParams {
-            noise: 0.5,
-            drift_per_min: 0.5,
-            seed: 6,
-            ..SensorParams::default()
-        };
-        let tr = run_tuning(t, &cell);
-        let (std, slope) = tr.force_std_detrended(5.0, 600.0);
-        let raw_std = tr.force_std(5.0, 600.0);
-        let end = tr.at(599.0);
-        let kc_rel = (end.kc_hat - 70_000.0).abs() / 70_000.0;
-        let xc_dev = tr
+        let r = judge(t, &scenario("b06-noise-drift"), name, &plant, fails);
+        // x̂_c bounded.
+        let dev = r
             .rows
             .iter()
             .filter(|r| r.t >= 5.0)
             .map(|r| (r.xc_hat - r.x_c).abs())
             .fold(0.0, f64::max);
-        show("B6", name, "true force std (detrended) N", std, "<= 0.1");
-        show(
-            "B6",
-            name,
-            "true force std (raw) N",
-            raw_std,
-            "(drift: unobservable)",
-        );
-        show(
-            "B6",
-            name,
-            "true force trend N/min",
-            slope * 60.0,
-            "(= -sensor drift)",
-        );
-        show("B6", name, "|k̂−k|/k at 10 min", kc_rel, "<= 0.05");
-        show("B6", name, "max |x̂_c − x_c| m", xc_dev, "bounded (<= 2e-4)");
-        check!(fails, std <= 0.1, "{name}: std {std} N");
-        check!(fails, kc_rel <= 0.05, "{name}: k̂ off by {kc_rel}");
-        check!(fails, xc_dev <= 2e-4, "{name}: x̂_c off by {xc_dev} m");
+        if dev > 2e-4 {
+            fails.push(format!("B6 {name}: x̂_c off by {dev} m"));
+        }
     }
 }
 
-// ---------------------------------------------------------------- B9
 #[test]
-fn b9_faults_nan_dropout() {
-    let mut fails: Vec<String> = Vec::new();
-    b9_targets(&robust(), &mut fails);
+fn b6_noise_and_drift_ten_minutes() {
+    let mut fails = Vec::new();
+    b6_targets(&robust(), &mut fails);
     verdict(fails);
 }
 
-fn b9_targets(t: &Tuning, fails: &mut Vec<String>) {
-    for (name, plant) in PLANTS {
-        let mut cell = Cell::nominal(plant, 4.0);
-        cell.sensor = SensorParams {
-            nan_at: vec![2.0],
-            dropouts: vec![Window {
-                at: 2.5,
-                duration: 0.020,
-            }],
-            ..SensorParams::default()
-        };
-        let tr = run_tuning(t, &cell);
-        assert!(tr.commands_finite(), "{name}: NaN reached the command");
-        let step = tr.max_command_step();
-        let controller::LawConfig::Robust(p) = &t.law else {
-            panic!()
-        };
-        let limit = p.limits.max_velocity * plant.period;
-        let err = tr.max_error(2.0, 3.5);
-        show(
-            "B9",
-            name,
-            "max command step m",
-            step,
-            &format!("<= {limit}"),
-        );
-        show("B9", name, "max error after faults N", err, "<= 1.0 (20 %)");
-        check!(fails, step <= limit * (1.0 + 1e-9), "{name}: step {step} m");
-        check!(fails, err <= 1.0, "{name}: error {err} N");
-        assert!(tr.stats.sensor_faults >= 1 && tr.stats.nonfinite_inputs == 1);
+/// B6's targets are not one lucky noise sequence: eight sensor seeds, both plants.
+#[test]
+fn b6_over_sensor_seeds() {
+    let mut fails = Vec::new();
+    for seed in 1..=8 {
+        let mut s = scenario("b06-noise-drift");
+        s.sensor.seed = seed;
+        s.name = format!("b06-seed-{seed}");
+        for (name, plant) in PLANTS {
+            judge(&robust(), &s, name, &plant, &mut fails);
+        }
     }
+    verdict(fails);
+}
+
+// ---------------------------------------------------------------- B9
+fn b9_targets(t: &Tuning, fails: &mut Vec<String>) {
+    let LawConfig::Robust(p) = &t.law else {
+        panic!("robust tuning is robust")
+    };
+    for (name, plant) in PLANTS {
+        let r = judge(t, &scenario("b09-faults"), name, &plant, fails);
+        assert!(
+            r.rows.iter().all(|r| r.x_cmd.is_finite()),
+            "{name}: NaN reached the command"
+        );
+        let step = r
+            .rows
+            .windows(2)
+            .map(|w| (w[1].x_cmd - w[0].x_cmd).abs())
+            .fold(0.0, f64::max);
+        let limit = p.limits.max_velocity * plant.period;
+        println!(
+            "b09-faults               {name:5} max command step m {step:>12.6}   target <= {limit}"
+        );
+        if step > limit * (1.0 + 1e-9) {
+            fails.push(format!("B9 {name}: command step {step} m"));
+        }
+        assert!(r.stats.sensor_faults >= 1 && r.stats.nonfinite_inputs == 1);
+    }
+}
+
+#[test]
+fn b9_faults_nan_dropout() {
+    let mut fails = Vec::new();
+    b9_targets(&robust(), &mut fails);
+    verdict(fails);
 }
 
 // ---------------------------------------------------------------- initial stiffness estimate
 /// The shipped tuning with another initial stiffness estimate `k̂_c(0)`, N/m.
 fn with_kc0(kc0: f64) -> Tuning {
     let mut t = robust();
-    let controller::LawConfig::Robust(p) = &mut t.law else {
+    let LawConfig::Robust(p) = &mut t.law else {
         panic!("robust tuning is robust")
     };
     p.estimator.kc0 = kc0;
@@ -458,13 +285,12 @@ fn with_kc0(kc0: f64) -> Tuning {
 
 /// Every B target of one tuning, each failure labelled with `label`.
 fn every_target(t: &Tuning, label: &str) -> Vec<String> {
-    let mut fails: Vec<String> = Vec::new();
+    let mut fails = Vec::new();
     b1_targets(t, &mut fails);
-    b2_targets(t, &mut fails);
+    for prefix in ["b02", "b03", "b04", "b05"] {
+        files(t, prefix, &mut fails);
+    }
     b2_range_targets(t, &mut fails);
-    b3_targets(t, &mut fails);
-    b4_targets(t, &mut fails);
-    b5_targets(t, &mut fails);
     b6_targets(t, &mut fails);
     b7_targets(t, &mut fails);
     b8_targets(t, &mut fails);
@@ -484,41 +310,6 @@ fn every_target_with_the_initial_stiffness_29_pct_low() {
 fn every_target_with_the_initial_stiffness_43_pct_high_or_exact() {
     let mut fails = every_target(&with_kc0(100_000.0), "k̂(0) 100 kN/m");
     fails.extend(every_target(&with_kc0(70_000.0), "k̂(0) 70 kN/m"));
-    verdict(fails);
-}
-
-/// B6's stiffness target is not one lucky noise sequence: eight sensor seeds, both plants, the shipped
-/// tuning.
-#[test]
-fn b6_stiffness_over_sensor_seeds() {
-    let mut fails: Vec<String> = Vec::new();
-    for (name, plant) in PLANTS {
-        for seed in 1..=8 {
-            let mut cell = Cell::nominal(plant, 600.0);
-            cell.sensor = SensorParams {
-                noise: 0.5,
-                drift_per_min: 0.5,
-                seed,
-                ..SensorParams::default()
-            };
-            let tr = run_tuning(&robust(), &cell);
-            let (std, _) = tr.force_std_detrended(5.0, 600.0);
-            let kc_rel = (tr.at(599.0).kc_hat - 70_000.0).abs() / 70_000.0;
-            show(
-                "B6",
-                name,
-                &format!("seed {seed} |k̂−k|/k"),
-                kc_rel,
-                "<= 0.05",
-            );
-            check!(fails, std <= 0.1, "{name} seed {seed}: std {std} N");
-            check!(
-                fails,
-                kc_rel <= 0.05,
-                "{name} seed {seed}: k̂ off by {kc_rel}"
-            );
-        }
-    }
     verdict(fails);
 }
 

@@ -388,7 +388,7 @@ pub fn builtin_tuning_names() -> Vec<&'static str> {
 }
 
 /// toml's errors span several lines with a source excerpt; keep the message and the position.
-pub(crate) fn one_line(s: &str) -> String {
+pub fn one_line(s: &str) -> String {
     let mut lines = s.lines().filter(|l| !l.trim().is_empty());
     let head = lines.next().unwrap_or_default().trim().to_string();
     let tail: Vec<_> = lines

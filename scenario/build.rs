@@ -28,8 +28,8 @@ fn embed(dir: &str, konst: &str, out: &mut String) {
 
 fn main() {
     let mut out = String::new();
-    embed("scenarios", "SCENARIOS", &mut out);
-    embed("tunings", "TUNINGS", &mut out);
+    embed("../scenarios", "SCENARIOS", &mut out);
+    embed("../tunings", "TUNINGS", &mut out);
     let dest = Path::new(&std::env::var("OUT_DIR").expect("cargo sets OUT_DIR")).join("builtin.rs");
     std::fs::write(dest, out).expect("write builtin.rs");
 }

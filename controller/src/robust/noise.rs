@@ -1,0 +1,116 @@
+//! The sensor noise, measured online: the mean square of the raw force's second difference over six
+//! (white noise of variance σ² gives σ²; ramps give nothing, smooth motion little), averaged over a
+//! window. Each difference is clipped at three of its own standard deviations (plus a floor), so impacts
+//! and steps — rare, large — cannot pass for noise; true noise still builds the estimate up.
+
+use serde::{Deserialize, Serialize};
+
+use super::positive;
+
+/// The noise meter's parameters (advanced: the defaults suit any cell).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NoiseParams {
+    /// Time constant of the estimate, s.
+    pub window: f64,
+    /// Floor of the clipping level, N.
+    pub clip_floor: f64,
+}
+
+impl Default for NoiseParams {
+    fn default() -> Self {
+        Self {
+            window: 1.0,
+            clip_floor: 0.05,
+        }
+    }
+}
+
+impl NoiseParams {
+    /// Checks the values.
+    pub fn validate(&self) -> Result<(), String> {
+        positive("noise.window", self.window)?;
+        positive("noise.clip_floor", self.clip_floor)
+    }
+}
+
+/// Online estimate of the force sensor's noise variance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NoiseMeter {
+    p: NoiseParams,
+    /// The two previous raw forces, N.
+    prev: Option<(f64, f64)>,
+    var: f64,
+}
+
+impl NoiseMeter {
+    /// A meter that has measured nothing.
+    pub fn new(p: NoiseParams) -> Self {
+        Self {
+            p,
+            prev: None,
+            var: 0.0,
+        }
+    }
+
+    /// Take new parameters, keeping the estimate.
+    pub fn set_params(&mut self, p: NoiseParams) {
+        self.p = p;
+    }
+
+    /// Forget everything.
+    pub fn reset(&mut self) {
+        self.prev = None;
+        self.var = 0.0;
+    }
+
+    /// Count one raw force sample `f` after a step of `dt`.
+    pub fn step(&mut self, f: f64, dt: f64) {
+        if let Some((p1, p2)) = self.prev {
+            let a = (dt / self.p.window).min(1.0);
+            let clip = 3.0 * (6.0 * self.var).sqrt() + self.p.clip_floor;
+            let d2 = (f - 2.0 * p1 + p2).clamp(-clip, clip);
+            self.var += a * (d2 * d2 / 6.0 - self.var);
+        }
+        self.prev = Some((f, self.prev.map_or(f, |p| p.0)));
+    }
+
+    /// The noise variance, N².
+    pub fn var(&self) -> f64 {
+        self.var
+    }
+
+    /// The noise standard deviation, N.
+    pub fn std(&self) -> f64 {
+        self.var.sqrt()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+
+    #[test]
+    fn measures_white_noise_and_ignores_ramps_and_steps() {
+        let mut m = NoiseMeter::new(NoiseParams::default());
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let n = Normal::new(0.0, 0.5).unwrap();
+        for i in 0..5000 {
+            m.step(5.0 + 0.01 * i as f64 + n.sample(&mut rng), 1e-3);
+        }
+        assert!((m.std() - 0.5).abs() < 0.05, "{}", m.std());
+        let mut m = NoiseMeter::new(NoiseParams::default());
+        for i in 0..3000 {
+            m.step(if i < 1500 { 0.002 * i as f64 } else { 40.0 }, 1e-3);
+        }
+        assert!(
+            m.std() < 0.03,
+            "a ramp and a step are not noise: {}",
+            m.std()
+        );
+        m.reset();
+        assert_eq!(m.var(), 0.0);
+    }
+}

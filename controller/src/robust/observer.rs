@@ -1,0 +1,313 @@
+//! The surface, observed and predicted, and the feed-forward built on it.
+//!
+//! * The *observer* is a second-order tracker on the conditioned surface `x̃_c = x̄ − f̃/k̂_c`: it gives
+//!   the reported `x̂_c`, the estimator's motion test and the fallback feed-forward. A jump (a surface
+//!   step, a stiffness change seen through a stale `k̂_c`) moves it without a velocity kick; what keeps
+//!   jumping for longer than the conditioning takes to pass a step is motion.
+//! * The *predictor* ([`crate::predictor`]) runs on the raw pseudo-measurement `x − f/k̂_c` and puts the
+//!   tool on the surface predicted the inner loop's delay ahead, through its inverted lag. Its weight is
+//!   0 until real surface motion is established (the apparent motion of a stale `k̂_c` is tied to the
+//!   robot's), then `m²/(m² + 1)` with `m` the estimated motion in units of its own uncertainty.
+
+use serde::{Deserialize, Serialize};
+
+use super::motion::Motion;
+use super::positive;
+use crate::estimator::surface_moving;
+use crate::predictor::SurfacePredictor;
+
+/// The observer's and predictor's advanced parameters (the defaults suit any cell).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ObserverParams {
+    /// An innovation above this fraction of the set-point's penetration `f_r/k̂_c` in one step is a
+    /// jump, not motion.
+    pub step_innovation: f64,
+    /// Innovation of the predictor, in its own standard deviations, beyond which (and beyond the step
+    /// floor) a measurement is a jump.
+    pub jump_gate: f64,
+    /// How long the feed-forward stays on after real surface motion was last seen, s (it passes
+    /// through zero velocity at every turn of a curved surface).
+    pub motion_hold: f64,
+    /// How long the predictor must see surface motion without a break before it is believed, s.
+    pub motion_confirm: f64,
+    /// How long the robot must have moved both with and against one run of surface velocity for
+    /// that run to count as real motion, s.
+    pub opposed_confirm: f64,
+    /// Significance, in standard deviations, at which the fed-forward motion gets half its weight.
+    pub motion_significance: f64,
+    /// Smallest dead-band on the fallback feed-forward velocity, m/s.
+    pub deadband_floor: f64,
+}
+
+impl Default for ObserverParams {
+    fn default() -> Self {
+        Self {
+            step_innovation: 0.25,
+            jump_gate: 6.0,
+            motion_hold: 0.5,
+            motion_confirm: 0.008,
+            opposed_confirm: 0.01,
+            motion_significance: 3.0,
+            deadband_floor: 0.0001,
+        }
+    }
+}
+
+impl ObserverParams {
+    /// Checks the values.
+    pub fn validate(&self) -> Result<(), String> {
+        positive("observer.step_innovation", self.step_innovation)?;
+        positive("observer.jump_gate", self.jump_gate)?;
+        positive("observer.motion_hold", self.motion_hold)?;
+        positive("observer.motion_confirm", self.motion_confirm)?;
+        positive("observer.opposed_confirm", self.opposed_confirm)?;
+        positive("observer.motion_significance", self.motion_significance)?;
+        positive("observer.deadband_floor", self.deadband_floor)
+    }
+}
+
+/// What the observer needs from the rest of the law in one contact step.
+#[derive(Clone, Copy, Debug)]
+pub struct View {
+    /// Measured position, m.
+    pub x: f64,
+    /// Raw force, N.
+    pub f: f64,
+    /// Conditioned position, m.
+    pub xf: f64,
+    /// Conditioned force, N.
+    pub ff: f64,
+    /// Velocity of the raw position, m/s.
+    pub v_raw: f64,
+    /// Stiffness estimate, N/m.
+    pub k: f64,
+    /// Force scale of a jump (the set-point, at least the contact force), N.
+    pub force_scale: f64,
+    /// Sensor noise variance, N².
+    pub noise_var: f64,
+    /// How long a step takes to pass the conditioning, s.
+    pub step_time: f64,
+}
+
+/// The surface model's part of the command: `w·(ahead − x̃_c) + (1 − w)·fallback`.
+#[derive(Clone, Copy, Debug)]
+pub struct FeedForward {
+    /// Weight `w` of the prediction (0: no real surface motion established).
+    pub weight: f64,
+    /// The predicted surface through the inverted inner loop, less the conditioned one, m.
+    pub predicted: f64,
+    /// The conditioned observer's velocity over the lead time, outside the noise dead-band, m.
+    pub fallback: f64,
+}
+
+/// Surface observer, predictor and motion tests.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SurfaceObserver {
+    p: ObserverParams,
+    zc: f64,
+    vc: f64,
+    jump_time: f64,
+    jump_started: bool,
+    pred: SurfacePredictor,
+    pred_jump_time: f64,
+    motion: Motion,
+}
+
+impl SurfaceObserver {
+    /// An observer that has seen nothing.
+    pub fn new(p: ObserverParams) -> Self {
+        let mut o = Self {
+            p,
+            zc: f64::NAN,
+            vc: 0.0,
+            jump_time: 0.0,
+            jump_started: false,
+            pred: SurfacePredictor::new(),
+            pred_jump_time: 0.0,
+            motion: Motion::default(),
+        };
+        o.reset();
+        o
+    }
+
+    /// Take new parameters, keeping the state.
+    pub fn set_params(&mut self, p: ObserverParams) {
+        self.p = p;
+    }
+
+    /// Forget everything.
+    pub fn reset(&mut self) {
+        self.restart(f64::NAN);
+        self.motion.reset();
+    }
+
+    /// Restart at rest on the surface `z` (a new contact, a new `k̂_c`), keeping what was learnt about
+    /// motion.
+    pub fn restart(&mut self, z: f64) {
+        self.zc = z;
+        self.vc = 0.0;
+        self.jump_time = 0.0;
+        self.jump_started = false;
+        self.pred.clear();
+        self.pred_jump_time = 0.0;
+        self.motion.restart();
+    }
+
+    /// Observed surface, m (NaN before the first contact).
+    pub fn surface(&self) -> f64 {
+        self.zc
+    }
+
+    /// Observed surface velocity away from the tool (for the search after a lift-off), m/s.
+    pub fn receding(&self) -> f64 {
+        self.vc.max(0.0)
+    }
+
+    /// Whether the observed surface started a jump at the last step while no motion was established
+    /// (on a still surface: the environment changed under a steady contact).
+    pub fn jump_on_still_surface(&self) -> bool {
+        self.jump_started && self.motion.still()
+    }
+
+    /// Whether no surface motion is established.
+    pub fn still(&self) -> bool {
+        self.motion.still()
+    }
+
+    /// Whether anything moved or jumped lately (the steady-contact estimator waits for calm).
+    pub fn disturbed(&self) -> bool {
+        !self.motion.still() || self.jump_time > 0.0 || self.pred_jump_time > 0.0
+    }
+
+    /// Run the motion holds for a step; `v_x` is the conditioned position's velocity. Returns whether
+    /// the estimator is to take the surface for a moving one.
+    pub fn hold(&mut self, v_x: f64, max_surface_speed: f64, in_contact: bool, dt: f64) -> bool {
+        let moving = surface_moving(self.vc, v_x, max_surface_speed);
+        self.motion.hold(&self.p, moving && in_contact, dt) || moving
+    }
+
+    /// Track the conditioned surface with natural frequency `bandwidth` (Hz).
+    pub fn track(&mut self, s: &View, bandwidth: f64, dt: f64) {
+        let w = (core::f64::consts::TAU * bandwidth).min(0.5 / dt);
+        let z = s.xf - s.ff / s.k;
+        let e = z - self.zc;
+        let jump = e.abs() > self.p.step_innovation * s.force_scale / s.k;
+        self.jump_started = jump && self.jump_time == 0.0;
+        self.jump_time = if jump { self.jump_time + dt } else { 0.0 };
+        if jump && self.jump_time <= s.step_time {
+            self.zc = z;
+        } else {
+            self.vc += dt * w * w * e;
+            self.zc += dt * (self.vc + 2.0 * 0.8 * w * e);
+        }
+    }
+
+    /// The feed-forward for a cell of `lag` and `delay` (s) at `cycle` (s); `lead` is the whole lead
+    /// time of the fallback (lag, delay and conditioning), `jerk`, `noise_floor` and `deadband` the
+    /// response's surface parameters.
+    #[allow(clippy::too_many_arguments)]
+    pub fn feedforward(
+        &mut self,
+        s: &View,
+        r: &super::ResponseParams,
+        max_surface_speed: f64,
+        lag: f64,
+        delay: f64,
+        cycle: f64,
+        lead: f64,
+        dt: f64,
+    ) -> FeedForward {
+        let p = self.p;
+        let k = s.k;
+        let floor = r.noise_floor;
+        let var = (s.noise_var + floor * floor) / (k * k);
+        let jump_floor = if self.pred_jump_time <= s.step_time {
+            p.step_innovation * s.force_scale / k
+        } else {
+            f64::INFINITY
+        };
+        let jumped = self.pred.update(
+            s.x - s.f / k,
+            var,
+            r.surface_jerk,
+            dt,
+            p.jump_gate,
+            jump_floor,
+        );
+        self.pred_jump_time = if jumped {
+            self.pred_jump_time + dt
+        } else {
+            0.0
+        };
+        let ahead = self.pred.command(0.0, delay, lag, cycle, 1.0, 1.0);
+        let z_f = s.xf - s.ff / k;
+        let [_, v, a] = self.pred.state();
+        if !jumped {
+            // A jump says nothing about motion either way.
+            self.motion.observe(&p, v, s.v_raw, max_surface_speed, dt);
+        }
+        let sv = p.motion_significance * self.pred.velocity_std();
+        let sa = p.motion_significance * self.pred.acceleration_std();
+        let m2 = v * v / (sv * sv + 1e-30) + a * a / (sa * sa + 1e-30);
+        let weight = if self.motion.established() {
+            m2 / (m2 + 1.0)
+        } else {
+            0.0
+        };
+        let deadband = (r.feedforward_deadband * s.noise_var.sqrt()).max(p.deadband_floor);
+        let v_ff = self.vc.signum() * (self.vc.abs() - deadband).max(0.0);
+        FeedForward {
+            weight,
+            predicted: ahead - z_f,
+            fallback: lead * v_ff,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn view(xf: f64, ff: f64) -> View {
+        View {
+            x: xf,
+            f: ff,
+            xf,
+            ff,
+            v_raw: 0.0,
+            k: 70_000.0,
+            force_scale: 5.0,
+            noise_var: 0.0,
+            step_time: 0.03,
+        }
+    }
+
+    #[test]
+    fn a_step_moves_the_observed_surface_without_a_velocity_kick() {
+        let mut o = SurfaceObserver::new(ObserverParams::default());
+        o.restart(0.010);
+        // The surface seen jumps 0.5 mm (35 N at the same position).
+        o.track(&view(0.0105, 0.0), 8.0, 1e-3);
+        assert_eq!(o.surface(), 0.0105);
+        assert_eq!(o.receding(), 0.0);
+        assert!(o.disturbed(), "a jump is a disturbance");
+    }
+
+    #[test]
+    fn a_still_surface_stays_still_and_a_moving_one_is_followed() {
+        let mut o = SurfaceObserver::new(ObserverParams::default());
+        o.restart(0.010);
+        for _ in 0..1000 {
+            o.track(&view(0.010 + 5.0 / 70_000.0, 5.0), 8.0, 1e-3);
+        }
+        assert!((o.surface() - 0.010).abs() < 1e-12 && !o.disturbed());
+        for i in 0..1000 {
+            let z = 0.010 + 0.002 * i as f64 * 1e-3;
+            o.track(&view(z + 5.0 / 70_000.0, 5.0), 8.0, 1e-3);
+        }
+        assert!((o.receding() - 0.002).abs() < 1e-4, "{}", o.receding());
+        o.reset();
+        assert!(o.surface().is_nan() && !o.disturbed());
+    }
+}

@@ -1,0 +1,174 @@
+//! The response in contact: the proportional path `κ·(f_r − f̃)/k̂_c` anchored on the measured position
+//! (weighted down inside the sensor's noise), the conditional integral, and the set-point's slew.
+
+use serde::{Deserialize, Serialize};
+
+use super::{non_negative, positive};
+
+/// How the law responds in contact.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ResponseParams {
+    /// Fraction `κ` of the force error, converted to a position by `k̂_c`, corrected per command. In
+    /// (0, 1]; the loop stays stable while `κ·k_c/k̂_c < 2`.
+    pub kappa: f64,
+    /// Integral gain `k_i`, 1/s (0: none).
+    pub integral: f64,
+    /// Largest magnitude of the integral term, m.
+    pub integral_limit: f64,
+    /// Natural frequency of the surface observer the estimator's motion test and the reported `x̂_c`
+    /// use, Hz.
+    pub surface_bandwidth: f64,
+    /// Spectral density of the surface's jerk in the surface predictor's model, m²/s⁵. With the
+    /// measured sensor noise it sets the predictor's bandwidth (see [`crate::predictor`]).
+    pub surface_jerk: f64,
+    /// Floor of the force noise the predictor assumes, N (quantisation, model error).
+    pub noise_floor: f64,
+    /// Dead-band of the fallback feed-forward per newton of sensor noise, (m/s)/N. While no real
+    /// surface motion is established (see [`crate::estimator::surface_moving`]) the law feeds the
+    /// conditioned observer's velocity forward over the loop's lead time instead of the prediction;
+    /// inside `σ·feedforward_deadband` that velocity is taken for differentiated noise.
+    pub feedforward_deadband: f64,
+    /// Largest rate of change of the set-point when it is changed, N/s (bumpless changes).
+    pub set_point_rate: f64,
+    /// Noise gate: the proportional correction is weighted by `e²/(e² + (noise_gate·σ)²)`, with `e` the
+    /// conditioned force error and `σ` the sensor noise the law measures online. 0 switches it off.
+    pub noise_gate: f64,
+    /// Relative force error within which the integral acts (advanced): near the set-point what is left
+    /// is a ramp's lag; a transient's error is the proportional path's business.
+    #[serde(default = "default_integration_band")]
+    pub integration_band: f64,
+}
+
+fn default_integration_band() -> f64 {
+    0.3
+}
+
+impl ResponseParams {
+    /// Checks the values.
+    pub fn validate(&self) -> Result<(), String> {
+        positive("response.kappa", self.kappa)?;
+        if self.kappa > 1.0 {
+            return Err(format!("response.kappa must be <= 1, got {}", self.kappa));
+        }
+        non_negative("response.integral", self.integral)?;
+        non_negative("response.integral_limit", self.integral_limit)?;
+        positive("response.surface_bandwidth", self.surface_bandwidth)?;
+        positive("response.surface_jerk", self.surface_jerk)?;
+        positive("response.noise_floor", self.noise_floor)?;
+        non_negative("response.feedforward_deadband", self.feedforward_deadband)?;
+        positive("response.set_point_rate", self.set_point_rate)?;
+        non_negative("response.noise_gate", self.noise_gate)?;
+        positive("response.integration_band", self.integration_band)
+    }
+}
+
+/// The response's state: the active set-point and the integral.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Response {
+    p: ResponseParams,
+    f_r: f64,
+    integ: f64,
+}
+
+impl Response {
+    /// At rest at set-point `f_r`.
+    pub fn new(p: ResponseParams, f_r: f64) -> Self {
+        Self { p, f_r, integ: 0.0 }
+    }
+
+    /// Take new parameters, keeping the state.
+    pub fn set_params(&mut self, p: ResponseParams) {
+        self.p = p;
+    }
+
+    /// At rest at set-point `f_r`.
+    pub fn reset(&mut self, f_r: f64) {
+        self.f_r = f_r;
+        self.integ = 0.0;
+    }
+
+    /// A new contact: the integral starts over.
+    pub fn begin_contact(&mut self) {
+        self.integ = 0.0;
+    }
+
+    /// The active set-point, N.
+    pub fn set_point(&self) -> f64 {
+        self.f_r
+    }
+
+    /// Slew the active set-point towards `target` for a step of `dt`; returns it, N.
+    pub fn slew(&mut self, target: f64, dt: f64) -> f64 {
+        let df = self.p.set_point_rate * dt;
+        self.f_r += (target - self.f_r).clamp(-df, df);
+        self.f_r
+    }
+
+    /// The proportional correction and the integral (updated) for conditioned force `ff`, stiffness `k`
+    /// and noise variance `noise_var`; `force_scale` is the set-point, at least the contact force, N.
+    /// Returns `(proportional, integral)`, m.
+    pub fn correction(
+        &mut self,
+        ff: f64,
+        k: f64,
+        noise_var: f64,
+        force_scale: f64,
+        dt: f64,
+    ) -> (f64, f64) {
+        let r = self.p;
+        let e = self.f_r - ff;
+        let n = r.noise_gate * r.noise_gate * noise_var;
+        let weight = if n > 0.0 { e * e / (e * e + n) } else { 1.0 };
+        let delta = e / k;
+        if e.abs() <= r.integration_band * force_scale {
+            let lim = r.integral_limit;
+            self.integ = (self.integ + dt * r.integral * delta).clamp(-lim, lim);
+        }
+        (weight * r.kappa * delta, self.integ)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const P: ResponseParams = ResponseParams {
+        kappa: 0.8,
+        integral: 1.5,
+        integral_limit: 0.0003,
+        surface_bandwidth: 8.0,
+        surface_jerk: 0.001,
+        noise_floor: 0.02,
+        feedforward_deadband: 0.0006,
+        set_point_rate: 50.0,
+        noise_gate: 1.0,
+        integration_band: 0.3,
+    };
+
+    #[test]
+    fn the_set_point_slews_and_the_integral_acts_near_it_only() {
+        let mut r = Response::new(P, 5.0);
+        assert_eq!(r.slew(10.0, 1e-3), 5.05);
+        r.reset(5.0);
+        // Far from the set-point: proportional only.
+        let (p, i) = r.correction(0.0, 50_000.0, 0.0, 5.0, 1e-3);
+        assert!((p - 0.8 * 5.0 / 50_000.0).abs() < 1e-15 && i == 0.0);
+        // Near it: the integral builds up, within its limit.
+        for _ in 0..100_000 {
+            r.correction(4.5, 50_000.0, 0.0, 5.0, 1e-3);
+        }
+        assert_eq!(r.correction(4.5, 50_000.0, 0.0, 5.0, 1e-3).1, 0.0003);
+        // Inside the noise the proportional correction is weighted down.
+        let (p, _) = r.correction(4.9, 50_000.0, 0.25, 5.0, 1e-3);
+        assert!(p < 0.1 * 0.8 * 0.1 / 50_000.0, "{p}");
+        r.begin_contact();
+        assert_eq!(r.correction(0.0, 50_000.0, 0.0, 5.0, 1e-3).1, 0.0);
+    }
+
+    #[test]
+    fn validation_names_the_field() {
+        let p = ResponseParams { kappa: 1.5, ..P };
+        assert!(p.validate().unwrap_err().contains("kappa"));
+    }
+}

@@ -1,0 +1,141 @@
+//! The law's view of its inputs: the raw position and force, the same conditioning
+//! ([`crate::conditioning`]) applied to both (so force and position stay in phase), and the velocities
+//! of the conditioned and the raw position.
+
+use crate::conditioning::{ConditioningParams, SignalFilter};
+
+/// One step's conditioned signals.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Signals {
+    /// Measured position, m.
+    pub x: f64,
+    /// Measured force, N.
+    pub f: f64,
+    /// Conditioned force, N.
+    pub ff: f64,
+    /// Conditioned position, m.
+    pub xf: f64,
+    /// Velocity of the conditioned position, m/s.
+    pub v_x: f64,
+    /// Velocity of the raw position, m/s.
+    pub v_raw: f64,
+}
+
+/// Force and position conditioning with the velocities derived from them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Conditioner {
+    p: ConditioningParams,
+    force: SignalFilter,
+    position: SignalFilter,
+    xf_prev: Option<f64>,
+    x_prev: Option<f64>,
+}
+
+/// The position is filtered like the force, without the notch (the notch is for the tool's ringing).
+fn position_params(p: ConditioningParams) -> ConditioningParams {
+    ConditioningParams { notch: None, ..p }
+}
+
+impl Conditioner {
+    /// Conditioning with `p`, at rest.
+    pub fn new(p: ConditioningParams) -> Self {
+        Self {
+            p,
+            force: SignalFilter::new(p),
+            position: SignalFilter::new(position_params(p)),
+            xf_prev: None,
+            x_prev: None,
+        }
+    }
+
+    /// Take new parameters, keeping the filters' state.
+    pub fn set_params(&mut self, p: ConditioningParams) {
+        self.force.set_params(p);
+        self.position.set_params(position_params(p));
+        self.p = p;
+    }
+
+    /// Forget everything.
+    pub fn reset(&mut self) {
+        self.force.clear();
+        self.position.clear();
+        self.xf_prev = None;
+        self.x_prev = None;
+    }
+
+    /// Restart the force filter at `f` (a contact is gone: forget the filter's memory of it).
+    pub fn reset_force(&mut self, f: f64) {
+        self.force.reset_to(f);
+    }
+
+    /// Condition one sample.
+    pub fn step(&mut self, x: f64, f: f64, dt: f64) -> Signals {
+        let ff = self.force.step(f, dt);
+        let xf = self.position.step(x, dt);
+        let v_x = self.xf_prev.map_or(0.0, |p| (xf - p) / dt);
+        self.xf_prev = Some(xf);
+        let v_raw = self.x_prev.map_or(0.0, |p| (x - p) / dt);
+        self.x_prev = Some(x);
+        Signals {
+            x,
+            f,
+            ff,
+            xf,
+            v_x,
+            v_raw,
+        }
+    }
+
+    /// Low-frequency group delay of the conditioning at control period `cycle`, s.
+    pub fn delay(&self, cycle: f64) -> f64 {
+        core::f64::consts::SQRT_2 / (core::f64::consts::TAU * self.p.cutoff.min(0.45 / cycle))
+    }
+
+    /// How much of white noise's standard deviation passes the conditioning at control period
+    /// `cycle`: `√(2·B·cycle)`, `B = 1.11·f_c` the second-order low-pass's noise bandwidth.
+    pub fn noise_gain(&self, cycle: f64) -> f64 {
+        let fc = self.p.cutoff.min(0.45 / cycle);
+        (2.0 * 1.11 * fc * cycle).sqrt().min(1.0)
+    }
+
+    /// How long a step takes to pass the conditioning, s (about two of its low-pass time constants
+    /// beyond the group delay: 30 ms at 20 Hz). Innovations that last this long are no longer a jump.
+    pub fn step_time(&self, cycle: f64) -> f64 {
+        0.6 / self.p.cutoff.min(0.45 / cycle)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn velocities_start_at_rest_and_follow_a_ramp() {
+        let mut c = Conditioner::new(ConditioningParams {
+            cutoff: 20.0,
+            notch: None,
+        });
+        let s = c.step(0.01, 0.0, 1e-3);
+        assert_eq!((s.v_x, s.v_raw), (0.0, 0.0));
+        let mut last = s;
+        for i in 1..500 {
+            last = c.step(0.01 + 0.002 * i as f64 * 1e-3, 0.0, 1e-3);
+        }
+        assert!((last.v_raw - 0.002).abs() < 1e-12);
+        assert!((last.v_x - 0.002).abs() < 1e-6, "{}", last.v_x);
+        c.reset();
+        assert_eq!(c.step(0.5, 0.0, 1e-3).v_raw, 0.0);
+    }
+
+    #[test]
+    fn delays_derive_from_the_cutoff() {
+        let c = Conditioner::new(ConditioningParams {
+            cutoff: 20.0,
+            notch: None,
+        });
+        assert!((c.step_time(1e-3) - 0.03).abs() < 1e-12);
+        assert!((c.delay(1e-3) - 0.011_254).abs() < 1e-5);
+        // Capped at a fraction of the sampling rate on a slow cell.
+        assert!(c.step_time(0.05) > c.step_time(1e-3));
+    }
+}

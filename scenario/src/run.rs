@@ -1,0 +1,137 @@
+//! A scenario run in process, lockstep, in simulated time: the simulated world, the in-process robot
+//! and sensor, the controller's loop — recorded and measured as `forcecell sim` records and measures a
+//! run (the application's runner adds wires, recording and progress around the same pieces). The
+//! controller's closed-loop tests use this, so a scenario file and a metric mean the same thing in both.
+
+use anyhow::{Result, anyhow};
+use controller::{CellParams, ControlLoop, EventCounts, ForceLaw, LoopStats, Tuning};
+use sim::{InProcRobot, InProcSensor, InnerLoopModel, World};
+
+use crate::metrics::Metrics;
+use crate::record::Row;
+use crate::scenario::{Scenario, Target};
+
+/// The law's model of the cell's inner loop, from the simulated plant (the cycle, the lag, the delay).
+pub fn cell_model(m: &InnerLoopModel) -> CellParams {
+    CellParams {
+        cycle: m.period,
+        lag: m.tau,
+        delay: m.delay(),
+    }
+}
+
+/// Fill the truth columns of `rows` (one per control step of `period`) from the world's log.
+pub fn fill_truth(rows: &mut [Row], truth: &[sim::world::Truth], period: f64) {
+    for r in rows {
+        let k = (r.t / period).round();
+        if k >= 0.0
+            && let Some(tr) = truth.get(k as usize)
+        {
+            r.f_true = tr.f;
+            r.k_c = tr.k_c;
+            r.x_c = tr.x_c;
+            r.s = tr.s;
+        }
+    }
+}
+
+/// A target checked against a run.
+#[derive(Clone, Debug)]
+pub struct Check {
+    /// The target.
+    pub target: Target,
+    /// The metric's value over the target's window.
+    pub value: f64,
+    /// Whether it is met.
+    pub pass: bool,
+}
+
+impl Check {
+    /// Check `target` against `rows`.
+    pub fn of(target: &Target, rows: &[Row]) -> Self {
+        let m = Metrics::compute(
+            rows,
+            target.after.unwrap_or(0.0),
+            target.until.unwrap_or(f64::INFINITY),
+        );
+        let value = m.get(&target.metric).unwrap_or(f64::NAN);
+        let pass = !value.is_nan()
+            && target.max.is_none_or(|mx| value <= mx)
+            && target.min.is_none_or(|mn| value >= mn);
+        Self {
+            target: target.clone(),
+            value,
+            pass,
+        }
+    }
+}
+
+/// What an in-process run produced.
+#[derive(Clone, Debug)]
+pub struct Run {
+    /// One row per step, with the truth.
+    pub rows: Vec<Row>,
+    /// The law's event counters.
+    pub counters: EventCounts,
+    /// The loop's counters.
+    pub stats: LoopStats,
+}
+
+impl Run {
+    /// Metrics over `[from, until]`.
+    pub fn metrics(&self, from: f64, until: f64) -> Metrics {
+        Metrics::compute(&self.rows, from, until)
+    }
+
+    /// Every target of `targets` checked.
+    pub fn check(&self, targets: &[Target]) -> Vec<Check> {
+        targets.iter().map(|t| Check::of(t, &self.rows)).collect()
+    }
+}
+
+/// Run `scenario` on `plant` with `tuning` (the scenario's overrides and the plant's cell model
+/// applied), in process.
+pub fn run(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) -> Result<Run> {
+    let mut tuning = tuning.clone();
+    tuning.law.apply(&scenario.controller);
+    tuning.law.set_cell(cell_model(plant));
+    let law = tuning.law.build().map_err(|e| anyhow!(e))?;
+    let world = World::new(
+        scenario.environment.plant(),
+        *plant,
+        scenario.sensor.clone(),
+        scenario.start_position(),
+    )
+    .with_form(scenario.environment.form.clone());
+    let world = match &scenario.program {
+        Some(p) => world.with_program(p.clone()),
+        None => world,
+    }
+    .shared();
+    let mut lp = ControlLoop::new(
+        InProcRobot::new(world.clone()),
+        InProcSensor::new(world.clone()),
+        law,
+        tuning.loop_config(),
+    );
+    let steps = (scenario.duration / plant.period).round().max(1.0) as usize;
+    let mut rows = Vec::with_capacity(steps);
+    for _ in 0..steps {
+        // A robot program ends the run when it ends (as `forcecell sim` does).
+        if sim::world::lock(&world).program().is_some_and(|p| p.done()) {
+            break;
+        }
+        let r = lp.cycle()?;
+        rows.push(Row::from_report(&r, r.set_point));
+    }
+    let counters = lp.law().counters();
+    let stats = lp.stats();
+    drop(lp);
+    let truth = sim::world::lock(&world).truth_log();
+    fill_truth(&mut rows, &truth, plant.period);
+    Ok(Run {
+        rows,
+        counters,
+        stats,
+    })
+}
