@@ -602,7 +602,7 @@ where
         match lp.cycle() {
             Ok(r) => {
                 if let Some(tx) = &mut recorder {
-                    let mut rec = Record::from_report(&r, f_r, 0);
+                    let mut rec = Record::from_report(&r, f_r);
                     if let Some(raw) = lp.sensor_mut().last_raw() {
                         rec.wrench_raw = raw.to_array();
                     }

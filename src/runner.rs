@@ -191,7 +191,7 @@ where
         }
         match lp.cycle() {
             Ok(r) => {
-                let rec = Record::from_report(&r, f_r, 0);
+                let rec = Record::from_report(&r, f_r);
                 rows.push(rec.row);
                 if let Some(tx) = &mut recorder {
                     tx.push(rec);
@@ -270,10 +270,6 @@ pub fn start_recording(
     meta.insert("plant".to_string(), spec.plant_label.clone());
     meta.insert("tuning".to_string(), spec.tuning.name.clone());
     meta.insert("period_s".to_string(), spec.plant.period.to_string());
-    meta.insert(
-        "segment".to_string(),
-        "0 (segments not yet recorded)".into(),
-    );
     let opts = RecorderOptions {
         full: if realtime { Full::Drop } else { Full::Wait },
         attachments: vec![
