@@ -375,16 +375,15 @@ fn wait_for(what: &str, limit: Duration, mut ok: impl FnMut() -> bool) {
     }
 }
 
-#[test]
-fn a_killed_sim_leaves_an_mcap_readable_up_to_its_last_flush() {
-    let dir = tempfile::tempdir().unwrap();
+/// A `sim --realtime` killed with SIGKILL after two flushes of messages; returns its recording.
+fn killed_recording(dir: &Path) -> std::path::PathBuf {
     let scenario = std::fs::read_to_string(
         Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/paper-fig9.toml"),
     )
     .unwrap()
     .replace("name = \"paper-fig9\"", "name = \"long\"")
     .replace("duration = 2.0", "duration = 60.0");
-    std::fs::write(dir.path().join("long.toml"), scenario).unwrap();
+    std::fs::write(dir.join("long.toml"), scenario).unwrap();
     let mut child = Command::new(env!("CARGO_BIN_EXE_forcecell"))
         .args([
             "sim",
@@ -396,14 +395,14 @@ fn a_killed_sim_leaves_an_mcap_readable_up_to_its_last_flush() {
             "--out",
             "res",
         ])
-        .current_dir(dir.path())
+        .current_dir(dir)
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let path = dir.path().join("res/long-p2-paper.mcap");
+    let path = dir.join("res/long-p2-paper.mcap");
     let len = || path.metadata().map_or(0, |m| m.len());
-    // The header, schemas and attachments are flushed at once; wait for two flushes of messages.
+    // The header and attachments are flushed at once; wait for two flushes of messages.
     wait_for("the recording to start", Duration::from_secs(30), || {
         len() > 0
     });
@@ -415,7 +414,13 @@ fn a_killed_sim_leaves_an_mcap_readable_up_to_its_last_flush() {
     wait_for("a second flush", Duration::from_secs(30), || len() > second);
     child.kill().unwrap(); // SIGKILL
     child.wait().unwrap();
+    path
+}
 
+#[test]
+fn a_killed_sim_leaves_an_mcap_readable_up_to_its_last_flush() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = killed_recording(dir.path());
     let bytes = std::fs::read(&path).unwrap();
     let back = recorder::read_mcap(&bytes).unwrap();
     assert!(
@@ -445,6 +450,49 @@ fn a_killed_sim_leaves_an_mcap_readable_up_to_its_last_flush() {
             "{r:?}"
         );
     }
+}
+
+/// The `mcap` Python package (the reference reader) streams a killed recording up to its last
+/// flush: every message forcecell's reader found, then the end of the data. Needs `pip install mcap`;
+/// `FORCECELL_MCAP_PYTHON` names the interpreter (default `python3`).
+#[test]
+#[ignore = "needs the mcap Python package: pip install mcap; FORCECELL_MCAP_PYTHON=path/to/python"]
+fn the_mcap_python_reader_reads_a_killed_recording_up_to_its_last_flush() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = killed_recording(dir.path());
+    let python = std::env::var("FORCECELL_MCAP_PYTHON").unwrap_or_else(|_| "python3".into());
+    let script = r#"
+import sys
+from collections import Counter
+from mcap.stream_reader import StreamReader
+from mcap.records import Channel, Message
+topics, counts, end = {}, Counter(), "end of file"
+try:
+    for rec in StreamReader(open(sys.argv[1], "rb"), skip_magic=False).records:
+        if isinstance(rec, Channel):
+            topics[rec.id] = rec.topic
+        elif isinstance(rec, Message):
+            counts[topics[rec.channel_id]] += 1
+except Exception as e:
+    end = type(e).__name__
+print(counts["/force"], counts["/process"], end)
+"#;
+    let out = Command::new(&python)
+        .args(["-c", script])
+        .arg(&path)
+        .output()
+        .expect("run python");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    let f: Vec<&str> = text.split_whitespace().collect();
+    let back = recorder::read_mcap(&std::fs::read(&path).unwrap()).unwrap();
+    assert_eq!(f[0].parse::<usize>().unwrap(), back.rows.len(), "{text}");
+    assert_eq!(f[1].parse::<usize>().unwrap(), back.rows.len(), "{text}");
+    assert!(back.rows.len() > 100, "{text}");
 }
 
 /// Needs root: mounts a 256 KiB tmpfs (the CI and the dev machines run as root).
