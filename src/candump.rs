@@ -208,6 +208,10 @@ pub struct Replay {
 
 type Exchange = Vec<(Duration, Frame)>;
 
+/// An exchange being read from the log: its key, request time (µs), expected answer layout and the
+/// frames so far.
+type Open = ((u8, Vec<u8>), u64, &'static [(u8, u8)], Exchange);
+
 fn key(frame: &Frame) -> (u8, Vec<u8>) {
     ((frame.id() & 0xF) as u8, frame.data().to_vec())
 }
@@ -226,10 +230,8 @@ impl Replay {
             unknown: 0,
             past_end: 0,
         };
-        // The exchange being read: its key, request time, expected answer layout and frames so far.
-        let mut cur: Option<((u8, Vec<u8>), u64, &'static [(u8, u8)], Exchange)> = None;
-        let close = |cur: &mut Option<((u8, Vec<u8>), u64, &'static [(u8, u8)], Exchange)>,
-                     replay: &mut Self| {
+        let mut cur: Option<Open> = None;
+        let close = |cur: &mut Option<Open>, replay: &mut Self| {
             if let Some((k, _, _, answers)) = cur.take() {
                 if k.0 == ati_can::codec::op::POLL {
                     replay.recorded_polls += 1;
