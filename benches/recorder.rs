@@ -58,7 +58,7 @@ fn cycle_recorded(b: Bencher) {
     });
     b.bench_local(|| {
         let r = lp.cycle().unwrap();
-        tx.push(Record::from_report(&r, f_r, 0))
+        tx.push(Record::from_report(&r, f_r))
     });
     stop.store(true, Ordering::Relaxed);
     drain.join().unwrap();

@@ -12,6 +12,7 @@
 # The test binaries are built on the host and run unchanged in the guest, which sees the host's files.
 #
 # Usage: scripts/vcan-tests.sh                         (auto: native, else UML, else QEMU)
+#        FORCECELL_VCAN_FILTER=replay scripts/vcan-tests.sh   (only the tests whose names contain it)
 #        FORCECELL_VCAN_MODE=native|uml|qemu scripts/vcan-tests.sh   (force one; fails if it cannot run)
 # Prerequisites are installed with apt-get when missing. Exits non-zero, with the guest's output, when a
 # prerequisite is missing, the guest does not boot or finish, or any test fails. Never a silent skip.
@@ -80,7 +81,8 @@ for spec in forcecell-sim:ati_vcan forcecell:ati_cli_vcan; do
   fi
   bins+=("$bin")
 done
-test_args=(--ignored --test-threads=1)
+# FORCECELL_VCAN_FILTER=NAME runs only the vcan tests whose names contain NAME (a subset, e.g. replay).
+test_args=(--ignored --test-threads=1 ${FORCECELL_VCAN_FILTER:-})
 
 mkdir -p "$root/target"
 work=$(mktemp -d "$root/target/vcan-run.XXXXXX")

@@ -128,6 +128,21 @@ pub fn sim_sensor(
         .map_err(|e| anyhow!("simulated ATI node: {e}"))?,
     );
     let transport = SocketCanTransport::open(iface)?;
+    let stop = stop_after(seconds)?;
+    println!(
+        "simulated ATI NETCANOEM node on {iface}, base {base} (ids 0x{:03X}..=0x{:03X}), Fz {} N; Ctrl-C ends it",
+        base.id(0),
+        base.id(0xF),
+        wrench.force.z
+    );
+    serve(&node, transport, &stop).with_context(|| format!("serving on {iface}"))?;
+    let n = node.lock();
+    println!("answered {} requests ({} polls)", n.requests(), n.polls());
+    Ok(())
+}
+
+/// A flag that a thread sets after `seconds` (never when `None`).
+fn stop_after(seconds: Option<f64>) -> Result<Arc<AtomicBool>> {
     let stop = Arc::new(AtomicBool::new(false));
     if let Some(s) = seconds {
         if !(s.is_finite() && s > 0.0) {
@@ -139,15 +154,50 @@ pub fn sim_sensor(
             stop.store(true, Ordering::Release);
         });
     }
+    Ok(stop)
+}
+
+/// `forcecell sim-sensor ati --replay LOG`: answer the driver on `iface` from a recorded candump log
+/// (see [`crate::candump::Replay`]) until `seconds` have passed (forever when `None`).
+pub fn sim_sensor_replay(
+    iface: &str,
+    base: Base,
+    log: &std::path::Path,
+    seconds: Option<f64>,
+) -> Result<()> {
+    let records = crate::candump::read_log(log)?;
+    let mut replay = crate::candump::Replay::from_log(&records, base)
+        .with_context(|| format!("{}", log.display()))?;
+    let transport = SocketCanTransport::open(iface)?;
+    let stop = stop_after(seconds)?;
     println!(
-        "simulated ATI NETCANOEM node on {iface}, base {base} (ids 0x{:03X}..=0x{:03X}), Fz {} N; Ctrl-C ends it",
-        base.id(0),
-        base.id(0xF),
-        wrench.force.z
+        "replaying {} on {iface}, base {base}: {} recorded polls, answered as the driver asks; Ctrl-C ends it",
+        log.display(),
+        replay.recorded_polls
     );
-    serve(&node, transport, &stop).with_context(|| format!("serving on {iface}"))?;
-    let n = node.lock();
-    println!("answered {} requests ({} polls)", n.requests(), n.polls());
+    sim::ati_node::serve_responder(&mut replay, base, transport, &stop)
+        .with_context(|| format!("serving on {iface}"))?;
+    println!(
+        "answered {} of {} recorded polls{}{}",
+        replay.replayed_polls,
+        replay.recorded_polls,
+        if replay.past_end > 0 {
+            format!(
+                "; {} polls after the log's end went unanswered",
+                replay.past_end
+            )
+        } else {
+            String::new()
+        },
+        if replay.unknown > 0 {
+            format!(
+                "; {} requests the log never saw went unanswered",
+                replay.unknown
+            )
+        } else {
+            String::new()
+        }
+    );
     Ok(())
 }
 

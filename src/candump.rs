@@ -181,3 +181,127 @@ pub fn open_logged(iface: &str, can_log: Option<&Path>) -> Result<Box<dyn CanTra
         None => Box::new(t),
     })
 }
+
+/// A recorded field trace answering the driver as the sensor did: `forcecell sim-sensor ati --replay`.
+///
+/// The ATI board only speaks when asked, so a log is not replayed blindly onto the bus (answers sent
+/// on the log's clock would miss the live driver's requests). Instead the log is cut into exchanges —
+/// each request the driver sent, with the answer frames that followed it and their delays — and every
+/// request the live driver sends is answered with the next recorded exchange for the same request,
+/// after the recorded delay. The driver therefore gets the recorded identity, calibration, status
+/// words and gauge counts in the recorded order, with the recorded turnaround, and a request that went
+/// unanswered in the field goes unanswered again. Start-up requests (firmware, serial, matrix, units,
+/// …) are answered again from their last recorded exchange when the driver asks more often than the
+/// log did; polls are not: past the log's last poll the replay falls silent (the trace has ended).
+pub struct Replay {
+    base: Base,
+    exchanges: std::collections::BTreeMap<(u8, Vec<u8>), std::collections::VecDeque<Exchange>>,
+    /// Polls in the log.
+    pub recorded_polls: u64,
+    /// Polls answered from the log.
+    pub replayed_polls: u64,
+    /// Requests that the log has no exchange for (not answered).
+    pub unknown: u64,
+    /// Polls asked for after the log's last one (not answered).
+    pub past_end: u64,
+}
+
+type Exchange = Vec<(Duration, Frame)>;
+
+/// An exchange being read from the log: its key, request time (µs), expected answer layout and the
+/// frames so far.
+type Open = ((u8, Vec<u8>), u64, &'static [(u8, u8)], Exchange);
+
+fn key(frame: &Frame) -> (u8, Vec<u8>) {
+    ((frame.id() & 0xF) as u8, frame.data().to_vec())
+}
+
+impl Replay {
+    /// Cut a candump log's frames (as [`read_log`] returns them) into exchanges on `base`. Frames of
+    /// other ids are left out (the driver filters them too). Fails when the log holds no request on
+    /// `base`.
+    pub fn from_log(records: &[(u64, String, Frame)], base: Base) -> Result<Self> {
+        use ati_can::Request;
+        let mut replay = Self {
+            base,
+            exchanges: Default::default(),
+            recorded_polls: 0,
+            replayed_polls: 0,
+            unknown: 0,
+            past_end: 0,
+        };
+        let mut cur: Option<Open> = None;
+        let close = |cur: &mut Option<Open>, replay: &mut Self| {
+            if let Some((k, _, _, answers)) = cur.take() {
+                if k.0 == ati_can::codec::op::POLL {
+                    replay.recorded_polls += 1;
+                }
+                replay.exchanges.entry(k).or_default().push_back(answers);
+            }
+        };
+        for (t_us, _, frame) in records {
+            let Ok(opcode) = base.opcode_of(frame) else {
+                continue;
+            };
+            // The answer frame the open exchange waits for next?
+            let expected = cur
+                .as_ref()
+                .and_then(|(_, _, layout, got)| layout.get(got.len()).copied());
+            if expected == Some((opcode, frame.dlc())) {
+                if let Some((_, t0, _, got)) = &mut cur {
+                    got.push((Duration::from_micros(t_us.saturating_sub(*t0)), *frame));
+                }
+            } else if let Ok(req) = Request::decode(frame, base) {
+                close(&mut cur, &mut replay);
+                cur = Some((key(frame), *t_us, req.answer_layout(), Vec::new()));
+            } else if let Some((_, t0, _, got)) = &mut cur {
+                // An unexpected frame after a request (a duplicate, a late answer): replayed as seen.
+                got.push((Duration::from_micros(t_us.saturating_sub(*t0)), *frame));
+            }
+        }
+        close(&mut cur, &mut replay);
+        if replay.exchanges.is_empty() {
+            anyhow::bail!("the log holds no ATI request on base {base}");
+        }
+        Ok(replay)
+    }
+
+    /// The recorded answer to a request frame, with each frame's delay after the request; `None`
+    /// when the log has none (a request it never saw, or a poll past its end).
+    pub fn answer(&mut self, request: &Frame) -> Option<Exchange> {
+        let k = key(request);
+        let poll = k.0 == ati_can::codec::op::POLL;
+        let Some(queue) = self.exchanges.get_mut(&k) else {
+            self.unknown += 1;
+            return None;
+        };
+        if poll {
+            let next = queue.pop_front();
+            match next {
+                Some(_) => self.replayed_polls += 1,
+                None => self.past_end += 1,
+            }
+            next
+        } else if queue.len() > 1 {
+            queue.pop_front()
+        } else {
+            queue.front().cloned()
+        }
+    }
+
+    /// The base it answers on.
+    pub fn base(&self) -> Base {
+        self.base
+    }
+}
+
+impl ati_can::Responder for Replay {
+    fn on_frame(&mut self, frame: &Frame, _now: Duration, out: &mut dyn FnMut(Duration, Frame)) {
+        if ati_can::Request::decode(frame, self.base).is_err() {
+            return;
+        }
+        for (delay, answer) in self.answer(frame).into_iter().flatten() {
+            out(delay, answer);
+        }
+    }
+}

@@ -612,11 +612,7 @@ where
         match lp.cycle() {
             Ok(r) => {
                 if let Some(tx) = &mut recorder {
-                    let segment = r
-                        .cycle
-                        .process
-                        .map_or(0, |p| p.segment.clamp(0, u32::MAX as i64) as u32);
-                    let mut rec = Record::from_report(&r, r.set_point, segment);
+                    let mut rec = Record::from_report(&r, r.set_point);
                     if let Some(raw) = lp.sensor_mut().last_raw() {
                         rec.wrench_raw = raw.to_array();
                     }

@@ -136,6 +136,10 @@ struct SimSensorArgs {
     /// Stop after this many seconds (default: run until interrupted).
     #[arg(long, allow_negative_numbers = true, value_parser = forcecell::args::serve_seconds)]
     seconds: Option<f64>,
+    /// Answer from a recorded candump `-L` log (`sensor ati --can-log`, a cell's `record`) instead of
+    /// a constant wrench: each request gets the log's next answer to it, after the recorded delay.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["fz", "noise"])]
+    replay: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -321,6 +325,15 @@ fn main() -> ExitCode {
         }
         Command::Tune(a) => tune(a),
         Command::BenchScenarios(a) => bench_scenarios(a),
+        Command::SimSensor(SimSensorKind::Ati(a)) if a.replay.is_some() => {
+            forcecell::ati::sim_sensor_replay(
+                &a.bus.can,
+                a.bus.base,
+                a.replay.as_deref().unwrap_or(std::path::Path::new("")),
+                a.seconds,
+            )
+            .map(|()| ExitCode::SUCCESS)
+        }
         Command::SimSensor(SimSensorKind::Ati(a)) => forcecell::ati::sim_sensor(
             &a.bus.can,
             a.bus.base,
@@ -714,7 +727,7 @@ fn report(spec: &RunSpec, run: &RunResult, out: &Path, check: bool) -> Result<Ex
         &run.rows,
     )?;
     println!("\nwrote {} and {}", csv.display(), png.display());
-    if run.rows.iter().any(|r| r.phase != record::NO_PROCESS) {
+    if run.rows.iter().any(|r| r.segment.is_some()) {
         let pass_png = out.join(format!("{stem}-pass.png"));
         plot::write_pass_png(
             &pass_png,

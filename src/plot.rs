@@ -246,7 +246,7 @@ pub fn write_pass_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
     })?;
     let rows: Vec<Row> = rows
         .iter()
-        .filter(|r| r.phase != crate::record::NO_PROCESS)
+        .filter(|r| r.segment.is_some())
         .cloned()
         .collect();
     let root = BitMapBackend::new(path, (1200, 1100)).into_drawing_area();
@@ -291,7 +291,7 @@ pub fn write_pass_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
             label: "state",
             color: ORANGE_,
             width: 2,
-            value: |r| f64::from(r.phase),
+            value: |r| r.phase.map_or(f64::NAN, f64::from),
         }],
     )?;
     panel(
@@ -303,7 +303,7 @@ pub fn write_pass_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
             label: "segment",
             color: GREEN_,
             width: 2,
-            value: |r| r.segment as f64,
+            value: |r| r.segment.map_or(f64::NAN, |s| s as f64),
         }],
     )?;
     panel(

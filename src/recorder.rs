@@ -54,8 +54,6 @@ pub struct Record {
     pub late_replies: u64,
     /// Contact state code ([`ContactState::code`]), or [`NO_STATE`] for laws without a state machine.
     pub state: u8,
-    /// Process segment (0 until the cell runs segmented programs).
-    pub segment: u32,
     /// The law's events of this step, one bit each in [`EVENT_NAMES`] order.
     pub events: u16,
 }
@@ -121,8 +119,9 @@ pub fn fault_name(code: u8) -> &'static str {
 const NAN6: [f64; 6] = [f64::NAN; 6];
 
 impl Record {
-    /// The record of an answered cycle with set-point `f_r` in process segment `segment`.
-    pub fn from_report(r: &CycleReport, f_r: f64, segment: u32) -> Self {
+    /// The record of an answered cycle with set-point `f_r`; the process segment, command and state
+    /// come from the cycle and the correction sent ([`Row::from_report`]).
+    pub fn from_report(r: &CycleReport, f_r: f64) -> Self {
         let (wrench, sensor_seq, sensor_age) = match r.sample {
             Some(s) => (s.wrench.to_array(), s.seq, s.age.as_secs_f64()),
             None => (NAN6, 0, f64::NAN),
@@ -137,7 +136,6 @@ impl Record {
             period: r.cycle.period,
             late_replies: u64::from(r.cycle.late_replies),
             state: r.out.state.map_or(NO_STATE, ContactState::code),
-            segment,
             events: event_bits(&r.out.events),
         }
     }
@@ -241,20 +239,23 @@ pub struct ChannelDef {
     pub json_schema: &'static str,
 }
 
+// Plain `"type":"number"` fields (a value that is not known is written as `null`): Foxglove Studio's
+// JSON-schema reader refuses type unions such as `["number","null"]` and leaves the channel unplottable.
 macro_rules! num_schema {
-    ($title:literal, $($field:literal: $desc:literal),+ $(,)?) => {
+    ($title:literal, $field0:literal: $desc0:literal $(, $field:literal: $desc:literal)* $(,)?) => {
         concat!(
             r#"{"title":""#, $title, r#"","type":"object","properties":{"#,
-            $( r#"""#, $field, r#"":{"type":["number","null"],"description":""#, $desc, r#""},"#, )+
-            r#""_":{"type":"null"}}}"#
+            r#"""#, $field0, r#"":{"type":"number","description":""#, $desc0, r#" (null: unknown)"}"#,
+            $( r#",""#, $field, r#"":{"type":"number","description":""#, $desc, r#" (null: unknown)"}"#, )*
+            r#"}}"#
         )
     };
 }
 
-const WRENCH_SCHEMA: &str = r#"{"title":"forcecell.Wrench","type":"object","properties":{"force":{"type":"object","properties":{"x":{"type":["number","null"]},"y":{"type":["number","null"]},"z":{"type":["number","null"]}},"description":"N, sensor frame"},"torque":{"type":"object","properties":{"x":{"type":["number","null"]},"y":{"type":["number","null"]},"z":{"type":["number","null"]}},"description":"N·m, sensor frame"}}}"#;
+const WRENCH_SCHEMA: &str = r#"{"title":"forcecell.Wrench","type":"object","properties":{"force":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}},"description":"N, sensor frame"},"torque":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}},"description":"N·m, sensor frame"}}}"#;
 
 /// Every channel a recording (and the live view) carries, in a fixed order.
-pub const CHANNELS: [ChannelDef; 9] = [
+pub const CHANNELS: [ChannelDef; 10] = [
     ChannelDef {
         topic: "/force",
         schema: "forcecell.Force",
@@ -283,7 +284,7 @@ pub const CHANNELS: [ChannelDef; 9] = [
     ChannelDef {
         topic: "/state",
         schema: "forcecell.State",
-        json_schema: r#"{"title":"forcecell.State","type":"object","properties":{"state":{"type":"integer","description":"0 approach, 1 contact, 2 reacquire, 3 retract, 255 none"},"state_name":{"type":"string"},"segment":{"type":"integer"},"fault":{"type":"integer","description":"0 none, 1 sensor error, 2 non-finite sample, 3 non-finite pose, 4 non-finite command, 5 step limited, 6 envelope limited, 7 backing off after a fault"},"fault_name":{"type":"string"},"events":{"type":"integer","description":"bits: contact, lift_off, force_limit, velocity_limit, acceleration_limit, deviation_limit, estimator_bound, bad_input"},"event_names":{"type":"array","items":{"type":"string"}}}}"#,
+        json_schema: r#"{"title":"forcecell.State","type":"object","properties":{"state":{"type":"integer","description":"0 approach, 1 contact, 2 reacquire, 3 retract, 255 none"},"state_name":{"type":"string"},"segment":{"type":"integer","description":"the robot program's path segment (null: no process command)"},"fault":{"type":"integer","description":"0 none, 1 sensor error, 2 non-finite sample, 3 non-finite pose, 4 non-finite command, 5 step limited, 6 envelope limited, 7 backing off after a fault"},"fault_name":{"type":"string"},"events":{"type":"integer","description":"bits: contact, lift_off, force_limit, velocity_limit, acceleration_limit, deviation_limit, estimator_bound, bad_input"},"event_names":{"type":"array","items":{"type":"string"}}}}"#,
     },
     ChannelDef {
         topic: "/rsi",
@@ -293,14 +294,60 @@ pub const CHANNELS: [ChannelDef; 9] = [
     ChannelDef {
         topic: "/sensor",
         schema: "forcecell.Sensor",
-        json_schema: r#"{"title":"forcecell.Sensor","type":"object","properties":{"ok":{"type":"boolean"},"seq":{"type":"integer"},"age":{"type":["number","null"],"description":"s"}}}"#,
+        json_schema: r#"{"title":"forcecell.Sensor","type":"object","properties":{"ok":{"type":"boolean"},"seq":{"type":"integer"},"age":{"type":"number","description":"s (null: no sample)"}}}"#,
     },
     ChannelDef {
         topic: "/truth",
         schema: "forcecell.Truth",
         json_schema: num_schema!("forcecell.Truth", "f_true": "true contact force, N", "k_c": "true stiffness, N/m", "x_c": "true surface position, m"),
     },
+    ChannelDef {
+        topic: "/process",
+        schema: "forcecell.Process",
+        json_schema: r#"{"title":"forcecell.Process","type":"object","properties":{"segment":{"type":"integer","description":"the robot program's path segment (RSI FcCmd); null: the link carries no process command"},"mode":{"type":"integer","description":"commanded mode: 0 off, 1 press, 2 release, other numbers as sent (a bad command)"},"mode_name":{"type":"string"},"f_cmd":{"type":"number","description":"commanded force, N"},"phase":{"type":"integer","description":"reported phase (RSI FcState): 0 off, 1 approach, 2 ramp, 3 pressing, 4 release, 9 fault"},"phase_name":{"type":"string"},"fault":{"type":"integer","description":"latched process fault: 0 none, 1 sensor lost, 2 force limit, 3 correction limit, 4 bad command, 5 contact lost, 6 hold timeout"},"fault_name":{"type":"string"}}}"#,
+    },
 ];
+
+/// Index of the `/process` channel.
+pub const PROCESS: usize = 9;
+
+/// A process mode number's name ([`hal::ProcessMode::code`]).
+pub fn mode_name(code: Option<i64>) -> &'static str {
+    match code {
+        None => "none",
+        Some(0) => "off",
+        Some(1) => "press",
+        Some(2) => "release",
+        Some(_) => "unknown",
+    }
+}
+
+/// A process phase number's name ([`hal::ProcessPhase::code`]).
+pub fn phase_name(code: Option<u8>) -> &'static str {
+    match code.and_then(|c| hal::ProcessPhase::from_code(i64::from(c))) {
+        None => "unknown",
+        Some(hal::ProcessPhase::Off) => "off",
+        Some(hal::ProcessPhase::Approach) => "approach",
+        Some(hal::ProcessPhase::Ramp) => "ramp",
+        Some(hal::ProcessPhase::Pressing) => "pressing",
+        Some(hal::ProcessPhase::Release) => "release",
+        Some(hal::ProcessPhase::Fault) => "fault",
+    }
+}
+
+/// A process fault number's name ([`hal::ProcessFault::code`]).
+pub fn process_fault_name(code: Option<u8>) -> &'static str {
+    match code.and_then(|c| hal::ProcessFault::from_code(i64::from(c))) {
+        None => "unknown",
+        Some(hal::ProcessFault::None) => "none",
+        Some(hal::ProcessFault::SensorLost) => "sensor lost",
+        Some(hal::ProcessFault::ForceLimit) => "force limit",
+        Some(hal::ProcessFault::CorrectionLimit) => "correction limit",
+        Some(hal::ProcessFault::BadCommand) => "bad command",
+        Some(hal::ProcessFault::ContactLost) => "contact lost",
+        Some(hal::ProcessFault::HoldTimeout) => "hold timeout",
+    }
+}
 
 /// Index of the `/truth` channel (written at the end of a simulation).
 pub const TRUTH: usize = 8;
@@ -353,7 +400,7 @@ pub fn encode(i: usize, rec: &Record, buf: &mut Vec<u8>) -> Option<()> {
                 .filter(|(b, _)| rec.events & (1 << b) != 0)
                 .map(|(_, n)| *n)
                 .collect();
-            json!({"state": rec.state, "state_name": state_name(rec.state), "segment": rec.segment,
+            json!({"state": rec.state, "state_name": state_name(rec.state), "segment": r.segment,
                    "fault": r.fault, "fault_name": fault_name(r.fault), "events": rec.events, "event_names": names})
         }
         6 => json!({"seq": rec.robot_seq, "period": rec.period, "late_replies": rec.late_replies}),
@@ -363,6 +410,11 @@ pub fn encode(i: usize, rec: &Record, buf: &mut Vec<u8>) -> Option<()> {
         TRUTH if r.f_true.is_finite() || r.k_c.is_finite() || r.x_c.is_finite() => {
             json!({"f_true": r.f_true, "k_c": r.k_c, "x_c": r.x_c})
         }
+        PROCESS => json!({
+            "segment": r.segment, "mode": r.mode, "mode_name": mode_name(r.mode), "f_cmd": r.f_cmd,
+            "phase": r.phase, "phase_name": phase_name(r.phase),
+            "fault": r.process_fault, "fault_name": process_fault_name(r.process_fault),
+        }),
         _ => return None,
     };
     serde_json::to_writer(&mut *buf, &v).ok()?;
@@ -460,11 +512,9 @@ pub fn start(
         .disable_seeking(true)
         .create(BufWriter::with_capacity(256 * 1024, file))
         .with_context(|| format!("cannot write {}", path.display()))?;
-    let mut ids = [0u16; CHANNELS.len()];
-    for (i, c) in CHANNELS.iter().enumerate() {
-        let schema = w.add_schema(c.schema, "jsonschema", c.json_schema.as_bytes())?;
-        ids[i] = w.add_channel(schema, c.topic, "json", &BTreeMap::new())?;
-    }
+    // Attachments and metadata first, outside any chunk; the schemas and channels then open the first
+    // chunk, which is finished only once it holds messages (see `Writer::flush`): a chunk without
+    // messages has no message index, and Foxglove Studio refuses to read a file with one.
     for (name, media_type, data) in &opts.attachments {
         w.attach(&mcap::Attachment {
             log_time: 0,
@@ -482,6 +532,11 @@ pub fn start(
     }
     w.flush()
         .with_context(|| format!("cannot write {}", path.display()))?;
+    let mut ids = [0u16; CHANNELS.len()];
+    for (i, c) in CHANNELS.iter().enumerate() {
+        let schema = w.add_schema(c.schema, "jsonschema", c.json_schema.as_bytes())?;
+        ids[i] = w.add_channel(schema, c.topic, "json", &BTreeMap::new())?;
+    }
     let (recorder, rx) = queue(opts.capacity, opts.full);
     let dropped = recorder.dropped.clone();
     let (truth_tx, truth_rx) = mpsc::channel();
@@ -497,6 +552,7 @@ pub fn start(
         buf: Vec::with_capacity(512),
         seq: 0,
         last_t: None,
+        unflushed: 0,
     };
     let flush_every = opts.flush_every;
     let d2 = dropped.clone();
@@ -563,6 +619,8 @@ struct Writer {
     buf: Vec<u8>,
     seq: u32,
     last_t: Option<f64>,
+    /// Messages written since the last flush.
+    unflushed: u64,
 }
 
 impl Writer {
@@ -636,6 +694,7 @@ impl Writer {
             log_time: t,
             publish_time: t,
         };
+        self.unflushed += 1;
         if let Err(e) = w.write_to_known_channel(&header, &self.buf) {
             self.fail(e);
             if i != TRUTH {
@@ -646,6 +705,11 @@ impl Writer {
 
     fn flush(&mut self) {
         let Some(w) = &mut self.w else { return };
+        // Nothing new: finishing the open chunk now would write one without messages.
+        if self.unflushed == 0 {
+            return;
+        }
+        self.unflushed = 0;
         match w.flush() {
             Ok(()) => self.summary.flushed_until = self.last_t,
             Err(e) => self.fail(e),
@@ -711,7 +775,6 @@ impl Record {
             period: f64::NAN,
             late_replies: 0,
             state: NO_STATE,
-            segment: 0,
             events: 0,
         }
     }
@@ -783,6 +846,16 @@ pub fn read_mcap(bytes: &[u8]) -> Result<ReadBack> {
                 row.k_c = num(&v, "k_c");
                 row.x_c = num(&v, "x_c");
             }
+            // Recordings before the process channel leave these unknown (`/state`'s `segment` was
+            // always 0 then).
+            "/process" => {
+                let int = |k| v.get(k).and_then(serde_json::Value::as_i64);
+                row.segment = int("segment");
+                row.mode = int("mode");
+                row.f_cmd = num(&v, "f_cmd");
+                row.phase = int("phase").and_then(|c| u8::try_from(c).ok());
+                row.process_fault = int("fault").and_then(|c| u8::try_from(c).ok());
+            }
             _ => {}
         }
     }
@@ -812,9 +885,11 @@ fn nan_row() -> Row {
         k_c: f64::NAN,
         x_c: f64::NAN,
         fault: 0,
-        phase: crate::record::NO_PROCESS,
-        segment: 0,
+        segment: None,
+        mode: None,
         f_cmd: f64::NAN,
+        phase: None,
+        process_fault: None,
         s: f64::NAN,
     }
 }

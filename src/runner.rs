@@ -226,11 +226,7 @@ where
                 robot_driven = spec.external
                     && r.cycle.process.is_some()
                     && sim::world::lock(world).program().is_none();
-                let segment = r
-                    .cycle
-                    .process
-                    .map_or(0, |p| p.segment.clamp(0, u32::MAX as i64) as u32);
-                let rec = Record::from_report(&r, r.set_point, segment);
+                let rec = Record::from_report(&r, r.set_point);
                 rows.push(rec.row);
                 if let Some(tx) = &mut recorder {
                     tx.push(rec);
@@ -314,10 +310,6 @@ pub fn start_recording(
     meta.insert("plant".to_string(), spec.plant_label.clone());
     meta.insert("tuning".to_string(), spec.tuning.name.clone());
     meta.insert("period_s".to_string(), spec.plant.period.to_string());
-    meta.insert(
-        "segment".to_string(),
-        "0 (segments not yet recorded)".into(),
-    );
     let opts = RecorderOptions {
         full: if realtime { Full::Drop } else { Full::Wait },
         attachments: vec![

@@ -61,24 +61,24 @@ impl<S: ForceSensor> ForceSensor for TapSensor<S> {
         let s = self.inner.read()?;
         if let Some(c) = self.last.get() {
             let x = c.tool_offset().z;
-            let mut rec = Record::from_row(Row {
-                t: c.t,
-                f: s.wrench.force.z,
-                f_true: f64::NAN,
-                f_r: 0.0,
-                x,
-                x_cmd: 0.0,
-                x_r: f64::NAN,
-                kc_hat: f64::NAN,
-                xc_hat: f64::NAN,
-                k_c: f64::NAN,
-                x_c: f64::NAN,
-                fault: 0,
-                phase: crate::record::NO_PROCESS,
-                segment: 0,
-                f_cmd: f64::NAN,
-                s: f64::NAN,
-            });
+            let mut rec = Record::from_row(
+                Row {
+                    t: c.t,
+                    f: s.wrench.force.z,
+                    f_true: f64::NAN,
+                    f_r: 0.0,
+                    x,
+                    x_cmd: 0.0,
+                    x_r: f64::NAN,
+                    kc_hat: f64::NAN,
+                    xc_hat: f64::NAN,
+                    k_c: f64::NAN,
+                    x_c: f64::NAN,
+                    fault: 0,
+                    ..Row::default()
+                }
+                .no_process(),
+            );
             rec.wrench = s.wrench.to_array();
             rec.sensor_seq = s.seq;
             rec.sensor_age = s.age.as_secs_f64();

@@ -34,7 +34,7 @@ fn the_loop_with_the_recorder_attached_does_not_allocate() {
         let region = Region::new(GLOBAL);
         for _ in 0..cycles {
             let r = lp.cycle().unwrap();
-            let rec = Record::from_report(&r, f_r, 0);
+            let rec = Record::from_report(&r, f_r);
             states |= 1 << rec.state.min(7);
             pushed += u64::from(tx.push(rec));
         }

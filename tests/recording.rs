@@ -28,7 +28,30 @@ fn record(k: u64) -> Record {
         k_c: f64::NAN,
         x_c: f64::NAN,
         fault: (k % 3) as u8,
-        ..Row::default()
+        // The process: no command for the first cycles, then pressing segment by segment, a bad
+        // command (mode 7) that latches a fault, and a release.
+        segment: (k >= 50).then_some((k / 500) as i64),
+        mode: match k {
+            0..50 => None,
+            1000..1010 => Some(7),
+            2500.. => Some(2),
+            _ => Some(1),
+        },
+        f_cmd: if k < 50 {
+            f64::NAN
+        } else {
+            5.0 + (k / 500) as f64
+        },
+        phase: Some(match k {
+            0..50 => 0,
+            50..100 => 1,
+            100..200 => 2,
+            1000..1500 => 9,
+            2500.. => 4,
+            _ => 3,
+        }),
+        process_fault: Some(if (1000..1500).contains(&k) { 4 } else { 0 }),
+        s: f64::NAN,
     });
     rec.wrench = [0.1, -0.2, 5.0 + k as f64, 0.01, 0.02, -0.03];
     rec.wrench_raw = [0.1, -0.2, 25.0, 0.01, 0.02, -0.03];
@@ -68,6 +91,30 @@ fn assert_same_row(got: &Row, want: &Row) {
         );
     }
     assert_eq!(got.fault, want.fault);
+    assert_eq!(
+        (got.segment, got.mode, got.phase, got.process_fault),
+        (want.segment, want.mode, want.phase, want.process_fault),
+        "process columns at t = {}",
+        want.t
+    );
+    assert!(same(got.f_cmd, want.f_cmd), "f_cmd at t = {}", want.t);
+}
+
+/// Every field's `type` is one plain JSON type (Foxglove Studio refuses unions like
+/// `["number","null"]`: "Unsupported type"), and every type is one Foxglove knows.
+fn assert_foxglove_types(topic: &str, schema: &serde_json::Value) {
+    for (name, field) in schema["properties"].as_object().unwrap() {
+        let ty = field["type"]
+            .as_str()
+            .unwrap_or_else(|| panic!("{topic}.{name}: type {:?}", field["type"]));
+        assert!(
+            ["number", "integer", "string", "boolean", "object", "array"].contains(&ty),
+            "{topic}.{name}: type {ty}"
+        );
+        if ty == "object" {
+            assert_foxglove_types(&format!("{topic}.{name}"), field);
+        }
+    }
 }
 
 #[test]
@@ -130,6 +177,16 @@ fn records_round_trip_through_an_mcap_file() {
         assert_eq!(schema.encoding, "jsonschema");
         let parsed: serde_json::Value = serde_json::from_slice(&schema.data).unwrap();
         assert!(parsed["properties"].is_object(), "{}", c.topic);
+        assert_foxglove_types(c.topic, &parsed);
+    }
+    // Foxglove Studio reads a chunk only through its message index: a chunk without messages (the
+    // schemas alone, an idle second) has none and makes it refuse the whole file.
+    assert!(!summary.chunk_indexes.is_empty());
+    for ci in &summary.chunk_indexes {
+        assert!(
+            ci.message_index_length > 0 && !ci.message_index_offsets.is_empty(),
+            "a chunk without message indexes: {ci:?}"
+        );
     }
     let stats = summary.stats.unwrap();
     assert_eq!(stats.message_count, n * CHANNELS.len() as u64);
@@ -141,6 +198,7 @@ fn records_round_trip_through_an_mcap_file() {
     // The wrench channels carry what was pushed, and the state its name.
     let mut seen_raw = 0;
     let mut seen_contact_event = false;
+    let mut seen_process_fault = false;
     for m in mcap::MessageStream::new(&bytes).unwrap() {
         let m = m.unwrap();
         let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
@@ -156,12 +214,111 @@ fn records_round_trip_through_an_mcap_file() {
                 assert_eq!(v["event_names"][0], "contact");
                 seen_contact_event = true;
             }
+            "/state" if k == 10 => assert!(v["segment"].is_null(), "{v}"),
+            "/process" if k == 10 => {
+                assert!(v["segment"].is_null() && v["mode"].is_null(), "{v}");
+                assert_eq!(
+                    (v["mode_name"].as_str(), v["phase_name"].as_str()),
+                    (Some("none"), Some("off"))
+                );
+            }
+            "/process" if k == 1005 => {
+                assert_eq!(v["segment"], 2);
+                assert_eq!(v["mode"], 7);
+                assert_eq!(v["mode_name"], "unknown");
+                assert_eq!(v["f_cmd"], 7.0);
+                assert_eq!(
+                    (v["phase"].as_u64(), v["phase_name"].as_str()),
+                    (Some(9), Some("fault"))
+                );
+                assert_eq!(v["fault_name"], "bad command");
+                seen_process_fault = true;
+            }
+            "/process" if k == 2600 => {
+                assert_eq!(
+                    (v["segment"].as_i64(), v["mode_name"].as_str()),
+                    (Some(5), Some("release"))
+                );
+                assert_eq!(v["phase_name"], "release");
+            }
             _ => {}
         }
     }
     assert_eq!(seen_raw, n);
     assert!(seen_contact_event);
+    assert!(seen_process_fault);
     assert_ne!(record(0).state, NO_STATE);
+}
+
+/// A recording made before the `/process` channel (its `/state` carried `segment: 0`) still reads:
+/// the process columns are unknown, everything else is there.
+#[test]
+fn a_recording_without_the_process_channel_still_reads() {
+    use std::collections::BTreeMap;
+    let mut buf = std::io::Cursor::new(Vec::new());
+    let mut w = mcap::Writer::new(&mut buf).unwrap();
+    let mut ids = BTreeMap::new();
+    for topic in ["/force", "/position", "/estimates", "/state"] {
+        let schema = w
+            .add_schema(topic, "jsonschema", br#"{"type":"object"}"#)
+            .unwrap();
+        ids.insert(
+            topic,
+            w.add_channel(schema, topic, "json", &BTreeMap::new())
+                .unwrap(),
+        );
+    }
+    for k in 0..3u32 {
+        let t = u64::from(k + 1) * 4_000_000;
+        for (topic, msg) in [
+            ("/force", format!(r#"{{"t":{},"f":5.0,"f_r":5.0,"error":0.0}}"#, t as f64 * 1e-9)),
+            ("/position", r#"{"x":0.01,"x_cmd":0.011,"x_r":0.012}"#.to_string()),
+            ("/estimates", r#"{"kc_hat":50000.0,"xc_hat":0.009}"#.to_string()),
+            ("/state", r#"{"state":1,"state_name":"contact","segment":0,"fault":0,"fault_name":"none","events":0,"event_names":[]}"#.to_string()),
+        ] {
+            let header = mcap::records::MessageHeader { channel_id: ids[topic], sequence: k, log_time: t, publish_time: t };
+            w.write_to_known_channel(&header, msg.as_bytes()).unwrap();
+        }
+    }
+    w.finish().unwrap();
+    drop(w);
+    let dir = tempfile::tempdir().unwrap();
+    let old = dir.path().join("old.mcap");
+    std::fs::write(&old, buf.into_inner()).unwrap();
+
+    let (rows, truncated) = recorder::load_trace(&old).unwrap();
+    assert!(truncated.is_none());
+    assert_eq!(rows.len(), 3);
+    assert_eq!(
+        (rows[2].f, rows[2].x_cmd, rows[2].kc_hat),
+        (5.0, 0.011, 50_000.0)
+    );
+    assert_eq!(
+        (
+            rows[2].segment,
+            rows[2].mode,
+            rows[2].phase,
+            rows[2].process_fault
+        ),
+        (None, None, None, None)
+    );
+    // `export` writes the process columns empty; `plot` draws it.
+    let exe = env!("CARGO_BIN_EXE_forcecell");
+    let o = Command::new(exe)
+        .args(["export", "old.mcap", "--csv", "--out", "old.csv"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = std::fs::read_to_string(dir.path().join("old.csv")).unwrap();
+    assert!(csv.starts_with(forcecell::record::HEADER), "{csv}");
+    assert!(csv.lines().nth(1).unwrap().ends_with(",0,,,,,"), "{csv}");
+    let o = Command::new(exe)
+        .args(["plot", "old.mcap", "--out", "old.png"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
 #[test]
@@ -219,16 +376,15 @@ fn wait_for(what: &str, limit: Duration, mut ok: impl FnMut() -> bool) {
     }
 }
 
-#[test]
-fn a_killed_sim_leaves_an_mcap_readable_up_to_its_last_flush() {
-    let dir = tempfile::tempdir().unwrap();
+/// A `sim --realtime` killed with SIGKILL after two flushes of messages; returns its recording.
+fn killed_recording(dir: &Path) -> std::path::PathBuf {
     let scenario = std::fs::read_to_string(
         Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/paper-fig9.toml"),
     )
     .unwrap()
     .replace("name = \"paper-fig9\"", "name = \"long\"")
     .replace("duration = 2.0", "duration = 60.0");
-    std::fs::write(dir.path().join("long.toml"), scenario).unwrap();
+    std::fs::write(dir.join("long.toml"), scenario).unwrap();
     let mut child = Command::new(env!("CARGO_BIN_EXE_forcecell"))
         .args([
             "sim",
@@ -240,14 +396,14 @@ fn a_killed_sim_leaves_an_mcap_readable_up_to_its_last_flush() {
             "--out",
             "res",
         ])
-        .current_dir(dir.path())
+        .current_dir(dir)
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let path = dir.path().join("res/long-p2-paper.mcap");
+    let path = dir.join("res/long-p2-paper.mcap");
     let len = || path.metadata().map_or(0, |m| m.len());
-    // The header, schemas and attachments are flushed at once; wait for two flushes of messages.
+    // The header and attachments are flushed at once; wait for two flushes of messages.
     wait_for("the recording to start", Duration::from_secs(30), || {
         len() > 0
     });
@@ -259,7 +415,13 @@ fn a_killed_sim_leaves_an_mcap_readable_up_to_its_last_flush() {
     wait_for("a second flush", Duration::from_secs(30), || len() > second);
     child.kill().unwrap(); // SIGKILL
     child.wait().unwrap();
+    path
+}
 
+#[test]
+fn a_killed_sim_leaves_an_mcap_readable_up_to_its_last_flush() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = killed_recording(dir.path());
     let bytes = std::fs::read(&path).unwrap();
     let back = recorder::read_mcap(&bytes).unwrap();
     assert!(
@@ -289,6 +451,49 @@ fn a_killed_sim_leaves_an_mcap_readable_up_to_its_last_flush() {
             "{r:?}"
         );
     }
+}
+
+/// The `mcap` Python package (the reference reader) streams a killed recording up to its last
+/// flush: every message forcecell's reader found, then the end of the data. Needs `pip install mcap`;
+/// `FORCECELL_MCAP_PYTHON` names the interpreter (default `python3`).
+#[test]
+#[ignore = "needs the mcap Python package: pip install mcap; FORCECELL_MCAP_PYTHON=path/to/python"]
+fn the_mcap_python_reader_reads_a_killed_recording_up_to_its_last_flush() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = killed_recording(dir.path());
+    let python = std::env::var("FORCECELL_MCAP_PYTHON").unwrap_or_else(|_| "python3".into());
+    let script = r#"
+import sys
+from collections import Counter
+from mcap.stream_reader import StreamReader
+from mcap.records import Channel, Message
+topics, counts, end = {}, Counter(), "end of file"
+try:
+    for rec in StreamReader(open(sys.argv[1], "rb"), skip_magic=False).records:
+        if isinstance(rec, Channel):
+            topics[rec.id] = rec.topic
+        elif isinstance(rec, Message):
+            counts[topics[rec.channel_id]] += 1
+except Exception as e:
+    end = type(e).__name__
+print(counts["/force"], counts["/process"], end)
+"#;
+    let out = Command::new(&python)
+        .args(["-c", script])
+        .arg(&path)
+        .output()
+        .expect("run python");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    let f: Vec<&str> = text.split_whitespace().collect();
+    let back = recorder::read_mcap(&std::fs::read(&path).unwrap()).unwrap();
+    assert_eq!(f[0].parse::<usize>().unwrap(), back.rows.len(), "{text}");
+    assert_eq!(f[1].parse::<usize>().unwrap(), back.rows.len(), "{text}");
+    assert!(back.rows.len() > 100, "{text}");
 }
 
 /// Needs root: mounts a 256 KiB tmpfs (the CI and the dev machines run as root).

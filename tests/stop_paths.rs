@@ -82,6 +82,19 @@ fn assert_mcap_finished(path: &Path, text: &str) {
     let back = forcecell::recorder::read_mcap(&bytes).unwrap();
     assert_eq!(back.truncated, None, "{}", path.display());
     assert_eq!(back.rows.len(), rows(&path.with_extension("csv")), "{text}");
+    // The summary section with its chunk index (what indexed readers and Foxglove seek by).
+    let summary = mcap::Summary::read(&bytes)
+        .unwrap()
+        .unwrap_or_else(|| panic!("{}: no summary section", path.display()));
+    assert!(!summary.chunk_indexes.is_empty(), "{}", path.display());
+    assert!(
+        summary
+            .chunk_indexes
+            .iter()
+            .all(|c| c.message_index_length > 0),
+        "{}: a chunk without message index",
+        path.display()
+    );
 }
 
 fn rows(path: &Path) -> usize {
@@ -180,4 +193,5 @@ fn a_lost_link_ends_with_its_own_exit_status() {
     assert_eq!(code, 3, "{text}\n{report:?}");
     assert!(text.contains("the loop ended early"), "{text}");
     assert_eq!(rows(&dir.path().join("o/long.csv")), 300, "{text}");
+    assert_mcap_finished(&dir.path().join("o/long.mcap"), &text);
 }

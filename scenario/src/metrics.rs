@@ -250,7 +250,8 @@ impl Metrics {
         for w in win.windows(2) {
             let (r, next) = (w[0], w[1]);
             let f = force(r);
-            match r.phase {
+            let phase = r.phase.unwrap_or(0);
+            match phase {
                 phase::PRESSING => {
                     pressing += 1;
                     dt_sum += next.t - r.t;
@@ -259,7 +260,7 @@ impl Metrics {
                 phase::RELEASE => excess = excess.max(f - r.f_cmd),
                 _ => {}
             }
-            if matches!(r.phase, phase::APPROACH | phase::RAMP | phase::PRESSING) {
+            if matches!(phase, phase::APPROACH | phase::RAMP | phase::PRESSING) {
                 if r.f_cmd != episode_f {
                     direction = if episode_f.is_nan() || r.f_cmd > episode_f {
                         1.0
@@ -272,7 +273,7 @@ impl Metrics {
             } else {
                 episode_f = f64::NAN;
             }
-            if matches!(r.phase, phase::RAMP | phase::PRESSING) {
+            if matches!(phase, phase::RAMP | phase::PRESSING) {
                 if touching && f <= 0.0 {
                     self.press_contact_losses += 1.0;
                 }

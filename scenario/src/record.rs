@@ -32,20 +32,23 @@ pub struct Row {
     pub x_c: f64,
     /// Fault code of the step (0: none; see [`fault_code`]).
     pub fault: u8,
-    /// The force process's phase as reported to the robot program (`FcState.State`: 0 OFF,
-    /// 1 APPROACH, 2 RAMP, 3 PRESSING, 4 RELEASE, 9 FAULT), or [`NO_PROCESS`] on a link without
-    /// process channels.
-    pub phase: u8,
-    /// The robot program's segment number (`FcCmd.Seg`; 0 without process channels).
-    pub segment: i64,
-    /// The robot program's commanded force (`FcCmd.F`), N; NaN without process channels.
+    /// The robot program's path segment (RSI `FcCmd`), `None` when the link carries no process
+    /// command (or the trace predates process columns).
+    pub segment: Option<i64>,
+    /// The commanded process mode ([`hal::ProcessMode::code`]: 0 off, 1 press, 2 release, other
+    /// numbers as sent), `None` without a process command.
+    pub mode: Option<i64>,
+    /// The commanded process force, N (NaN without a process command).
     pub f_cmd: f64,
-    /// Path position along the workpiece, m (NaN on a real cell).
+    /// The force process's phase as reported to the robot ([`hal::ProcessPhase::code`]), `None` in a
+    /// trace that predates process columns.
+    pub phase: Option<u8>,
+    /// The force process's latched fault ([`hal::ProcessFault::code`]), `None` in a trace that
+    /// predates process columns.
+    pub process_fault: Option<u8>,
+    /// Path position along the workpiece, m (simulation only: NaN on a real cell and in files).
     pub s: f64,
 }
-
-/// [`Row::phase`] of a cycle that carried no process command.
-pub const NO_PROCESS: u8 = 255;
 
 impl Row {
     /// The row of an answered cycle with set-point `f_r`; the truth columns (`f_true`, `k_c`, `x_c`) are
@@ -64,19 +67,37 @@ impl Row {
             k_c: f64::NAN,
             x_c: f64::NAN,
             fault: fault_code(r.fault),
-            phase: r
-                .cycle
-                .process
-                .map_or(NO_PROCESS, |_| r.command.process.phase.code() as u8),
-            segment: r.cycle.process.map_or(0, |p| p.segment),
+            segment: r.cycle.process.map(|p| p.segment),
+            mode: r.cycle.process.map(|p| p.mode.code()),
             f_cmd: r.cycle.process.map_or(f64::NAN, |p| p.force),
+            phase: Some(r.command.process.phase.code() as u8),
+            process_fault: Some(r.command.process.fault.code() as u8),
             s: f64::NAN,
+        }
+    }
+
+    /// The process columns of a row without a process command (phase off, no fault): what a loop
+    /// that does not run the process (a calibration, a trace from before process columns) records.
+    pub fn no_process(self) -> Self {
+        Self {
+            segment: None,
+            mode: None,
+            f_cmd: f64::NAN,
+            phase: None,
+            process_fault: None,
+            ..self
         }
     }
 }
 
-/// The CSV header, in column order.
-pub const HEADER: &str = "t,f,f_true,f_r,x,x_cmd,x_r,kc_hat,xc_hat,k_c,x_c,fault";
+/// The CSV header, in column order. The last five columns are the process command and state
+/// (`segment`, commanded `mode` and force `f_cmd`, reported `phase` and `process_fault`, as their wire
+/// numbers; empty where unknown).
+pub const HEADER: &str =
+    "t,f,f_true,f_r,x,x_cmd,x_r,kc_hat,xc_hat,k_c,x_c,fault,segment,mode,f_cmd,phase,process_fault";
+
+/// The header of traces written before the process columns (still read).
+pub const HEADER_V1: &str = "t,f,f_true,f_r,x,x_cmd,x_r,kc_hat,xc_hat,k_c,x_c,fault";
 
 /// A compact code for a cycle's fault, as written in the CSV `fault` column:
 /// 0 none, 1 sensor error, 2 non-finite sample, 3 non-finite pose, 4 non-finite command,
@@ -103,6 +124,13 @@ fn field(w: &mut impl Write, v: f64) -> io::Result<()> {
     }
 }
 
+fn opt(w: &mut impl Write, v: Option<impl std::fmt::Display>) -> io::Result<()> {
+    match v {
+        Some(v) => write!(w, ",{v}"),
+        None => w.write_all(b","),
+    }
+}
+
 /// Write rows as CSV. Non-finite values are written as empty fields.
 pub fn write_csv(w: impl Write, rows: &[Row]) -> io::Result<()> {
     let mut w = BufWriter::new(w);
@@ -119,7 +147,14 @@ pub fn write_csv(w: impl Write, rows: &[Row]) -> io::Result<()> {
             }
             field(&mut w, v)?;
         }
-        writeln!(w, ",{}", r.fault)?;
+        write!(w, ",{}", r.fault)?;
+        opt(&mut w, r.segment)?;
+        opt(&mut w, r.mode)?;
+        w.write_all(b",")?;
+        field(&mut w, r.f_cmd)?;
+        opt(&mut w, r.phase)?;
+        opt(&mut w, r.process_fault)?;
+        writeln!(w)?;
     }
     w.flush()
 }
@@ -140,17 +175,27 @@ pub const MAX_TIME: f64 = 1e7;
 pub fn read_csv(text: &str) -> Result<Vec<Row>> {
     let mut lines = text.lines();
     let head = lines.next().unwrap_or_default().trim();
-    if head != HEADER {
-        anyhow::bail!("not a forcecell trace: the header must be {HEADER:?}");
-    }
+    let ncols = if head == HEADER {
+        17
+    } else if head == HEADER_V1 {
+        12
+    } else {
+        anyhow::bail!(
+            "not a forcecell trace: the header must be {HEADER:?} (or, before process columns, {HEADER_V1:?})"
+        );
+    };
     let mut rows = Vec::new();
     for (n, line) in lines.enumerate() {
         if line.trim().is_empty() {
             continue;
         }
         let cols: Vec<&str> = line.split(',').collect();
-        if cols.len() != 12 {
-            anyhow::bail!("line {}: expected 12 columns, got {}", n + 2, cols.len());
+        if cols.len() != ncols {
+            anyhow::bail!(
+                "line {}: expected {ncols} columns, got {}",
+                n + 2,
+                cols.len()
+            );
         }
         let mut v = [f64::NAN; 11];
         for (i, c) in cols[..11].iter().enumerate() {
@@ -177,7 +222,41 @@ pub fn read_csv(text: &str) -> Result<Vec<Row>> {
         let fault = cols[11]
             .parse()
             .with_context(|| format!("line {}: bad fault code", n + 2))?;
+        let int = |i: usize, what: &str| -> Result<Option<i64>> {
+            match cols.get(i) {
+                None | Some(&"") => Ok(None),
+                Some(c) => c
+                    .parse()
+                    .map(Some)
+                    .with_context(|| format!("line {}: bad {what}", n + 2)),
+            }
+        };
+        let code = |i: usize, what: &str| -> Result<Option<u8>> {
+            int(i, what)?
+                .map(|c| u8::try_from(c).with_context(|| format!("line {}: bad {what} {c}", n + 2)))
+                .transpose()
+        };
+        let f_cmd = match cols.get(14) {
+            None | Some(&"") => f64::NAN,
+            Some(c) => {
+                let v: f64 = c
+                    .parse()
+                    .with_context(|| format!("line {}: f_cmd is not a number", n + 2))?;
+                if !(v.is_finite() && v.abs() <= MAX_VALUE) {
+                    anyhow::bail!(
+                        "line {}: f_cmd is {c}: it must be finite and within ±{MAX_VALUE:e} N",
+                        n + 2
+                    );
+                }
+                v
+            }
+        };
         rows.push(Row {
+            segment: int(12, "segment")?,
+            mode: int(13, "process mode")?,
+            f_cmd,
+            phase: code(15, "process phase")?,
+            process_fault: code(16, "process fault")?,
             t: v[0],
             f: v[1],
             f_true: v[2],
@@ -190,9 +269,6 @@ pub fn read_csv(text: &str) -> Result<Vec<Row>> {
             k_c: v[9],
             x_c: v[10],
             fault,
-            phase: NO_PROCESS,
-            segment: 0,
-            f_cmd: f64::NAN,
             s: f64::NAN,
         });
     }
@@ -219,9 +295,11 @@ mod tests {
                 k_c: 70_000.0,
                 x_c: 0.01,
                 fault: 1,
-                phase: NO_PROCESS,
-                segment: 0,
-                f_cmd: f64::NAN,
+                segment: Some(4),
+                mode: Some(1),
+                f_cmd: 12.5,
+                phase: Some(3),
+                process_fault: Some(0),
                 s: f64::NAN,
             };
             2
@@ -235,6 +313,16 @@ mod tests {
         assert!(back[0].f.is_nan());
         assert_eq!(back[0].x_cmd, 0.0102);
         assert_eq!(back[1].fault, 1);
+        let without_f = |r: &Row| Row { f: 0.0, ..*r };
+        assert_eq!(
+            back.iter().map(without_f).collect::<Vec<_>>(),
+            rows.iter().map(without_f).collect::<Vec<_>>()
+        );
+        assert_eq!(
+            (back[0].segment, back[0].mode, back[0].f_cmd),
+            (Some(4), Some(1), 12.5)
+        );
+        assert_eq!((back[0].phase, back[0].process_fault), (Some(3), Some(0)));
         assert!(read_csv("a,b\n").is_err());
         let broken = text.replace("0.0102", "zz");
         assert!(
@@ -242,6 +330,51 @@ mod tests {
                 .unwrap_err()
                 .to_string()
                 .contains("line 2")
+        );
+    }
+
+    #[test]
+    fn rows_without_a_process_command_leave_its_columns_empty_and_old_traces_still_read() {
+        let row = Row {
+            t: 0.004,
+            f: 1.0,
+            f_r: 5.0,
+            phase: Some(0),
+            process_fault: Some(0),
+            ..Row::default()
+        }
+        .no_process();
+        let mut buf = Vec::new();
+        write_csv(&mut buf, &[row]).unwrap();
+        let text = String::from_utf8(buf).unwrap();
+        assert!(text.lines().nth(1).unwrap().ends_with(",0,,,,,"), "{text}");
+        let back = read_csv(&text).unwrap();
+        assert_eq!(
+            (
+                back[0].segment,
+                back[0].mode,
+                back[0].phase,
+                back[0].process_fault
+            ),
+            (None, None, None, None)
+        );
+        assert!(back[0].f_cmd.is_nan());
+
+        // A trace written before the process columns: read, with those columns unknown.
+        let old = format!("{HEADER_V1}\n0.004,1,,5,0,0,0,0,0,,,0\n");
+        let back = read_csv(&old).unwrap();
+        assert_eq!(back.len(), 1);
+        assert_eq!(
+            (back[0].f, back[0].f_r, back[0].segment, back[0].phase),
+            (1.0, 5.0, None, None)
+        );
+        // …but a row must have its header's column count.
+        assert!(read_csv(&format!("{HEADER}\n0.004,1,,5,0,0,0,0,0,,,0\n")).is_err());
+        assert!(
+            read_csv(&format!("{HEADER}\n0.004,1,,5,0,0,0,0,0,,,0,1,1,5,300,0\n"))
+                .unwrap_err()
+                .to_string()
+                .contains("phase")
         );
     }
 }

@@ -507,10 +507,20 @@ impl Responder for SharedNode {
 /// holding late answers back without blocking the others. Returns on a transport error.
 pub fn serve<T: CanTransport>(
     node: &SharedNode,
-    mut transport: T,
+    transport: T,
     stop: &AtomicBool,
 ) -> Result<(), TransportError> {
     let base = node.lock().config().base;
+    serve_responder(&mut node.clone(), base, transport, stop)
+}
+
+/// [`serve`] for any [`Responder`] answering on `base` (e.g. a replay of a recorded bus log).
+pub fn serve_responder<R: Responder, T: CanTransport>(
+    responder: &mut R,
+    base: Base,
+    mut transport: T,
+    stop: &AtomicBool,
+) -> Result<(), TransportError> {
     transport.accept_only(base)?;
     let clock = transport.clock();
     let mut pending: VecDeque<(Duration, Frame)> = VecDeque::new();
@@ -528,7 +538,7 @@ pub fn serve<T: CanTransport>(
             });
         if let Some(BusEvent::Frame(f)) = transport.recv(wait)? {
             let t = clock.now();
-            node.lock().handle(&f, t, &mut |delay, answer| {
+            responder.on_frame(&f, t, &mut |delay, answer| {
                 let due = t + delay;
                 let at = pending
                     .iter()
