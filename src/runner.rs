@@ -252,7 +252,7 @@ where
         if let Err(e) = lp.stop() {
             ended_early.get_or_insert(format!("could not send Stop at the end: {e}"));
         }
-    } else if let Some((false, _)) = program_done() {
+    } else if let (false, Some((false, _))) = (crate::stop::requested(), program_done()) {
         ended_early.get_or_insert(format!(
             "the robot program did not finish within the scenario's {} s",
             spec.scenario.duration

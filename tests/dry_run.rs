@@ -56,19 +56,32 @@ impl Robot {
         let rob = format!(
             "<Rob Type=\"KUKA\"><RIst X=\"445.0000\" Y=\"0.0000\" Z=\"{z_ist:.4}\" A=\"180.0000\" B=\"0.0000\" C=\"180.0000\"/>\
              <RSol X=\"445.0000\" Y=\"0.0000\" Z=\"{z_sol:.4}\" A=\"180.0000\" B=\"0.0000\" C=\"180.0000\"/>\
+             <AIPos A1=\"0.0000\" A2=\"-90.0000\" A3=\"90.0000\" A4=\"0.0000\" A5=\"90.0000\" A6=\"0.0000\"/>\
+             <ASPos A1=\"0.0000\" A2=\"-90.0000\" A3=\"90.0000\" A4=\"0.0000\" A5=\"90.0000\" A6=\"0.0000\"/>\
              <Delay D=\"0\"/>{}<IPOC>{}</IPOC></Rob>",
             fc.unwrap_or(""),
             self.ipoc
         );
         let mut buf = [0u8; 2048];
-        // The server may still be starting: resend until it answers (bounded).
+        // The server may still be starting (the port refuses, or nothing answers yet): resend until
+        // it answers, for at most about 20 s.
         for _ in 0..100 {
-            self.sock.send(rob.as_bytes()).unwrap();
-            if let Ok(n) = self.sock.recv(&mut buf) {
-                let sen = String::from_utf8_lossy(&buf[..n]).into_owned();
-                self.ipoc += 4;
-                self.z_corr = attr(&sen, "RKorr", "Z").expect("every reply corrects");
-                return Some(sen);
+            if self.sock.send(rob.as_bytes()).is_err() {
+                std::thread::sleep(Duration::from_millis(200));
+                continue;
+            }
+            match self.sock.recv(&mut buf) {
+                Ok(n) => {
+                    let sen = String::from_utf8_lossy(&buf[..n]).into_owned();
+                    self.ipoc += 4;
+                    self.z_corr = attr(&sen, "RKorr", "Z").expect("every reply corrects");
+                    return Some(sen);
+                }
+                // Refused (ICMP port unreachable) returns at once: wait before the next try.
+                Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => {
+                    std::thread::sleep(Duration::from_millis(200));
+                }
+                Err(_) => {}
             }
         }
         None
