@@ -10,6 +10,16 @@ use plotters::style::{FontStyle, register_font};
 
 use crate::record::Row;
 
+/// The backend reports an unwritable path as a nested Debug dump, only after drawing: find it first.
+fn check_writable(path: &Path) -> Result<()> {
+    std::fs::File::create(path).map_err(|e| {
+        let t = e.to_string();
+        let t = t.split(" (os error").next().unwrap_or_default();
+        anyhow!("cannot write {}: {t}", path.display())
+    })?;
+    Ok(())
+}
+
 fn fonts() {
     static ONCE: Once = Once::new();
     ONCE.call_once(|| {
@@ -134,12 +144,7 @@ const PURPLE_: RGBColor = RGBColor(148, 103, 189);
 /// Write a three-panel PNG: force, positions (mm), stiffness estimate (kN/m).
 pub fn write_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
     fonts();
-    // The backend reports an unwritable path as a nested Debug dump, only after drawing: find it first.
-    std::fs::File::create(path).map_err(|e| {
-        let t = e.to_string();
-        let t = t.split(" (os error").next().unwrap_or_default();
-        anyhow!("cannot write {}: {t}", path.display())
-    })?;
+    check_writable(path)?;
     let root = BitMapBackend::new(path, (1200, 1050)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| anyhow!("plot: {e}"))?;
     let root = root
@@ -239,11 +244,7 @@ pub fn write_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
 /// the process state the program saw, its segment and the tool's position along the path, over time.
 pub fn write_pass_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
     fonts();
-    std::fs::File::create(path).map_err(|e| {
-        let t = e.to_string();
-        let t = t.split(" (os error").next().unwrap_or_default();
-        anyhow!("cannot write {}: {t}", path.display())
-    })?;
+    check_writable(path)?;
     let rows: Vec<Row> = rows
         .iter()
         .filter(|r| r.segment.is_some())

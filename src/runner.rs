@@ -242,7 +242,7 @@ where
                 break;
             }
         }
-        if k % every == 0 {
+        if k.is_multiple_of(every) {
             progress(k as f64 / steps as f64);
         }
     }

@@ -324,14 +324,9 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             if self.started {
                 self.stats.sessions += 1;
             }
-            self.started = true;
+            self.begin_session(x);
             self.law.start(x);
             self.stepped_t = None;
-            self.last_cmd = x;
-            self.last_out = Output {
-                x_cmd: x,
-                ..Output::default()
-            };
         }
 
         let Reading {
@@ -386,6 +381,16 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             set_point: self.law.set_point(),
             fault,
         })
+    }
+
+    /// A robot session starts with the tool at `x`: the command stands there (bumpless).
+    fn begin_session(&mut self, x: f64) {
+        self.started = true;
+        self.last_cmd = x;
+        self.last_out = Output {
+            x_cmd: x,
+            ..Output::default()
+        };
     }
 
     /// Read the newest sample and classify it: a usable force, a non-finite sample, a sensor error
@@ -461,13 +466,8 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             if self.started {
                 self.stats.sessions += 1;
             }
-            self.started = true;
-            self.last_cmd = x;
+            self.begin_session(x);
             self.process = Process::new(self.cfg.process);
-            self.last_out = Output {
-                x_cmd: x,
-                ..Output::default()
-            };
         }
         let Reading {
             f,

@@ -313,7 +313,12 @@ mod tests {
         assert!(back[0].f.is_nan());
         assert_eq!(back[0].x_cmd, 0.0102);
         assert_eq!(back[1].fault, 1);
-        let without_f = |r: &Row| Row { f: 0.0, ..*r };
+        // NaN is not equal to itself: the missing `f` and the simulation-only `s` compared as 0.
+        let without_f = |r: &Row| Row {
+            f: 0.0,
+            s: 0.0,
+            ..*r
+        };
         assert_eq!(
             back.iter().map(without_f).collect::<Vec<_>>(),
             rows.iter().map(without_f).collect::<Vec<_>>()
