@@ -361,3 +361,110 @@ fn a_lost_link_ends_the_run_early_with_status_3() {
     assert_eq!(out.rows.len(), 100);
     assert!(out.ended.contains("link lost"), "{}", out.ended);
 }
+
+/// `forcecell run` with `[robot] process = true`: the robot program drives the pass over `FcCmd` /
+/// `FcState` (here the simulated controller running a program), and the run lasts until the robot
+/// ends its session.
+#[test]
+fn a_cell_with_process_channels_follows_the_robot_program() {
+    use sim::program::SegmentMode;
+    use sim::{Program, Segment};
+    const PROCESS_CELL: &str = r#"
+tuning = "robust"
+
+[robot]
+listen = "127.0.0.1:0"
+robot_ip = "127.0.0.1"
+process = true
+
+[sensor]
+kind = "ati"
+can = "vcan0"
+"#;
+    let cfg = CellConfig::from_toml(PROCESS_CELL, "cell.toml").unwrap();
+    let tuning = cfg.tuning().unwrap();
+    let link = RsiLink::bind(cfg.link_config(&tuning).unwrap()).unwrap();
+    let addr = link.local_addr().unwrap();
+    let seg = |mode, force, segment, length| Segment {
+        mode,
+        force,
+        ramp: 0.3,
+        segment,
+        feed: 0.05,
+        length,
+        dwell: 0.0,
+    };
+    let program = Program {
+        segments: vec![
+            seg(SegmentMode::Press, 10.0, 1, 0.05),
+            seg(SegmentMode::Release, 0.0, 2, 0.0),
+        ],
+        wait_timeout: 5.0,
+    };
+    let world: SharedWorld = World::new(
+        ContactPlant::spring(10_000.0, 0.001),
+        InnerLoopModel::P2,
+        SensorParams::default(),
+        0.0,
+    )
+    .with_program(program)
+    .shared();
+    let mut kc = KrcConfig::new(
+        EthernetConfig::forcecell([127, 0, 0, 1].into(), addr.port(), false)
+            .with_process(kuka_rsi::ProcessChannels::default()),
+        addr,
+    );
+    kc.timing = Timing::Lockstep {
+        deadline: Duration::from_millis(500),
+    };
+    // About 3 s of pass at 4 ms, then the robot falls silent (its RSI_OFF).
+    kc.cycles = Some(1_500);
+    let mut krc = Krc::new(kc).unwrap();
+    let mut mech = world.clone();
+    let robot = thread::spawn(move || krc.run(&mut mech));
+    let flag = AtomicBool::new(false);
+    let out = forcecell::cell::run_cell_recorded(
+        &cfg,
+        &tuning,
+        link,
+        InProcSensor::new(world.clone()),
+        &flag,
+        None,
+    )
+    .unwrap();
+    let report = robot.join().unwrap();
+    assert_eq!(report.bad_process, 0, "{report:?}");
+    assert_eq!(
+        out.end,
+        forcecell::cell::CellEnd::Done,
+        "the robot ending its session is the run's end: {}",
+        out.ended
+    );
+    let w = sim::world::lock(&world);
+    let p = w.program().unwrap();
+    assert!(p.done() && p.aborted().is_none(), "{:?}", p.aborted());
+    drop(w);
+    let mut phases: Vec<u8> = out.rows.iter().filter_map(|r| r.phase).collect();
+    phases.dedup();
+    assert_eq!(phases, [1, 2, 3, 4, 0], "{}", out.ended);
+    let pressing: Vec<f64> = out
+        .rows
+        .iter()
+        .filter(|r| r.phase == Some(3))
+        .map(|r| r.f)
+        .collect();
+    assert!(pressing.len() > 200, "pressed along 50 mm");
+    assert!(
+        pressing.iter().all(|f| (f - 10.0).abs() <= 0.5),
+        "held 10 N ± 5 %"
+    );
+    assert!(
+        out.rows.iter().all(|r| r.segment.is_some()),
+        "every row carries its segment"
+    );
+    assert_eq!(
+        out.rows.last().unwrap().x_cmd,
+        0.0,
+        "the correction is back at zero"
+    );
+}
