@@ -216,7 +216,14 @@ impl RobustLaw {
             lead,
             dt,
         );
-        s.xf + proportional + ff.weight * ff.predicted + (1.0 - ff.weight) * ff.fallback + integral
+        // The set-point's own motion, fed forward over the loop's lead time: a ramp is followed, not
+        // chased (the force lags the command by the inner loop's lag and delay and the conditioning).
+        let ramp = self.response.rate() / k * (cell.lag + cell.delay);
+        s.xf + proportional
+            + ff.weight * ff.predicted
+            + (1.0 - ff.weight) * ff.fallback
+            + integral
+            + ramp
     }
 }
 

@@ -69,12 +69,19 @@ pub struct Response {
     p: ResponseParams,
     f_r: f64,
     integ: f64,
+    /// Rate of the active set-point over the last step, N/s.
+    rate: f64,
 }
 
 impl Response {
     /// At rest at set-point `f_r`.
     pub fn new(p: ResponseParams, f_r: f64) -> Self {
-        Self { p, f_r, integ: 0.0 }
+        Self {
+            p,
+            f_r,
+            integ: 0.0,
+            rate: 0.0,
+        }
     }
 
     /// Take new parameters, keeping the state.
@@ -86,6 +93,7 @@ impl Response {
     pub fn reset(&mut self, f_r: f64) {
         self.f_r = f_r;
         self.integ = 0.0;
+        self.rate = 0.0;
     }
 
     /// A new contact: the integral starts over.
@@ -101,8 +109,15 @@ impl Response {
     /// Slew the active set-point towards `target` for a step of `dt`; returns it, N.
     pub fn slew(&mut self, target: f64, dt: f64) -> f64 {
         let df = self.p.set_point_rate * dt;
-        self.f_r += (target - self.f_r).clamp(-df, df);
+        let step = (target - self.f_r).clamp(-df, df);
+        self.f_r += step;
+        self.rate = step / dt;
         self.f_r
+    }
+
+    /// How fast the active set-point moved over the last step, N/s (0 once it stands).
+    pub fn rate(&self) -> f64 {
+        self.rate
     }
 
     /// The proportional correction and the integral (updated) for conditioned force `ff`, stiffness `k`
@@ -121,7 +136,9 @@ impl Response {
         let n = r.noise_gate * r.noise_gate * noise_var;
         let weight = if n > 0.0 { e * e / (e * e + n) } else { 1.0 };
         let delta = e / k;
-        if e.abs() <= r.integration_band * force_scale {
+        // While the set-point moves, the error is the ramp's lag, which the set-point feed-forward
+        // answers: integrating it would wind up and overshoot the ramp's end.
+        if e.abs() <= r.integration_band * force_scale && self.rate == 0.0 {
             let lim = r.integral_limit;
             self.integ = (self.integ + dt * r.integral * delta).clamp(-lim, lim);
         }
