@@ -532,11 +532,10 @@ pub fn start(
     }
     w.flush()
         .with_context(|| format!("cannot write {}", path.display()))?;
-    let mut ids = [0u16; CHANNELS.len()];
-    for (i, c) in CHANNELS.iter().enumerate() {
-        let schema = w.add_schema(c.schema, "jsonschema", c.json_schema.as_bytes())?;
-        ids[i] = w.add_channel(schema, c.topic, "json", &BTreeMap::new())?;
-    }
+    // Schemas and channels are added with each channel's first message: they open a chunk, and a run
+    // stopped before its first cycle must not leave a chunk that holds no message (no message index:
+    // Foxglove refuses the file).
+    let ids = [None; CHANNELS.len()];
     let (recorder, rx) = queue(opts.capacity, opts.full);
     let dropped = recorder.dropped.clone();
     let (truth_tx, truth_rx) = mpsc::channel();
@@ -612,7 +611,8 @@ impl Drop for Recording {
 
 struct Writer {
     w: Option<McapWriter>,
-    ids: [u16; CHANNELS.len()],
+    /// Channel ids, once each channel's first message added it.
+    ids: [Option<u16>; CHANNELS.len()],
     path: PathBuf,
     summary: RecordingSummary,
     live: Option<LiveSink>,
@@ -687,9 +687,31 @@ impl Writer {
             live(i, t, &self.buf);
         }
         let Some(w) = &mut self.w else { return };
+        let channel_id = match self.ids[i] {
+            Some(id) => id,
+            None => {
+                let c = &CHANNELS[i];
+                let added = w
+                    .add_schema(c.schema, "jsonschema", c.json_schema.as_bytes())
+                    .and_then(|schema| w.add_channel(schema, c.topic, "json", &BTreeMap::new()));
+                match added {
+                    Ok(id) => {
+                        self.ids[i] = Some(id);
+                        id
+                    }
+                    Err(e) => {
+                        self.fail(e);
+                        if i != TRUTH {
+                            self.summary.lost += 1;
+                        }
+                        return;
+                    }
+                }
+            }
+        };
         self.seq = self.seq.wrapping_add(1);
         let header = mcap::records::MessageHeader {
-            channel_id: self.ids[i],
+            channel_id,
             sequence: self.seq,
             log_time: t,
             publish_time: t,

@@ -572,3 +572,25 @@ fn an_unwritable_directory_is_an_error_before_the_run() {
     };
     assert!(format!("{e:#}").contains("cannot create"), "{e:#}");
 }
+
+/// A run stopped before its first cycle (a signal during start-up) records nothing: the file is still a
+/// finished MCAP, and it holds no chunk without a message index (Foxglove refuses such a file).
+#[test]
+fn a_recording_with_no_cycle_has_no_chunk_without_messages() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("empty.mcap");
+    let (tx, recording) = recorder::start(&path, RecorderOptions::default(), None).unwrap();
+    drop(tx);
+    let summary = recording.finish(Vec::new()).unwrap();
+    assert!(summary.finished, "{summary:?}");
+    let bytes = std::fs::read(&path).unwrap();
+    let s = mcap::Summary::read(&bytes)
+        .unwrap()
+        .expect("a summary section");
+    assert!(
+        s.chunk_indexes.iter().all(|c| c.message_index_length > 0),
+        "{:?}",
+        s.chunk_indexes
+    );
+    assert_eq!(recorder::read_mcap(&bytes).unwrap().rows.len(), 0);
+}
