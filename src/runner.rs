@@ -195,10 +195,16 @@ where
     let mut ended_early = None;
     let every = (steps / 200).max(1);
     let mut interrupted = None;
+    // Whether the world runs a program is fixed for the run: only then is its end looked up each cycle.
+    let has_program = sim::world::lock(world).program().is_some();
     let program_done = || {
-        sim::world::lock(world)
-            .program()
-            .map(|p| (p.done(), p.aborted().map(str::to_string)))
+        has_program
+            .then(|| {
+                sim::world::lock(world)
+                    .program()
+                    .map(|p| (p.done(), p.aborted().map(str::to_string)))
+            })
+            .flatten()
     };
     let mut finished = false;
     // An outside robot that sends `FcCmd` runs its own program: the session is its to end.
@@ -223,9 +229,7 @@ where
         }
         match lp.cycle() {
             Ok(r) => {
-                robot_driven = spec.external
-                    && r.cycle.process.is_some()
-                    && sim::world::lock(world).program().is_none();
+                robot_driven = spec.external && r.cycle.process.is_some() && !has_program;
                 let rec = Record::from_report(&r, r.set_point);
                 rows.push(rec.row);
                 if let Some(tx) = &mut recorder {

@@ -12,8 +12,8 @@ use serde::{Deserialize, Serialize};
 use crate::law::{ForceLaw, Output};
 
 mod process;
-pub use process::ProcessConfig;
 use process::{Act, Process, Release};
+pub use process::{ProcessConfig, Refusal};
 
 /// How the loop maps devices onto the 1-DOF law and what it refuses to command.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -493,7 +493,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             Ok(false) => {}
             Err(why) => self.process.latch(
                 ProcessFault::BadCommand,
-                format!("bad command: {why}"),
+                || format!("bad command: {why}"),
                 self.last_cmd,
                 lift,
                 floor,
@@ -502,7 +502,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         if let Some(e) = &fatal {
             self.process.latch(
                 ProcessFault::SensorLost,
-                format!("force sensor: {e}"),
+                || format!("force sensor: {e}"),
                 self.last_cmd,
                 lift,
                 floor,
@@ -511,7 +511,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
 
         let mut out = self.last_out;
         let mut cmd = self.last_cmd;
-        let controlling = match self.process.act(cmd) {
+        let controlling = match self.process.act() {
             Act::MoveTo { target } => {
                 let step = (self.cfg.retract_speed * cycle.period).min(self.cfg.max_step);
                 cmd = self.last_cmd + (target - self.last_cmd).clamp(-step, step);
@@ -530,7 +530,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
                     let dt = self.law_dt(&cycle);
                     if self.process.ramp_step(dt) {
                         self.law
-                            .set_set_point(self.process.law_set_point())
+                            .set_set_point(self.process.sp)
                             .expect("a ramp between checked forces is a valid set-point");
                     }
                     let o = self.law.step(x, fv, dt);
@@ -538,14 +538,16 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
                         out = o;
                         cmd = self.limit(o.x_cmd, &mut fault);
                         if let Err((code, why)) = self.process.after_step(&o, fv, dt) {
-                            self.process.latch(code, why, cmd, lift, floor);
+                            self.process.latch(code, || why, cmd, lift, floor);
                         } else if fault == Some(Fault::EnvelopeLimited) {
                             self.process.latch(
                                 ProcessFault::CorrectionLimit,
-                                format!(
-                                    "correction reached its envelope of {:.1} mm",
-                                    self.cfg.max_offset * 1e3
-                                ),
+                                || {
+                                    format!(
+                                        "correction reached its envelope of {:.1} mm",
+                                        self.cfg.max_offset * 1e3
+                                    )
+                                },
                                 cmd,
                                 lift,
                                 floor,
@@ -569,10 +571,13 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
                 Some(Fault::Sensor(_) | Fault::NonFiniteSample) => ProcessFault::SensorLost,
                 _ => ProcessFault::HoldTimeout,
             };
-            let why = format!(
-                "held the last command for {:.0} ms without a usable input (last: {fault:?})",
-                self.held * 1e3
-            );
+            let held = self.held;
+            let why = || {
+                format!(
+                    "held the last command for {:.0} ms without a usable input (last: {fault:?})",
+                    held * 1e3
+                )
+            };
             self.process.latch(code, why, cmd, lift, floor);
             self.held = 0.0;
         }
@@ -1125,11 +1130,13 @@ mod tests {
             .map(|dt| (dt / 0.004).round() as u64)
             .collect();
         assert_eq!(steps, [1, 1, 1, 3, 2], "periods per step: {:?}", lp.law().0);
-        assert!(
-            lp.law()
-                .0
-                .iter()
-                .all(|dt| (dt / 0.004).fract().abs() < 1e-12 || (dt / 0.004).fract() > 1.0 - 1e-12)
-        );
+        // Whole periods, exactly: the stamps' float error stays out of the law.
+        let whole = lp
+            .law()
+            .0
+            .iter()
+            .zip(&steps)
+            .all(|(dt, n)| *dt == *n as f64 * 0.004);
+        assert!(whole, "{:?}", lp.law().0);
     }
 }

@@ -249,19 +249,13 @@ fn a_silent_sensor_faults_after_the_hold_limit_not_later() {
 
 #[test]
 fn bad_commands_fault_with_code_4() {
+    // The program's own validation refuses these forces; the wire may still carry them, so the robot
+    // here rewrites the force of a valid program's PRESS on every cycle.
     for force in [f64::NAN, -5.0, 60.0, 500.0] {
-        let p = Program {
-            segments: vec![Segment {
-                force,
-                ..press(20.0, 0.01, 1)
-            }],
-            wait_timeout: 1.0,
-        };
-        // The program's own validation refuses these; the wire may still carry them.
         let world = World::new(flat(), InnerLoopModel::P1, SensorParams::default(), 0.0)
             .with_program(Program {
                 segments: vec![press(20.0, 0.01, 1)],
-                ..p
+                wait_timeout: 1.0,
             })
             .shared();
         let tuning = robust();
@@ -275,6 +269,11 @@ fn bad_commands_fault_with_code_4() {
         assert_eq!(r.command.process.phase, ProcessPhase::Fault, "F = {force}");
         assert_eq!(r.command.process.fault, ProcessFault::BadCommand);
         assert!(lp.process_fault_reason().unwrap().contains("PRESS"));
+        // The program sees FAULT and aborts with OFF, which re-arms the process.
+        let r = lp.cycle().unwrap();
+        assert_eq!(r.cycle.process.unwrap().mode, hal::ProcessMode::Off);
+        assert_eq!(r.command.process.phase, ProcessPhase::Off);
+        assert_eq!(r.command.process.fault, ProcessFault::None);
     }
 }
 

@@ -27,10 +27,6 @@ pub struct ProcessConfig {
     pub contact_loss_time: f64,
     /// Time constant of the force filter behind the `PRESSING` test and `FcState.F`, s.
     pub force_filter: f64,
-    /// How far ahead along a ramp the set-point handed to the law runs, s: the force lags the law's
-    /// set-point by about the inner loop's lag and delay, so the law is led by that much and the
-    /// force follows the ramp itself (the lead never passes the ramp's end). 0: no lead.
-    pub ramp_lead: f64,
 }
 
 impl Default for ProcessConfig {
@@ -42,7 +38,6 @@ impl Default for ProcessConfig {
             default_rate: 50.0,
             contact_loss_time: 0.5,
             force_filter: 0.01,
-            ramp_lead: 0.05,
         }
     }
 }
@@ -71,31 +66,59 @@ impl ProcessConfig {
         pos("default_rate", self.default_rate)?;
         pos("contact_loss_time", self.contact_loss_time)?;
         pos("force_filter", self.force_filter)?;
-        if !(self.ramp_lead.is_finite() && (0.0..=1.0).contains(&self.ramp_lead)) {
-            return Err(format!(
-                "process.ramp_lead must be 0..1 s, got {}",
-                self.ramp_lead
-            ));
-        }
         Ok(())
     }
 
     /// Why the program's command is refused, if it is: an undefined mode, or a PRESS whose force or
-    /// ramp the contract does not allow.
-    pub fn check(&self, c: &ProcessCommand) -> Result<(), String> {
+    /// ramp the contract does not allow. No allocation: the program may repeat a bad command every cycle.
+    pub fn check(&self, c: &ProcessCommand) -> Result<(), Refusal> {
         match c.mode {
-            ProcessMode::Unknown(m) => Err(format!("undefined mode {m}")),
+            ProcessMode::Unknown(m) => Err(Refusal::UndefinedMode(m)),
             ProcessMode::Press if !(c.force.is_finite() && c.force > 0.0) => {
-                Err(format!("PRESS needs F > 0 N, got {}", c.force))
+                Err(Refusal::Force(c.force))
             }
-            ProcessMode::Press if c.force >= self.max_force => Err(format!(
-                "PRESS with F = {} N at or above the force limit {} N",
-                c.force, self.max_force
-            )),
+            ProcessMode::Press if c.force >= self.max_force => Err(Refusal::AtLimit {
+                force: c.force,
+                limit: self.max_force,
+            }),
             ProcessMode::Press if !(c.ramp.is_finite() && (0.0..=60.0).contains(&c.ramp)) => {
-                Err(format!("Ramp must be 0..60 s, got {}", c.ramp))
+                Err(Refusal::Ramp(c.ramp))
             }
             _ => Ok(()),
+        }
+    }
+}
+
+/// Why a program's command is refused (fault 4, "bad command").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Refusal {
+    /// A mode number the contract does not define.
+    UndefinedMode(i64),
+    /// A PRESS force that is not a finite number > 0 N.
+    Force(f64),
+    /// A PRESS force at or above the force limit.
+    AtLimit {
+        /// Commanded, N.
+        force: f64,
+        /// The limit, N.
+        limit: f64,
+    },
+    /// A ramp outside 0..60 s.
+    Ramp(f64),
+}
+
+impl core::fmt::Display for Refusal {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::UndefinedMode(m) => write!(f, "undefined mode {m}"),
+            Self::Force(v) => write!(f, "PRESS needs F > 0 N, got {v}"),
+            Self::AtLimit { force, limit } => {
+                write!(
+                    f,
+                    "PRESS with F = {force} N at or above the force limit {limit} N"
+                )
+            }
+            Self::Ramp(r) => write!(f, "Ramp must be 0..60 s, got {r}"),
         }
     }
 }
@@ -134,8 +157,6 @@ pub(super) struct Process {
     pub target: f64,
     /// Rate of the running ramp, N/s.
     pub rate: f64,
-    /// Where the running ramp ends, N.
-    pub ramp_to: f64,
     /// The program's `Ramp`, s.
     pub ramp: f64,
     pub f_filt: f64,
@@ -157,7 +178,6 @@ impl Process {
             sp: 0.0,
             target: 0.0,
             rate: cfg.default_rate,
-            ramp_to: 0.0,
             ramp: 0.0,
             f_filt: 0.0,
             had_contact: false,
@@ -195,14 +215,22 @@ impl Process {
         self.f_filt += a * (f - self.f_filt);
     }
 
-    /// Latch a fault (the first one stands), backing off from `cmd`, within `floor`.
-    pub fn latch(&mut self, fault: ProcessFault, why: String, cmd: f64, lift: f64, floor: f64) {
+    /// Latch a fault (the first one stands), backing off from `cmd`, within `floor`. `why` is only
+    /// formatted when the fault latches, not on every cycle a latched condition persists.
+    pub fn latch(
+        &mut self,
+        fault: ProcessFault,
+        why: impl FnOnce() -> String,
+        cmd: f64,
+        lift: f64,
+        floor: f64,
+    ) {
         if self.phase == ProcessPhase::Fault {
             return;
         }
         self.phase = ProcessPhase::Fault;
         self.fault = fault;
-        self.reason = Some(why);
+        self.reason = Some(why());
         self.retract_target = (cmd - lift).max(floor);
     }
 
@@ -220,7 +248,7 @@ impl Process {
 
     /// Take the program's command. Returns `true` when force control (re)starts: the loop restarts
     /// the law at the measured position with set-point `sp`.
-    pub fn command(&mut self, c: &ProcessCommand) -> Result<bool, String> {
+    pub fn command(&mut self, c: &ProcessCommand) -> Result<bool, Refusal> {
         self.cfg.check(c)?;
         match c.mode {
             ProcessMode::Off => {
@@ -244,7 +272,6 @@ impl Process {
                         c.force
                     };
                     self.rate = self.ramp_rate(self.sp, c.force);
-                    self.ramp_to = self.sp;
                     self.had_contact = false;
                     self.lost = 0.0;
                     Ok(true)
@@ -292,21 +319,11 @@ impl Process {
         let before = self.sp;
         let d = self.rate * dt;
         self.sp += (to - self.sp).clamp(-d, d);
-        self.ramp_to = to;
         self.sp != before
     }
 
-    /// The set-point handed to the law: the ramp's, led by `ramp_lead` (never past the ramp's end).
-    pub fn law_set_point(&self) -> f64 {
-        if self.sp == self.ramp_to {
-            return self.sp;
-        }
-        let lead = self.rate * self.cfg.ramp_lead;
-        self.sp + (self.ramp_to - self.sp).clamp(-lead, lead)
-    }
-
-    /// What to do with the command this cycle, given the last command `cmd`.
-    pub fn act(&self, cmd: f64) -> Act {
+    /// What to do with the command this cycle.
+    pub fn act(&self) -> Act {
         match (self.phase, self.release) {
             (ProcessPhase::Off, _) => Act::MoveTo { target: 0.0 },
             (ProcessPhase::Fault, _) => Act::MoveTo {
@@ -314,10 +331,7 @@ impl Process {
             },
             (ProcessPhase::Release, Release::Lift { target }) => Act::MoveTo { target },
             (ProcessPhase::Release, Release::Return) => Act::MoveTo { target: 0.0 },
-            _ => {
-                let _ = cmd;
-                Act::Control
-            }
+            _ => Act::Control,
         }
     }
 
@@ -375,7 +389,7 @@ impl Process {
         Ok(())
     }
 
-    /// A RELEASE's ramp-down ended: lift off from `cmd` by `lift`, within `floor`.
+    /// True once a RELEASE's set-point has ramped down: the tool lifts off next.
     pub fn release_ramp_done(&self) -> bool {
         self.phase == ProcessPhase::Release
             && self.release == Release::RampDown
@@ -421,7 +435,8 @@ mod tests {
             mode: ProcessMode::Unknown(7),
             ..press(20.0, 0.5)
         };
-        assert!(c.check(&bad).unwrap_err().contains('7'));
+        assert_eq!(c.check(&bad), Err(Refusal::UndefinedMode(7)));
+        assert!(c.check(&bad).unwrap_err().to_string().contains('7'));
     }
 
     #[test]
@@ -478,7 +493,7 @@ mod tests {
         p.command(&rel).unwrap();
         assert_eq!(p.phase, ProcessPhase::Release);
         assert_eq!(p.release, Release::RampDown);
-        assert_eq!(p.act(0.001), Act::Control);
+        assert_eq!(p.act(), Act::Control);
         let mut n = 0;
         while !p.release_ramp_done() {
             p.ramp_step(0.004);
@@ -487,9 +502,9 @@ mod tests {
         // 18 N over 0.3 s asks for 60 N/s: the law's 50 N/s make it 0.36 s.
         assert!((90..=91).contains(&n), "{n} steps");
         p.release = Release::Lift { target: -0.001 };
-        assert_eq!(p.act(0.001), Act::MoveTo { target: -0.001 });
+        assert_eq!(p.act(), Act::MoveTo { target: -0.001 });
         p.arrived();
-        assert_eq!(p.act(0.0), Act::MoveTo { target: 0.0 });
+        assert_eq!(p.act(), Act::MoveTo { target: 0.0 });
         p.arrived();
         assert_eq!(p.phase, ProcessPhase::Off);
     }
@@ -498,10 +513,10 @@ mod tests {
     fn a_fault_latches_until_off() {
         let mut p = Process::new(ProcessConfig::default());
         p.command(&press(20.0, 0.0)).unwrap();
-        p.latch(ProcessFault::ForceLimit, "x".into(), 0.002, 0.002, -0.05);
-        p.latch(ProcessFault::ContactLost, "y".into(), 0.0, 0.002, -0.05);
+        p.latch(ProcessFault::ForceLimit, || "x".into(), 0.002, 0.002, -0.05);
+        p.latch(ProcessFault::ContactLost, || "y".into(), 0.0, 0.002, -0.05);
         assert_eq!(p.fault, ProcessFault::ForceLimit, "the first fault stands");
-        assert_eq!(p.act(0.002), Act::MoveTo { target: 0.0 });
+        assert_eq!(p.act(), Act::MoveTo { target: 0.0 });
         assert_eq!(
             p.command(&press(20.0, 0.0)),
             Ok(false),
