@@ -337,16 +337,8 @@ pub fn phase_name(code: Option<u8>) -> &'static str {
 
 /// A process fault number's name ([`hal::ProcessFault::code`]).
 pub fn process_fault_name(code: Option<u8>) -> &'static str {
-    match code.and_then(|c| hal::ProcessFault::from_code(i64::from(c))) {
-        None => "unknown",
-        Some(hal::ProcessFault::None) => "none",
-        Some(hal::ProcessFault::SensorLost) => "sensor lost",
-        Some(hal::ProcessFault::ForceLimit) => "force limit",
-        Some(hal::ProcessFault::CorrectionLimit) => "correction limit",
-        Some(hal::ProcessFault::BadCommand) => "bad command",
-        Some(hal::ProcessFault::ContactLost) => "contact lost",
-        Some(hal::ProcessFault::HoldTimeout) => "hold timeout",
-    }
+    code.and_then(|c| hal::ProcessFault::from_code(i64::from(c)))
+        .map_or("unknown", hal::ProcessFault::name)
 }
 
 /// Index of the `/truth` channel (written at the end of a simulation).

@@ -631,6 +631,8 @@ pub fn robot_setup(a: &RsiConfigArgs) -> Result<RobotSetup> {
             ramp: a.ramp,
             wait_timeout: a.wait_timeout,
             timer: 1,
+            interrupt: 21,
+            flag: 1,
         })
     };
     let setup = RobotSetup {

@@ -117,37 +117,19 @@ pub struct RunResult {
     pub interrupted: Option<bool>,
 }
 
-/// A scenario target checked against a run.
-#[derive(Clone, Debug)]
-pub struct Verdict {
-    /// The target.
-    pub target: Target,
-    /// The metric's value.
-    pub value: f64,
-    /// Whether it is met.
-    pub pass: bool,
-}
+/// A scenario target checked against a run (the same check as the controller's scenario tests).
+pub type Verdict = ::scenario::run::Check;
 
 impl RunResult {
-    /// Check every target of the scenario.
+    /// Check every target of the scenario. A run the loop ended early (a fault backed the tool off)
+    /// meets none: what it measured before the fault is not the scenario's course.
     pub fn verdicts(&self, targets: &[Target]) -> Vec<Verdict> {
         targets
             .iter()
             .map(|t| {
-                let m = Metrics::compute(
-                    &self.rows,
-                    t.after.unwrap_or(0.0),
-                    t.until.unwrap_or(f64::INFINITY),
-                );
-                let value = m.get(&t.metric).unwrap_or(f64::NAN);
-                let pass = !value.is_nan()
-                    && t.max.is_none_or(|mx| value <= mx)
-                    && t.min.is_none_or(|mn| value >= mn);
-                Verdict {
-                    target: t.clone(),
-                    value,
-                    pass,
-                }
+                let mut v = Verdict::of(t, &self.rows);
+                v.pass &= self.ended_early.is_none();
+                v
             })
             .collect()
     }
@@ -237,11 +219,19 @@ where
                 }
             }
             Err(e) => {
-                if robot_driven && matches!(e, controller::LoopError::Robot(_)) {
+                let robot_gone = matches!(e, controller::LoopError::Robot(_));
+                if robot_driven && robot_gone {
                     // The robot program ended its session (RSI_OFF): the normal end of its pass.
                     println!("the robot ended its session ({e})");
                 } else if !crate::stop::requested() {
                     ended_early = Some(e.to_string());
+                    if !robot_gone {
+                        // A fault has backed the tool off: end the robot's correction motion
+                        // with `Stop` (and the fault's code in `FcState` where the link has it).
+                        if let Err(stop) = lp.stop() {
+                            ended_early = Some(format!("{e}; could not send Stop: {stop}"));
+                        }
+                    }
                 }
                 break;
             }

@@ -191,6 +191,63 @@ fn rsi_config_writes_the_process_channels_and_a_polishing_template() {
     let release = krl.rfind("$SEN_PINT[11] = 2").unwrap();
     assert!(release < off, "RELEASE before RSI_OFF");
 
+    // A FAULT mid-path: an interrupt on State 9 around the path, which runs in its own level so that
+    // the fault routine's RESUME returns to the main program; there the tool is lifted clear before
+    // OFF brings the correction back to zero, then RSI is switched off and the program ends.
+    let at = |needle: &str| {
+        krl.find(needle)
+            .unwrap_or_else(|| panic!("no {needle:?} in {krl}"))
+    };
+    let decl = at("INTERRUPT DECL 21 WHEN $SEN_PINT[13] == 9 DO FC_FAULT()");
+    let on = at("INTERRUPT ON 21");
+    let call = at("  FC_PATH()\n");
+    let off_irq = at("  INTERRUPT OFF 21\n  IF $FLAG[1] THEN");
+    assert!(decl < on && on < call && call < off_irq, "{krl}");
+    let branch = &krl[off_irq..];
+    let branch = &branch[..branch.find("ENDIF").unwrap()];
+    let lift = branch
+        .find("LIN_REL {Z 50.0}")
+        .expect("lift clear on a fault");
+    let re_arm = branch.find("$SEN_PINT[11] = 0").expect("OFF re-arms");
+    let rsi_off = branch.find("RSI_OFF()").expect("RSI off on a fault");
+    assert!(
+        lift < re_arm && re_arm < rsi_off && branch.contains("RETURN"),
+        "{branch}"
+    );
+    let body = |name: &str| {
+        let from = at(&format!("DEF {name}()"));
+        let len = krl[from..].find("\nEND").unwrap();
+        krl[from..from + len].to_string()
+    };
+    let path = body("FC_PATH");
+    assert_eq!(path.matches("LIN_REL {X").count(), 2, "{path}");
+    assert!(
+        !krl[..at("DEF FC_PATH()")].contains("LIN_REL {X"),
+        "the path only in FC_PATH"
+    );
+    assert!(
+        path.trim_end().ends_with(
+            "WAIT SEC 0 ; advance-run stop: a RESUME must find the advance run in this level"
+        ),
+        "{path}"
+    );
+    let fault = body("FC_FAULT");
+    let (brake, flag, resume) = (
+        fault.find("BRAKE").unwrap(),
+        fault.find("$FLAG[1] = TRUE").unwrap(),
+        fault.find("RESUME").unwrap(),
+    );
+    assert!(brake < flag && flag < resume, "{fault}");
+    // Three programs, each closed; every IF closed.
+    let lines: Vec<&str> = krl.lines().map(str::trim).collect();
+    let count = |p: &dyn Fn(&str) -> bool| lines.iter().filter(|l| p(l)).count();
+    assert_eq!(count(&|l| l.starts_with("DEF ")), 3);
+    assert_eq!(count(&|l| l == "END"), 3);
+    assert_eq!(
+        count(&|l| l.starts_with("IF ")),
+        count(&|l| l.starts_with("ENDIF"))
+    );
+
     // Indices used twice, and bad segments, are refused with a reason.
     let o = forcecell(&["rsi-config", "--pint-state", "1"], dir.path());
     assert!(!o.status.success());

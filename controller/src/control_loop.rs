@@ -11,7 +11,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::law::{ForceLaw, Output};
 
+mod guard;
 mod process;
+use guard::Guard;
 use process::{Act, Process, Release};
 pub use process::{ProcessConfig, Refusal};
 
@@ -172,18 +174,51 @@ pub enum LoopError<RE, SE> {
         /// Why the last held cycle was held.
         last: Fault,
     },
+    /// Force control tripped the guard (the force limit, a correction limit, a contact lost too
+    /// long) on a link without process channels; the loop has backed off first.
+    Guard {
+        /// The fault's code in the process contract.
+        code: ProcessFault,
+        /// Why, for the operator.
+        reason: String,
+    },
+}
+
+impl<RE, SE> LoopError<RE, SE> {
+    /// The fault's code in the process contract (`FcState.Fault`), as reported to the robot while
+    /// backing off and with `Stop`; `None` for a failed robot link (no one left to report to).
+    pub fn code(&self) -> Option<ProcessFault> {
+        match self {
+            Self::Robot(_) => None,
+            Self::Sensor(_) => Some(ProcessFault::SensorLost),
+            Self::HoldTimeout { last, .. } => Some(hold_code(*last)),
+            Self::Guard { code, .. } => Some(*code),
+        }
+    }
+}
+
+/// The code of a hold that lasted too long: the sensor's, when it was the sensor that failed.
+fn hold_code(last: Fault) -> ProcessFault {
+    match last {
+        Fault::Sensor(_) | Fault::NonFiniteSample => ProcessFault::SensorLost,
+        _ => ProcessFault::HoldTimeout,
+    }
 }
 
 impl<RE: fmt::Display, SE: fmt::Display> fmt::Display for LoopError<RE, SE> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if let Some(code) = self.code() {
+            write!(f, "fault {} ({}): ", code.code(), code.name())?;
+        }
         match self {
             Self::Robot(e) => write!(f, "robot link: {e}"),
-            Self::Sensor(e) => write!(f, "force sensor: {e} (the tool backed off)"),
+            Self::Sensor(e) => write!(f, "force sensor: {e}; the tool backed off"),
             Self::HoldTimeout { held, last } => write!(
                 f,
                 "held the last command for {:.0} ms without a usable input (last: {last:?}); the tool backed off",
                 held * 1e3
             ),
+            Self::Guard { reason, .. } => write!(f, "{reason}; the tool backed off"),
         }
     }
 }
@@ -192,6 +227,7 @@ impl<RE: fmt::Display, SE: fmt::Display> fmt::Display for LoopError<RE, SE> {
 enum Ending<SE> {
     Sensor(SE),
     HoldTimeout { held: f64, last: Fault },
+    Guard { code: ProcessFault, reason: String },
 }
 
 impl<SE> Ending<SE> {
@@ -199,6 +235,16 @@ impl<SE> Ending<SE> {
         match self {
             Self::Sensor(e) => LoopError::Sensor(e),
             Self::HoldTimeout { held, last } => LoopError::HoldTimeout { held, last },
+            Self::Guard { code, reason } => LoopError::Guard { code, reason },
+        }
+    }
+
+    /// The fault's code in the process contract.
+    fn code(&self) -> ProcessFault {
+        match self {
+            Self::Sensor(_) => ProcessFault::SensorLost,
+            Self::HoldTimeout { last, .. } => hold_code(*last),
+            Self::Guard { code, .. } => *code,
         }
     }
 }
@@ -217,8 +263,9 @@ enum Phase<SE> {
     Control,
     /// Backing off towards `target`; then the loop ends with `end`.
     Retract { target: f64, end: Ending<SE> },
-    /// Backed off after a fault that was reported: every further cycle holds the backed-off command.
-    Halted,
+    /// Backed off after a fault that was reported: every further cycle holds the backed-off command
+    /// (or backs off further towards `target` while the tool still touches).
+    Halted { target: f64 },
 }
 
 impl<RE: fmt::Debug + fmt::Display, SE: fmt::Debug + fmt::Display> std::error::Error
@@ -242,6 +289,8 @@ pub struct ControlLoop<R, S: ForceSensor, L> {
     /// Robot time of the law's last step, s (`None` right after a start).
     stepped_t: Option<f64>,
     process: Process,
+    /// Force limit, correction limit and contact watch of a loop without process channels.
+    guard: Guard,
 }
 
 impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
@@ -260,6 +309,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             phase: Phase::Control,
             stepped_t: None,
             process: Process::new(cfg.process),
+            guard: Guard::default(),
         }
     }
 
@@ -316,8 +366,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         }
         match self.phase {
             Phase::Control => {}
-            Phase::Retract { target, .. } => return self.retract(cycle, x, target),
-            Phase::Halted => return self.retract(cycle, x, self.last_cmd),
+            Phase::Retract { .. } | Phase::Halted { .. } => return self.retract(cycle, x),
         }
         let pose_ok = cycle.actual.is_finite() && cycle.programmed.is_finite() && x.is_finite();
         if pose_ok && (!self.started || cycle.new_session) {
@@ -327,6 +376,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             self.begin_session(x);
             self.law.start(x);
             self.stepped_t = None;
+            self.guard.reset();
         }
 
         let Reading {
@@ -338,13 +388,23 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
 
         let mut out = self.last_out;
         let mut cmd = self.last_cmd;
+        let mut tripped = None;
         match (fault, f) {
             (None, Some(f)) if self.started => {
                 let dt = self.law_dt(&cycle);
+                self.guard.observe(&self.cfg.process, f, dt);
                 let o = self.law.step(x, f, dt);
                 if o.x_cmd.is_finite() {
                     out = o;
                     cmd = self.limit(o.x_cmd, &mut fault);
+                    let f_r = self.law.set_point();
+                    tripped = match self.guard.check(&self.cfg.process, &o, f, f_r, dt) {
+                        Err(t) => Some(t),
+                        Ok(_) if fault == Some(Fault::EnvelopeLimited) => {
+                            Some(guard::envelope(self.cfg.max_offset))
+                        }
+                        Ok(_) => None,
+                    };
                 } else {
                     fault = Some(Fault::NonFiniteCommand);
                 }
@@ -359,16 +419,34 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         self.stats.cycles += 1;
         self.last_out = out;
         self.last_cmd = cmd;
-        let end = match (fatal_sensor, fault) {
-            (Some(e), _) => Some(Ending::Sensor(e)),
-            (None, Some(last)) if self.held > self.cfg.max_hold => Some(Ending::HoldTimeout {
+        let end = match (fatal_sensor, fault, tripped) {
+            (Some(e), _, _) => Some(Ending::Sensor(e)),
+            (None, Some(last), _) if self.held > self.cfg.max_hold => Some(Ending::HoldTimeout {
                 held: self.held,
                 last,
             }),
+            (None, _, Some((code, reason))) => Some(Ending::Guard { code, reason }),
             _ => None,
         };
         if let Some(end) = end {
             let target = (cmd - self.cfg.retract_distance).max(-self.cfg.max_offset);
+            // Reported as FAULT with its code while backing off and with `Stop`, on links that
+            // carry process channels (the program is not using them, but the integrator sees it).
+            let why = || match &end {
+                Ending::Guard { reason, .. } => reason.clone(),
+                Ending::Sensor(_) => "the force sensor failed".into(),
+                Ending::HoldTimeout { held, .. } => format!(
+                    "held the last command for {:.0} ms without a usable input",
+                    held * 1e3
+                ),
+            };
+            self.process.latch(
+                end.code(),
+                why,
+                cmd,
+                self.cfg.retract_distance,
+                -self.cfg.max_offset,
+            );
             self.phase = Phase::Retract { target, end };
         }
         Ok(CycleReport {
@@ -511,6 +589,9 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
 
         let mut out = self.last_out;
         let mut cmd = self.last_cmd;
+        if let Some(f) = f {
+            self.process.back_off_further(f, self.last_cmd, lift, floor);
+        }
         let controlling = match self.process.act() {
             Act::MoveTo { target } => {
                 let step = (self.cfg.retract_speed * cycle.period).min(self.cfg.max_step);
@@ -540,18 +621,8 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
                         if let Err((code, why)) = self.process.after_step(&o, fv, dt) {
                             self.process.latch(code, || why, cmd, lift, floor);
                         } else if fault == Some(Fault::EnvelopeLimited) {
-                            self.process.latch(
-                                ProcessFault::CorrectionLimit,
-                                || {
-                                    format!(
-                                        "correction reached its envelope of {:.1} mm",
-                                        self.cfg.max_offset * 1e3
-                                    )
-                                },
-                                cmd,
-                                lift,
-                                floor,
-                            );
+                            let (code, why) = guard::envelope(self.cfg.max_offset);
+                            self.process.latch(code, || why, cmd, lift, floor);
                         } else if self.process.release_ramp_done() {
                             self.process.release = Release::Lift {
                                 target: (cmd - lift).max(floor),
@@ -656,34 +727,58 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         Ok(())
     }
 
-    /// One cycle of the back-off after a fault: step the command towards `target` at `retract_speed`
-    /// (within `max_step`) and reply; once there, end the loop with the fault (reported once; later
-    /// cycles hold the backed-off command).
+    /// One cycle of the back-off after a fault: step the command towards the phase's target at
+    /// `retract_speed` (within `max_step`) and reply; once there, end the loop with the fault
+    /// (reported once; later cycles hold the backed-off command). While a usable sample shows the tool
+    /// still touching (above the entry force: the surface came after it, or the force limit tripped
+    /// deeper than `retract_distance`), the target moves on by `retract_distance`, never beyond the
+    /// envelope: the tool backs off until it is free, then `retract_distance` further.
     fn retract(
         &mut self,
         cycle: Cycle,
         x: f64,
-        target: f64,
     ) -> Result<CycleReport, LoopError<R::Error, S::Error>> {
+        let (f, sample) = match self.sensor.read() {
+            Ok(s) if s.wrench.is_finite() => {
+                (Some(self.cfg.force_sign * s.wrench.force.z), Some(s))
+            }
+            Ok(s) => (None, Some(s)),
+            Err(_) => (None, None),
+        };
+        let floor = -self.cfg.max_offset;
         let step = (self.cfg.retract_speed * cycle.period).min(self.cfg.max_step);
+        let touching = f.is_some_and(|f| f > self.cfg.process.entry_force);
+        let further = (self.last_cmd - self.cfg.retract_distance).max(floor);
+        let target = match &mut self.phase {
+            Phase::Retract { target, .. } | Phase::Halted { target } => {
+                if touching && further < *target {
+                    *target = further;
+                }
+                *target
+            }
+            Phase::Control => unreachable!("retract() runs only after a fault"),
+        };
         let cmd = (self.last_cmd - step).max(target);
-        let command = Correction::along_z(cmd);
+        let command = Correction {
+            process: self.process.state(),
+            ..Correction::along_z(cmd)
+        };
         self.robot.reply(&command).map_err(LoopError::Robot)?;
         self.stats.cycles += 1;
         self.stats.retract_cycles += 1;
         self.last_cmd = cmd;
         self.last_out.x_cmd = cmd;
         if cmd <= target
-            && let Phase::Retract { end, .. } = core::mem::replace(&mut self.phase, Phase::Halted)
+            && let Phase::Retract { end, .. } =
+                core::mem::replace(&mut self.phase, Phase::Halted { target })
         {
             return Err(end.into_error());
         }
         Ok(CycleReport {
             cycle,
             x,
-            f: None,
-            // The sensor is not read while backing off: its reading no longer matters.
-            sample: None,
+            f,
+            sample,
             out: self.last_out,
             command,
             set_point: self.law.set_point(),
@@ -708,435 +803,4 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::law::ImpedanceLaw;
-    use hal::mock::{MockRobot, MockSensor};
-    use hal::{Pose, Sample, Vector3, Wrench};
-    use mockall::Sequence;
-    use std::time::Duration;
-
-    fn cycle_at(seq: u64, x: f64) -> Cycle {
-        Cycle {
-            seq,
-            t: seq as f64 * 0.004,
-            period: 0.004,
-            actual: Pose::from_position(Vector3::new(0.0, 0.0, x)),
-            programmed: Pose::identity(),
-            late_replies: 0,
-            new_session: false,
-            process: None,
-        }
-    }
-
-    fn sample(fz: f64) -> Sample {
-        Sample {
-            wrench: Wrench::from_array([0.0, 0.0, fz, 0.0, 0.0, 0.0]),
-            seq: 1,
-            age: Duration::ZERO,
-        }
-    }
-
-    fn fixed_law(x_r: f64) -> ImpedanceLaw {
-        ImpedanceLaw::new(
-            crate::ImpedanceParams::PAPER,
-            crate::Reference::Fixed { x_r },
-        )
-        .unwrap()
-    }
-
-    #[test]
-    fn calls_are_cycle_then_wrench_then_one_reply() {
-        let mut seq = Sequence::new();
-        let mut robot = MockRobot::new();
-        let mut sensor = MockSensor::new();
-        for k in 0..3 {
-            robot
-                .expect_next_cycle()
-                .times(1)
-                .in_sequence(&mut seq)
-                .returning(move || Ok(cycle_at(k, 0.001)));
-            sensor
-                .expect_read()
-                .times(1)
-                .in_sequence(&mut seq)
-                .returning(|| Ok(sample(0.0)));
-            robot
-                .expect_reply()
-                .times(1)
-                .in_sequence(&mut seq)
-                .returning(|_| Ok(()));
-        }
-        let mut lp = ControlLoop::new(robot, sensor, fixed_law(0.002), LoopConfig::default());
-        for _ in 0..3 {
-            lp.cycle().unwrap();
-        }
-        assert_eq!(lp.stats().cycles, 3);
-    }
-
-    #[test]
-    fn sensor_timeout_holds_without_a_step_and_counts() {
-        let mut robot = MockRobot::new();
-        let mut sensor = MockSensor::new();
-        robot
-            .expect_next_cycle()
-            .returning(|| Ok(cycle_at(1, 0.001)));
-        let mut n = 0;
-        sensor.expect_read().returning(move || {
-            n += 1;
-            if n == 1 {
-                Ok(sample(0.0))
-            } else {
-                Err(ErrorKind::Timeout)
-            }
-        });
-        let replies = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
-        let r2 = replies.clone();
-        robot.expect_reply().returning(move |c| {
-            r2.lock().unwrap().push(*c);
-            Ok(())
-        });
-        let mut lp = ControlLoop::new(robot, sensor, ImpedanceLaw::paper(), LoopConfig::default());
-        let first = lp.cycle().unwrap();
-        assert_eq!(first.fault, None);
-        let law_before = lp.law().clone();
-        let second = lp.cycle().unwrap();
-        assert_eq!(second.fault, Some(Fault::Sensor(ErrorKind::Timeout)));
-        assert_eq!(lp.stats().sensor_faults, 1);
-        assert_eq!(
-            lp.law(),
-            &law_before,
-            "the law must not step on a held cycle"
-        );
-        let r = replies.lock().unwrap();
-        assert_eq!(r.len(), 2);
-        assert_eq!(r[0], r[1], "a held cycle repeats the last command");
-    }
-
-    #[test]
-    fn lost_robot_link_ends_the_loop_with_the_error() {
-        let mut robot = MockRobot::new();
-        let sensor = MockSensor::new();
-        robot
-            .expect_next_cycle()
-            .returning(|| Err(ErrorKind::LinkLost));
-        robot.expect_reply().never();
-        let mut lp = ControlLoop::new(robot, sensor, fixed_law(0.002), LoopConfig::default());
-        match lp.cycle() {
-            Err(LoopError::Robot(ErrorKind::LinkLost)) => {}
-            other => panic!("expected the robot's LinkLost, got {other:?}"),
-        }
-        assert!(
-            format!("{}", LoopError::<_, ErrorKind>::Robot(ErrorKind::LinkLost))
-                .contains("link lost")
-        );
-    }
-
-    #[test]
-    fn transient_robot_errors_are_counted_and_skipped() {
-        let mut robot = MockRobot::new();
-        let mut sensor = MockSensor::new();
-        let mut n = 0;
-        robot.expect_next_cycle().returning(move || {
-            n += 1;
-            if n == 1 {
-                Err(ErrorKind::Malformed)
-            } else {
-                Ok(cycle_at(2, 0.0))
-            }
-        });
-        sensor.expect_read().returning(|| Ok(sample(0.0)));
-        robot.expect_reply().times(1).returning(|_| Ok(()));
-        let mut lp = ControlLoop::new(robot, sensor, fixed_law(0.0), LoopConfig::default());
-        lp.cycle().unwrap();
-        assert_eq!(lp.stats().robot_glitches, 1);
-    }
-
-    #[test]
-    fn nan_wrench_never_reaches_the_command() {
-        let mut robot = MockRobot::new();
-        let mut sensor = MockSensor::new();
-        robot
-            .expect_next_cycle()
-            .returning(|| Ok(cycle_at(1, 0.001)));
-        sensor.expect_read().returning(|| Ok(sample(f64::NAN)));
-        robot
-            .expect_reply()
-            .withf(|c: &Correction| c.is_finite() && c.translation.z == 0.001)
-            .times(2)
-            .returning(|_| Ok(()));
-        let mut lp = ControlLoop::new(robot, sensor, fixed_law(0.002), LoopConfig::default());
-        for _ in 0..2 {
-            let r = lp.cycle().unwrap();
-            assert_eq!(r.fault, Some(Fault::NonFiniteSample));
-            assert!(r.command.is_finite());
-        }
-        assert_eq!(lp.stats().nonfinite_inputs, 2);
-    }
-
-    /// Runs cycles until the loop ends; returns the corrections sent and the error it ended with.
-    fn run_until_end(
-        lp: &mut MockLoop,
-        sent: &std::sync::Mutex<Vec<Correction>>,
-    ) -> (Vec<Correction>, LoopError<ErrorKind, ErrorKind>) {
-        for _ in 0..10_000 {
-            if let Err(e) = lp.cycle() {
-                return (sent.lock().unwrap().clone(), e);
-            }
-        }
-        panic!("the loop never ended")
-    }
-
-    type MockLoop = ControlLoop<MockRobot, MockSensor, ImpedanceLaw>;
-    type SentLog = std::sync::Arc<std::sync::Mutex<Vec<Correction>>>;
-
-    /// A robot at a fixed pose whose replies are logged, and a sensor that answers `read` in turn.
-    fn logged(
-        mut read: impl FnMut(u64) -> Result<Sample, ErrorKind> + Send + 'static,
-    ) -> (MockLoop, SentLog) {
-        let mut robot = MockRobot::new();
-        let mut sensor = MockSensor::new();
-        let mut k = 0;
-        robot.expect_next_cycle().returning(move || {
-            k += 1;
-            Ok(cycle_at(k, 0.001))
-        });
-        let mut n = 0;
-        sensor.expect_read().returning(move || {
-            n += 1;
-            read(n)
-        });
-        let sent = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
-        let log = sent.clone();
-        robot.expect_reply().returning(move |c| {
-            log.lock().unwrap().push(*c);
-            Ok(())
-        });
-        let lp = ControlLoop::new(robot, sensor, fixed_law(0.001), LoopConfig::default());
-        (lp, sent)
-    }
-
-    /// The commands after `from` only ever back off (−z), by no more than the retract speed allows per
-    /// cycle, and end `retract_distance` below the command at `from`.
-    fn assert_backed_off(sent: &[Correction], from: usize) {
-        let cfg = LoopConfig::default();
-        let per_cycle = cfg.retract_speed * 0.004 + 1e-12;
-        let z: Vec<f64> = sent.iter().map(|c| c.translation.z).collect();
-        for w in z[from..].windows(2) {
-            assert!(w[1] <= w[0] && w[0] - w[1] <= per_cycle, "{w:?}");
-        }
-        let backed = z[from] - z[z.len() - 1];
-        assert!(
-            (backed - cfg.retract_distance).abs() < 1e-12,
-            "backed off {backed} m"
-        );
-    }
-
-    #[test]
-    fn fatal_sensor_error_backs_off_then_ends() {
-        let (mut lp, sent) = logged(|n| {
-            if n < 3 {
-                Ok(sample(0.0))
-            } else {
-                Err(ErrorKind::BusOff)
-            }
-        });
-        let (sent, end) = run_until_end(&mut lp, &sent);
-        assert!(
-            matches!(end, LoopError::Sensor(ErrorKind::BusOff)),
-            "{end:?}"
-        );
-        assert!(end.to_string().contains("backed off"), "{end}");
-        // The failing cycle (the third) is answered with the last command; then the back-off.
-        assert_eq!(sent[2], sent[1]);
-        assert_backed_off(&sent, 2);
-        assert_eq!(lp.stats().retract_cycles as usize, sent.len() - 3);
-    }
-
-    #[test]
-    fn a_hold_is_bounded_in_time_then_the_tool_backs_off() {
-        // Two good samples, then the sensor only times out: the loop may hold 0.1 s (25 cycles of 4 ms).
-        let (mut lp, sent) = logged(|n| {
-            if n <= 2 {
-                Ok(sample(0.0))
-            } else {
-                Err(ErrorKind::Timeout)
-            }
-        });
-        let (sent, end) = run_until_end(&mut lp, &sent);
-        let LoopError::HoldTimeout { held, last } = end else {
-            panic!("expected a hold timeout, got {end:?}")
-        };
-        assert_eq!(last, Fault::Sensor(ErrorKind::Timeout));
-        let cfg = LoopConfig::default();
-        assert!(
-            held > cfg.max_hold && held <= cfg.max_hold + 0.004 + 1e-9,
-            "{held}"
-        );
-        let held_cycles = (held / 0.004).round() as usize;
-        // Every held cycle repeated the last good command.
-        for c in &sent[2..2 + held_cycles] {
-            assert_eq!(c, &sent[1]);
-        }
-        assert_backed_off(&sent, 1 + held_cycles);
-        // After the fault was reported, the loop keeps answering at the backed-off position.
-        let r = lp.cycle().expect("a halted loop still answers");
-        assert_eq!(r.fault, Some(Fault::Retracting));
-        assert_eq!(r.command, *sent.last().unwrap());
-    }
-
-    #[test]
-    fn a_hold_shorter_than_max_hold_resumes_control() {
-        // A 20-cycle (80 ms) dropout, under the 100 ms bound: the law resumes, nothing backs off.
-        let (mut lp, sent) = logged(|n| {
-            if (3..23).contains(&n) {
-                Err(ErrorKind::Timeout)
-            } else {
-                Ok(sample(0.0))
-            }
-        });
-        for _ in 0..60 {
-            lp.cycle().expect("a short hold does not end the loop");
-        }
-        assert_eq!(lp.stats().retract_cycles, 0);
-        assert_eq!(lp.stats().sensor_faults, 20);
-        assert_eq!(sent.lock().unwrap().len(), 60);
-    }
-
-    #[test]
-    fn hold_and_retract_limits_are_validated() {
-        for bad in [
-            LoopConfig {
-                max_hold: 0.0,
-                ..LoopConfig::default()
-            },
-            LoopConfig {
-                max_hold: f64::NAN,
-                ..LoopConfig::default()
-            },
-            LoopConfig {
-                max_hold: 5.0,
-                ..LoopConfig::default()
-            },
-            LoopConfig {
-                retract_distance: -0.001,
-                ..LoopConfig::default()
-            },
-            LoopConfig {
-                retract_speed: f64::INFINITY,
-                ..LoopConfig::default()
-            },
-        ] {
-            assert!(bad.validate().is_err(), "{bad:?}");
-        }
-        assert!(LoopConfig::default().validate().is_ok());
-    }
-
-    #[test]
-    fn stop_answers_the_next_cycle_with_the_last_command_and_stop() {
-        let mut robot = MockRobot::new();
-        let mut sensor = MockSensor::new();
-        robot
-            .expect_next_cycle()
-            .returning(|| Ok(cycle_at(1, 0.001)));
-        sensor.expect_read().returning(|| Ok(sample(0.0)));
-        let sent = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
-        let log = sent.clone();
-        robot.expect_reply().returning(move |c| {
-            log.lock().unwrap().push(*c);
-            Ok(())
-        });
-        let mut lp = ControlLoop::new(robot, sensor, fixed_law(0.002), LoopConfig::default());
-        lp.cycle().unwrap();
-        lp.stop().unwrap();
-        let sent = sent.lock().unwrap();
-        assert_eq!(sent.len(), 2);
-        assert!(!sent[0].stop && sent[1].stop);
-        assert_eq!(
-            sent[1].translation, sent[0].translation,
-            "stop holds the last command"
-        );
-    }
-
-    #[test]
-    fn large_steps_are_limited_and_reported() {
-        let mut robot = MockRobot::new();
-        let mut sensor = MockSensor::new();
-        robot.expect_next_cycle().returning(|| Ok(cycle_at(1, 0.0)));
-        // A huge force error drives the fixed law hard towards x_r far away.
-        sensor.expect_read().returning(|| Ok(sample(-1.0e7)));
-        robot
-            .expect_reply()
-            .withf(|c: &Correction| c.translation.z.abs() <= 1e-4 + 1e-15)
-            .returning(|_| Ok(()));
-        let cfg = LoopConfig {
-            max_step: 1e-4,
-            ..LoopConfig::default()
-        };
-        let mut lp = ControlLoop::new(robot, sensor, fixed_law(0.0), cfg);
-        let r = lp.cycle().unwrap();
-        assert_eq!(r.fault, Some(Fault::StepLimited));
-        assert_eq!(lp.stats().limited, 1);
-    }
-
-    /// A law that records the `dt` of every step.
-    #[derive(Default)]
-    struct DtLaw(Vec<f64>);
-
-    impl ForceLaw for DtLaw {
-        fn start(&mut self, _x: f64) {}
-        fn step(&mut self, x: f64, _f: f64, dt: f64) -> Output {
-            self.0.push(dt);
-            Output {
-                x_cmd: x,
-                ..Output::default()
-            }
-        }
-        fn set_point(&self) -> f64 {
-            0.0
-        }
-        fn set_set_point(&mut self, _f_r: f64) -> Result<(), String> {
-            Ok(())
-        }
-    }
-
-    #[test]
-    fn the_laws_clock_is_the_robots_stamps_held_and_skipped_cycles_included() {
-        let mut robot = MockRobot::new();
-        // Cycles 0, 1, 2, then the robot skips 3 and 4 (a late PC), then 5, 6 (sensor timeout), 7.
-        let seqs = std::sync::Mutex::new(vec![0u64, 1, 2, 5, 6, 7].into_iter());
-        robot
-            .expect_next_cycle()
-            .returning(move || Ok(cycle_at(seqs.lock().unwrap().next().unwrap(), 0.001)));
-        robot.expect_reply().returning(|_| Ok(()));
-        let mut sensor = MockSensor::new();
-        let mut n = 0;
-        sensor.expect_read().returning(move || {
-            n += 1;
-            if n == 5 {
-                Err(ErrorKind::Timeout)
-            } else {
-                Ok(sample(1.0))
-            }
-        });
-        let mut lp = ControlLoop::new(robot, sensor, DtLaw::default(), LoopConfig::default());
-        for _ in 0..6 {
-            lp.cycle().unwrap();
-        }
-        let steps: Vec<u64> = lp
-            .law()
-            .0
-            .iter()
-            .map(|dt| (dt / 0.004).round() as u64)
-            .collect();
-        assert_eq!(steps, [1, 1, 1, 3, 2], "periods per step: {:?}", lp.law().0);
-        // Whole periods, exactly: the stamps' float error stays out of the law.
-        let whole = lp
-            .law()
-            .0
-            .iter()
-            .zip(&steps)
-            .all(|(dt, n)| *dt == *n as f64 * 0.004);
-        assert!(whole, "{:?}", lp.law().0);
-    }
-}
+mod tests;

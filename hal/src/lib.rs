@@ -313,6 +313,19 @@ impl ProcessFault {
         }
     }
 
+    /// A short name, for the operator and recordings.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::SensorLost => "sensor lost",
+            Self::ForceLimit => "force limit",
+            Self::CorrectionLimit => "correction limit",
+            Self::BadCommand => "bad command",
+            Self::ContactLost => "contact lost",
+            Self::HoldTimeout => "hold timeout",
+        }
+    }
+
     /// The fault for a wire number, if the contract defines it.
     pub fn from_code(code: i64) -> Option<Self> {
         Some(match code {

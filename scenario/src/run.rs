@@ -121,7 +121,9 @@ pub fn run(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) -> Resu
         if sim::world::lock(&world).program().is_some_and(|p| p.done()) {
             break;
         }
-        let r = lp.cycle()?;
+        let r = lp
+            .cycle()
+            .map_err(|e| anyhow!("the loop ended after {} steps: {e}", rows.len()))?;
         rows.push(Row::from_report(&r, r.set_point));
     }
     let counters = lp.law().counters();

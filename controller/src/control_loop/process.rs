@@ -7,7 +7,8 @@
 use hal::{ProcessCommand, ProcessFault, ProcessMode, ProcessPhase, ProcessState};
 use serde::{Deserialize, Serialize};
 
-use crate::law::{ContactState, Output};
+use super::guard::{Guard, Tripped};
+use crate::law::Output;
 
 /// How the process reacts to the program's commands. Forces in N, times in s.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -159,10 +160,8 @@ pub(super) struct Process {
     pub rate: f64,
     /// The program's `Ramp`, s.
     pub ramp: f64,
-    pub f_filt: f64,
-    pub had_contact: bool,
-    /// Robot time without contact after contact, s.
-    pub lost: f64,
+    /// The force filter and the contact watch.
+    pub guard: Guard,
     pub release: Release,
     /// Where a fault's back-off ends, m.
     pub retract_target: f64,
@@ -179,9 +178,7 @@ impl Process {
             target: 0.0,
             rate: cfg.default_rate,
             ramp: 0.0,
-            f_filt: 0.0,
-            had_contact: false,
-            lost: 0.0,
+            guard: Guard::default(),
             release: Release::Return,
             retract_target: 0.0,
         }
@@ -191,8 +188,8 @@ impl Process {
     pub fn state(&self) -> ProcessState {
         ProcessState {
             phase: self.phase,
-            force: if self.f_filt.is_finite() {
-                self.f_filt
+            force: if self.guard.f_filt.is_finite() {
+                self.guard.f_filt
             } else {
                 0.0
             },
@@ -211,8 +208,7 @@ impl Process {
 
     /// Filter a usable force sample.
     pub fn observe(&mut self, f: f64, dt: f64) {
-        let a = (dt / (self.cfg.force_filter + dt)).clamp(0.0, 1.0);
-        self.f_filt += a * (f - self.f_filt);
+        self.guard.observe(&self.cfg, f, dt);
     }
 
     /// Latch a fault (the first one stands), backing off from `cmd`, within `floor`. `why` is only
@@ -232,6 +228,15 @@ impl Process {
         self.fault = fault;
         self.reason = Some(why());
         self.retract_target = (cmd - lift).max(floor);
+    }
+
+    /// While a latched fault backs off and force `f` shows the tool still touching (above the entry
+    /// force), its target moves on to `lift` beyond the command `cmd`, within `floor`: the tool
+    /// backs off until it is free, then `lift` further.
+    pub fn back_off_further(&mut self, f: f64, cmd: f64, lift: f64, floor: f64) {
+        if self.phase == ProcessPhase::Fault && f > self.cfg.entry_force {
+            self.retract_target = self.retract_target.min((cmd - lift).max(floor));
+        }
     }
 
     /// The rate of a ramp from `from` to `to` over the program's `Ramp`: never faster than
@@ -272,8 +277,7 @@ impl Process {
                         c.force
                     };
                     self.rate = self.ramp_rate(self.sp, c.force);
-                    self.had_contact = false;
-                    self.lost = 0.0;
+                    self.guard.reset();
                     Ok(true)
                 }
                 _ => {
@@ -293,7 +297,7 @@ impl Process {
                     ProcessPhase::Approach | ProcessPhase::Ramp | ProcessPhase::Pressing => {
                         self.phase = ProcessPhase::Release;
                         self.ramp = c.ramp.max(0.0);
-                        self.release = if self.had_contact {
+                        self.release = if self.guard.had_contact {
                             let floor = self.cfg.entry_force.min(self.sp);
                             self.rate = self.ramp_rate(self.sp, floor);
                             Release::RampDown
@@ -336,42 +340,10 @@ impl Process {
     }
 
     /// After a law step: contact, ramp end, `PRESSING`, contact loss. `Err` is a fault to latch.
-    pub fn after_step(
-        &mut self,
-        out: &Output,
-        f: f64,
-        dt: f64,
-    ) -> Result<(), (ProcessFault, String)> {
-        if out.events.force_limit || f > self.cfg.max_force {
-            return Err((
-                ProcessFault::ForceLimit,
-                format!("force {f:.1} N above the limit {:.1} N", self.cfg.max_force),
-            ));
-        }
-        if out.events.deviation_limit {
-            return Err((
-                ProcessFault::CorrectionLimit,
-                "the law's correction reached its deviation limit".into(),
-            ));
-        }
-        let in_contact = match out.state {
-            Some(s) => s == ContactState::Contact,
-            None => self.f_filt >= self.cfg.entry_force.min(self.target),
-        };
-        if in_contact {
-            self.lost = 0.0;
-        } else if self.had_contact {
-            self.lost += dt;
-            if self.lost > self.cfg.contact_loss_time {
-                return Err((
-                    ProcessFault::ContactLost,
-                    format!("contact lost for {:.0} ms while pressing", self.lost * 1e3),
-                ));
-            }
-        }
+    pub fn after_step(&mut self, out: &Output, f: f64, dt: f64) -> Result<(), Tripped> {
+        let in_contact = self.guard.check(&self.cfg, out, f, self.target, dt)?;
         match self.phase {
             ProcessPhase::Approach if in_contact => {
-                self.had_contact = true;
                 self.phase = ProcessPhase::Ramp;
                 if self.ramp > 0.0 {
                     self.sp = f.clamp(self.sp.min(self.target), self.target);
@@ -380,7 +352,8 @@ impl Process {
             }
             ProcessPhase::Ramp
                 if self.sp == self.target
-                    && (self.f_filt - self.target).abs() <= self.cfg.tolerance * self.target =>
+                    && (self.guard.f_filt - self.target).abs()
+                        <= self.cfg.tolerance * self.target =>
             {
                 self.phase = ProcessPhase::Pressing;
             }
@@ -411,6 +384,7 @@ impl Process {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::law::ContactState;
 
     fn press(f: f64, ramp: f64) -> ProcessCommand {
         ProcessCommand {
@@ -460,7 +434,7 @@ mod tests {
             t += 0.004;
         }
         assert!((t - 0.5).abs() < 0.005, "{t}");
-        p.f_filt = 19.5;
+        p.guard.f_filt = 19.5;
         p.after_step(&contact, 19.5, 0.004).unwrap();
         assert_eq!(p.phase, ProcessPhase::Pressing);
     }
@@ -483,7 +457,7 @@ mod tests {
     fn release_ramps_down_lifts_returns_then_off() {
         let mut p = Process::new(ProcessConfig::default());
         p.command(&press(20.0, 0.0)).unwrap();
-        p.had_contact = true;
+        p.guard.had_contact = true;
         p.phase = ProcessPhase::Pressing;
         p.sp = 20.0;
         let rel = ProcessCommand {
@@ -534,10 +508,37 @@ mod tests {
     }
 
     #[test]
+    fn a_fault_backs_off_until_the_tool_is_free() {
+        let mut p = Process::new(ProcessConfig::default());
+        p.command(&press(20.0, 0.0)).unwrap();
+        p.latch(
+            ProcessFault::ForceLimit,
+            || "x".into(),
+            0.004,
+            0.002,
+            -0.005,
+        );
+        assert_eq!(p.act(), Act::MoveTo { target: 0.002 });
+        p.back_off_further(70.0, 0.003, 0.002, -0.005);
+        assert_eq!(p.act(), Act::MoveTo { target: 0.001 }, "still touching");
+        p.back_off_further(1.0, 0.0015, 0.002, -0.005);
+        assert_eq!(p.act(), Act::MoveTo { target: 0.001 }, "free: no further");
+        p.back_off_further(70.0, -0.004, 0.002, -0.005);
+        assert_eq!(
+            p.act(),
+            Act::MoveTo { target: -0.005 },
+            "never beyond the floor"
+        );
+        let mut q = Process::new(ProcessConfig::default());
+        q.back_off_further(70.0, 0.0, 0.002, -0.005);
+        assert_eq!(q.retract_target, 0.0, "only while a fault backs off");
+    }
+
+    #[test]
     fn contact_lost_too_long_is_a_fault() {
         let mut p = Process::new(ProcessConfig::default());
         p.command(&press(20.0, 0.0)).unwrap();
-        p.had_contact = true;
+        p.guard.had_contact = true;
         p.phase = ProcessPhase::Pressing;
         let lost = Output {
             state: Some(ContactState::Reacquire),

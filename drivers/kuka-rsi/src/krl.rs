@@ -130,6 +130,10 @@ pub struct ProcessSetup {
     pub wait_timeout: f64,
     /// The `$TIMER` used for those waits.
     pub timer: u8,
+    /// The interrupt (its number is its priority) that catches a FAULT mid-path.
+    pub interrupt: u8,
+    /// The `$FLAG` the fault's interrupt routine sets for the main program.
+    pub flag: u16,
 }
 
 impl ProcessSetup {
@@ -156,6 +160,8 @@ impl ProcessSetup {
             ramp: 0.5,
             wait_timeout: 10.0,
             timer: 1,
+            interrupt: 21,
+            flag: 1,
         }
     }
 
@@ -189,6 +195,19 @@ impl ProcessSetup {
         }
         if !(1..=32).contains(&self.timer) {
             return Err(format!("$TIMER index must be 1..=32, got {}", self.timer));
+        }
+        // KSS reserves priorities 3 and 40..=80 for the system.
+        if !(1..=128).contains(&self.interrupt)
+            || self.interrupt == 3
+            || (40..=80).contains(&self.interrupt)
+        {
+            return Err(format!(
+                "interrupt must be 1..=128 but not 3 or 40..=80 (system), got {}",
+                self.interrupt
+            ));
+        }
+        if !(1..=1024).contains(&self.flag) {
+            return Err(format!("$FLAG index must be 1..=1024, got {}", self.flag));
         }
         Ok(())
     }
@@ -453,6 +472,8 @@ impl RobotSetup {
         let fa = format!("$SEN_PINT[{}]", io.fault_pint);
         let tm = format!("$TIMER[{}]", p.timer);
         let tms = format!("$TIMER_STOP[{}]", p.timer);
+        let fl = format!("$FLAG[{}]", p.flag);
+        let irq = p.interrupt;
         let wait_ms = (p.wait_timeout * 1000.0).round() as u64;
         let first = p.segments[0];
         let mut k = String::new();
@@ -480,6 +501,10 @@ impl RobotSetup {
             k,
             "  ; Waits use {tm} and end after {:.1} s; messages use MsgNotify (KSS 8.3 MsgLib; unverified).",
             p.wait_timeout
+        );
+        let _ = writeln!(
+            k,
+            "  ; A FAULT mid-path is caught by INTERRUPT {irq} and flagged in {fl} (change both if the cell uses them)."
         );
         let _ = writeln!(
             k,
@@ -550,25 +575,36 @@ impl RobotSetup {
         let _ = writeln!(k);
         let _ = writeln!(
             k,
-            "  ; 4. the path at feed speed, each segment with its force and number"
+            "  ; 4. the path at feed speed (FC_PATH); a FAULT (State 9) on the way interrupts it:"
         );
-        let _ = writeln!(k, "  $VEL.CP = {}", krl_real(p.feed));
-        for (i, s) in p.segments.iter().enumerate() {
-            let seg = i + 1;
-            let _ = writeln!(
-                k,
-                "  ; segment {seg}: {:.2} N over {:.1} mm",
-                s.force,
-                crate::wire::m_to_mm(s.length)
-            );
-            let _ = writeln!(
-                k,
-                "  TRIGGER WHEN DISTANCE=0 DELAY=0 DO {fo} = {}",
-                krl_real(s.force)
-            );
-            let _ = writeln!(k, "  TRIGGER WHEN DISTANCE=0 DELAY=0 DO {sg} = {seg}");
-            let _ = writeln!(k, "  LIN_REL {{X {:.1}}}", crate::wire::m_to_mm(s.length));
-        }
+        let _ = writeln!(
+            k,
+            "  ;    FC_FAULT brakes, sets {fl} and RESUMEs here. forcecell has already backed the tool"
+        );
+        let _ = writeln!(
+            k,
+            "  ;    off along -z; the program lifts clear before OFF brings the correction back to zero."
+        );
+        let _ = writeln!(k, "  {fl} = FALSE");
+        let _ = writeln!(k, "  INTERRUPT DECL {irq} WHEN {st} == 9 DO FC_FAULT()");
+        let _ = writeln!(k, "  INTERRUPT ON {irq}");
+        let _ = writeln!(k, "  FC_PATH()");
+        let _ = writeln!(k, "  INTERRUPT OFF {irq}");
+        let _ = writeln!(k, "  IF {fl} THEN");
+        let _ = writeln!(k, "    LIN_REL {{Z 50.0}} ; lift clear (base Z) first");
+        let _ = writeln!(k, "    {md} = 0");
+        let _ = writeln!(k, "    {tm} = 0");
+        let _ = writeln!(k, "    {tms} = FALSE");
+        let _ = writeln!(k, "    WAIT FOR ({st} == 0) OR ({tm} > {wait_ms})");
+        let _ = writeln!(k, "    {tms} = TRUE");
+        let _ = writeln!(k, "    ret = RSI_OFF()");
+        let _ = writeln!(k, "    ret = RSI_DELETE(CONTID)");
+        let _ = writeln!(
+            k,
+            "    MsgNotify(\"forcecell: FAULT mid-path (code in {fa}); pass aborted\")"
+        );
+        let _ = writeln!(k, "    RETURN");
+        let _ = writeln!(k, "  ENDIF");
         let _ = writeln!(k);
         let _ = writeln!(k, "  ; 5. RELEASE; wait for OFF (State 0)");
         let _ = writeln!(k, "  {md} = 2");
@@ -589,6 +625,42 @@ impl RobotSetup {
         let _ = writeln!(k, "  ret = RSI_OFF()");
         let _ = writeln!(k, "  ret = RSI_DELETE(CONTID)");
         let _ = writeln!(k, "  LIN_REL {{Z 50.0}} ; lift clear (base Z)");
+        let _ = writeln!(k, "END");
+        let _ = writeln!(k);
+        let _ = writeln!(k, "DEF FC_PATH()");
+        let _ = writeln!(k, "  ; each segment with its force and number");
+        let _ = writeln!(k, "  $VEL.CP = {}", krl_real(p.feed));
+        for (i, s) in p.segments.iter().enumerate() {
+            let seg = i + 1;
+            let _ = writeln!(
+                k,
+                "  ; segment {seg}: {:.2} N over {:.1} mm",
+                s.force,
+                crate::wire::m_to_mm(s.length)
+            );
+            let _ = writeln!(
+                k,
+                "  TRIGGER WHEN DISTANCE=0 DELAY=0 DO {fo} = {}",
+                krl_real(s.force)
+            );
+            let _ = writeln!(k, "  TRIGGER WHEN DISTANCE=0 DELAY=0 DO {sg} = {seg}");
+            let _ = writeln!(k, "  LIN_REL {{X {:.1}}}", crate::wire::m_to_mm(s.length));
+        }
+        let _ = writeln!(
+            k,
+            "  WAIT SEC 0 ; advance-run stop: a RESUME must find the advance run in this level"
+        );
+        let _ = writeln!(k, "END");
+        let _ = writeln!(k);
+        let _ = writeln!(k, "DEF FC_FAULT()");
+        let _ = writeln!(
+            k,
+            "  ; forcecell latched a FAULT (code in {fa}) and backs the tool off: stop the path"
+        );
+        let _ = writeln!(k, "  INTERRUPT OFF {irq}");
+        let _ = writeln!(k, "  BRAKE");
+        let _ = writeln!(k, "  {fl} = TRUE");
+        let _ = writeln!(k, "  RESUME");
         let _ = writeln!(k, "END");
         k
     }

@@ -1,0 +1,188 @@
+//! The loop's guard over force control: the force limit, the law's correction limit and a contact
+//! lost too long are faults (codes 2, 3 and 5 of the process contract). One definition for both ways
+//! the loop runs: a process the robot program commands latches them (and the program re-arms with
+//! OFF); a loop without process channels ends on them, backed off, with `Stop`.
+
+use hal::ProcessFault;
+
+use super::process::ProcessConfig;
+use crate::law::{ContactState, Output};
+
+/// A fault the guard found: its contract code and why, for the operator.
+pub type Tripped = (ProcessFault, String);
+
+/// The guard's state: the filtered force, and whether and how long contact was lost.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(super) struct Guard {
+    /// The measured force through a first-order filter of `force_filter`, N (also `FcState.F`).
+    pub f_filt: f64,
+    /// Contact was made since the last reset (a loss only counts after it).
+    pub had_contact: bool,
+    /// Robot time without contact after contact, s.
+    pub lost: f64,
+}
+
+impl Guard {
+    /// Forget contact (a new approach starts); the force filter runs on.
+    pub fn reset(&mut self) {
+        self.had_contact = false;
+        self.lost = 0.0;
+    }
+
+    /// Filter a usable force sample taken `dt` after the last.
+    pub fn observe(&mut self, cfg: &ProcessConfig, f: f64, dt: f64) {
+        let a = (dt / (cfg.force_filter + dt)).clamp(0.0, 1.0);
+        self.f_filt += a * (f - self.f_filt);
+    }
+
+    /// Check a law step's output `out` taken with force `f` against set-point `f_r`, `dt` after the
+    /// last step. `Ok(true)` while in contact. Contact is the law's own contact state where it has
+    /// one, else the filtered force at or above `min(entry_force, f_r)`.
+    pub fn check(
+        &mut self,
+        cfg: &ProcessConfig,
+        out: &Output,
+        f: f64,
+        f_r: f64,
+        dt: f64,
+    ) -> Result<bool, Tripped> {
+        if out.events.force_limit || f > cfg.max_force {
+            return Err((
+                ProcessFault::ForceLimit,
+                format!("force {f:.1} N above the limit {:.1} N", cfg.max_force),
+            ));
+        }
+        if out.events.deviation_limit {
+            return Err((
+                ProcessFault::CorrectionLimit,
+                "the law's correction reached its deviation limit".into(),
+            ));
+        }
+        let in_contact = match out.state {
+            Some(s) => s == ContactState::Contact,
+            None => self.f_filt >= cfg.entry_force.min(f_r),
+        };
+        if in_contact {
+            self.had_contact = true;
+            self.lost = 0.0;
+        } else if self.had_contact {
+            self.lost += dt;
+            if self.lost > cfg.contact_loss_time {
+                return Err((
+                    ProcessFault::ContactLost,
+                    format!("contact lost for {:.0} ms while pressing", self.lost * 1e3),
+                ));
+            }
+        }
+        Ok(in_contact)
+    }
+}
+
+/// The fault of a command the loop had to clip to its envelope (`max_offset`).
+pub(super) fn envelope(max_offset: f64) -> Tripped {
+    (
+        ProcessFault::CorrectionLimit,
+        format!(
+            "correction reached its envelope of {:.1} mm",
+            max_offset * 1e3
+        ),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::law::Events;
+
+    fn out(state: Option<ContactState>) -> Output {
+        Output {
+            state,
+            ..Output::default()
+        }
+    }
+
+    #[test]
+    fn the_force_limit_and_the_laws_deviation_limit_trip() {
+        let cfg = ProcessConfig::default();
+        let mut g = Guard::default();
+        let contact = out(Some(ContactState::Contact));
+        assert_eq!(g.check(&cfg, &contact, 59.9, 20.0, 0.004), Ok(true));
+        let (code, why) = g.check(&cfg, &contact, 60.1, 20.0, 0.004).unwrap_err();
+        assert_eq!(code, ProcessFault::ForceLimit);
+        assert!(why.contains("60.1"), "{why}");
+        let mut limited = contact;
+        limited.events = Events {
+            force_limit: true,
+            ..Events::default()
+        };
+        assert_eq!(
+            g.check(&cfg, &limited, 10.0, 20.0, 0.004).unwrap_err().0,
+            ProcessFault::ForceLimit,
+            "the law's own force-limit event"
+        );
+        limited.events = Events {
+            deviation_limit: true,
+            ..Events::default()
+        };
+        assert_eq!(
+            g.check(&cfg, &limited, 10.0, 20.0, 0.004).unwrap_err().0,
+            ProcessFault::CorrectionLimit
+        );
+    }
+
+    #[test]
+    fn a_loss_counts_only_after_contact_and_only_while_it_lasts() {
+        let cfg = ProcessConfig::default();
+        let mut g = Guard::default();
+        let searching = out(Some(ContactState::Approach));
+        // An approach that never touched is not a lost contact, however long it lasts.
+        for _ in 0..1000 {
+            assert_eq!(g.check(&cfg, &searching, 0.0, 20.0, 0.004), Ok(false));
+        }
+        g.check(&cfg, &out(Some(ContactState::Contact)), 20.0, 20.0, 0.004)
+            .unwrap();
+        let lost = out(Some(ContactState::Reacquire));
+        // 0.4 s lost, then contact again: the count starts over.
+        for _ in 0..100 {
+            g.check(&cfg, &lost, 0.0, 20.0, 0.004).unwrap();
+        }
+        g.check(&cfg, &out(Some(ContactState::Contact)), 20.0, 20.0, 0.004)
+            .unwrap();
+        assert_eq!(g.lost, 0.0);
+        let mut r = Ok(false);
+        let mut n = 0;
+        while r.is_ok() {
+            r = g.check(&cfg, &lost, 0.0, 20.0, 0.004);
+            n += 1;
+        }
+        assert_eq!(r.unwrap_err().0, ProcessFault::ContactLost);
+        // The first count of 4 ms cycles beyond contact_loss_time = 0.5 s (the sum's float error
+        // decides between the 125th and the 126th).
+        assert!((125..=126).contains(&n), "{n}");
+        assert!(g.lost > cfg.contact_loss_time && g.lost - 0.004 <= cfg.contact_loss_time);
+        g.reset();
+        assert_eq!(g.check(&cfg, &lost, 0.0, 20.0, 0.004), Ok(false));
+    }
+
+    #[test]
+    fn without_a_contact_state_the_filtered_force_decides() {
+        let cfg = ProcessConfig::default();
+        let mut g = Guard::default();
+        let none = out(None);
+        assert_eq!(g.check(&cfg, &none, 0.0, 20.0, 0.004), Ok(false));
+        for _ in 0..100 {
+            g.observe(&cfg, 5.0, 0.004);
+        }
+        assert!((g.f_filt - 5.0).abs() < 1e-6);
+        assert_eq!(
+            g.check(&cfg, &none, 5.0, 20.0, 0.004),
+            Ok(true),
+            "5 N ≥ the 2 N entry force"
+        );
+        assert_eq!(
+            g.check(&cfg, &none, 5.0, 1.0, 0.004),
+            Ok(true),
+            "a set-point below the entry force lowers the bar"
+        );
+    }
+}

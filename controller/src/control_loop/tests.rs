@@ -1,0 +1,609 @@
+//! The loop's unit tests, against mocked devices.
+use super::*;
+use crate::law::ImpedanceLaw;
+use hal::mock::{MockRobot, MockSensor};
+use hal::{Pose, Sample, Vector3, Wrench};
+use mockall::Sequence;
+use std::time::Duration;
+
+fn cycle_at(seq: u64, x: f64) -> Cycle {
+    Cycle {
+        seq,
+        t: seq as f64 * 0.004,
+        period: 0.004,
+        actual: Pose::from_position(Vector3::new(0.0, 0.0, x)),
+        programmed: Pose::identity(),
+        late_replies: 0,
+        new_session: false,
+        process: None,
+    }
+}
+
+fn sample(fz: f64) -> Sample {
+    Sample {
+        wrench: Wrench::from_array([0.0, 0.0, fz, 0.0, 0.0, 0.0]),
+        seq: 1,
+        age: Duration::ZERO,
+    }
+}
+
+fn fixed_law(x_r: f64) -> ImpedanceLaw {
+    ImpedanceLaw::new(
+        crate::ImpedanceParams::PAPER,
+        crate::Reference::Fixed { x_r },
+    )
+    .unwrap()
+}
+
+#[test]
+fn calls_are_cycle_then_wrench_then_one_reply() {
+    let mut seq = Sequence::new();
+    let mut robot = MockRobot::new();
+    let mut sensor = MockSensor::new();
+    for k in 0..3 {
+        robot
+            .expect_next_cycle()
+            .times(1)
+            .in_sequence(&mut seq)
+            .returning(move || Ok(cycle_at(k, 0.001)));
+        sensor
+            .expect_read()
+            .times(1)
+            .in_sequence(&mut seq)
+            .returning(|| Ok(sample(0.0)));
+        robot
+            .expect_reply()
+            .times(1)
+            .in_sequence(&mut seq)
+            .returning(|_| Ok(()));
+    }
+    let mut lp = ControlLoop::new(robot, sensor, fixed_law(0.002), LoopConfig::default());
+    for _ in 0..3 {
+        lp.cycle().unwrap();
+    }
+    assert_eq!(lp.stats().cycles, 3);
+}
+
+#[test]
+fn sensor_timeout_holds_without_a_step_and_counts() {
+    let mut robot = MockRobot::new();
+    let mut sensor = MockSensor::new();
+    robot
+        .expect_next_cycle()
+        .returning(|| Ok(cycle_at(1, 0.001)));
+    let mut n = 0;
+    sensor.expect_read().returning(move || {
+        n += 1;
+        if n == 1 {
+            Ok(sample(0.0))
+        } else {
+            Err(ErrorKind::Timeout)
+        }
+    });
+    let replies = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let r2 = replies.clone();
+    robot.expect_reply().returning(move |c| {
+        r2.lock().unwrap().push(*c);
+        Ok(())
+    });
+    let mut lp = ControlLoop::new(robot, sensor, ImpedanceLaw::paper(), LoopConfig::default());
+    let first = lp.cycle().unwrap();
+    assert_eq!(first.fault, None);
+    let law_before = lp.law().clone();
+    let second = lp.cycle().unwrap();
+    assert_eq!(second.fault, Some(Fault::Sensor(ErrorKind::Timeout)));
+    assert_eq!(lp.stats().sensor_faults, 1);
+    assert_eq!(
+        lp.law(),
+        &law_before,
+        "the law must not step on a held cycle"
+    );
+    let r = replies.lock().unwrap();
+    assert_eq!(r.len(), 2);
+    assert_eq!(r[0], r[1], "a held cycle repeats the last command");
+}
+
+#[test]
+fn lost_robot_link_ends_the_loop_with_the_error() {
+    let mut robot = MockRobot::new();
+    let sensor = MockSensor::new();
+    robot
+        .expect_next_cycle()
+        .returning(|| Err(ErrorKind::LinkLost));
+    robot.expect_reply().never();
+    let mut lp = ControlLoop::new(robot, sensor, fixed_law(0.002), LoopConfig::default());
+    match lp.cycle() {
+        Err(LoopError::Robot(ErrorKind::LinkLost)) => {}
+        other => panic!("expected the robot's LinkLost, got {other:?}"),
+    }
+    assert!(
+        format!("{}", LoopError::<_, ErrorKind>::Robot(ErrorKind::LinkLost)).contains("link lost")
+    );
+}
+
+#[test]
+fn transient_robot_errors_are_counted_and_skipped() {
+    let mut robot = MockRobot::new();
+    let mut sensor = MockSensor::new();
+    let mut n = 0;
+    robot.expect_next_cycle().returning(move || {
+        n += 1;
+        if n == 1 {
+            Err(ErrorKind::Malformed)
+        } else {
+            Ok(cycle_at(2, 0.0))
+        }
+    });
+    sensor.expect_read().returning(|| Ok(sample(0.0)));
+    robot.expect_reply().times(1).returning(|_| Ok(()));
+    let mut lp = ControlLoop::new(robot, sensor, fixed_law(0.0), LoopConfig::default());
+    lp.cycle().unwrap();
+    assert_eq!(lp.stats().robot_glitches, 1);
+}
+
+#[test]
+fn nan_wrench_never_reaches_the_command() {
+    let mut robot = MockRobot::new();
+    let mut sensor = MockSensor::new();
+    robot
+        .expect_next_cycle()
+        .returning(|| Ok(cycle_at(1, 0.001)));
+    sensor.expect_read().returning(|| Ok(sample(f64::NAN)));
+    robot
+        .expect_reply()
+        .withf(|c: &Correction| c.is_finite() && c.translation.z == 0.001)
+        .times(2)
+        .returning(|_| Ok(()));
+    let mut lp = ControlLoop::new(robot, sensor, fixed_law(0.002), LoopConfig::default());
+    for _ in 0..2 {
+        let r = lp.cycle().unwrap();
+        assert_eq!(r.fault, Some(Fault::NonFiniteSample));
+        assert!(r.command.is_finite());
+    }
+    assert_eq!(lp.stats().nonfinite_inputs, 2);
+}
+
+/// Runs cycles until the loop ends; returns the corrections sent and the error it ended with.
+fn run_until_end(
+    lp: &mut MockLoop,
+    sent: &std::sync::Mutex<Vec<Correction>>,
+) -> (Vec<Correction>, LoopError<ErrorKind, ErrorKind>) {
+    for _ in 0..10_000 {
+        if let Err(e) = lp.cycle() {
+            return (sent.lock().unwrap().clone(), e);
+        }
+    }
+    panic!("the loop never ended")
+}
+
+type MockLoop = ControlLoop<MockRobot, MockSensor, ImpedanceLaw>;
+type SentLog = std::sync::Arc<std::sync::Mutex<Vec<Correction>>>;
+
+/// A robot at a fixed pose whose replies are logged, and a sensor that answers `read` in turn.
+fn logged(
+    mut read: impl FnMut(u64) -> Result<Sample, ErrorKind> + Send + 'static,
+) -> (MockLoop, SentLog) {
+    let mut robot = MockRobot::new();
+    let mut sensor = MockSensor::new();
+    let mut k = 0;
+    robot.expect_next_cycle().returning(move || {
+        k += 1;
+        Ok(cycle_at(k, 0.001))
+    });
+    let mut n = 0;
+    sensor.expect_read().returning(move || {
+        n += 1;
+        read(n)
+    });
+    let sent = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let log = sent.clone();
+    robot.expect_reply().returning(move |c| {
+        log.lock().unwrap().push(*c);
+        Ok(())
+    });
+    let lp = ControlLoop::new(robot, sensor, fixed_law(0.001), LoopConfig::default());
+    (lp, sent)
+}
+
+/// The commands after `from` only ever back off (−z), by no more than the retract speed allows per
+/// cycle, and end `retract_distance` below the command at `from`.
+fn assert_backed_off(sent: &[Correction], from: usize) {
+    let cfg = LoopConfig::default();
+    let per_cycle = cfg.retract_speed * 0.004 + 1e-12;
+    let z: Vec<f64> = sent.iter().map(|c| c.translation.z).collect();
+    for w in z[from..].windows(2) {
+        assert!(w[1] <= w[0] && w[0] - w[1] <= per_cycle, "{w:?}");
+    }
+    let backed = z[from] - z[z.len() - 1];
+    assert!(
+        (backed - cfg.retract_distance).abs() < 1e-12,
+        "backed off {backed} m"
+    );
+}
+
+#[test]
+fn fatal_sensor_error_backs_off_then_ends() {
+    let (mut lp, sent) = logged(|n| {
+        if n < 3 {
+            Ok(sample(0.0))
+        } else {
+            Err(ErrorKind::BusOff)
+        }
+    });
+    let (sent, end) = run_until_end(&mut lp, &sent);
+    assert!(
+        matches!(end, LoopError::Sensor(ErrorKind::BusOff)),
+        "{end:?}"
+    );
+    assert!(end.to_string().contains("backed off"), "{end}");
+    // The failing cycle (the third) is answered with the last command; then the back-off.
+    assert_eq!(sent[2], sent[1]);
+    assert_backed_off(&sent, 2);
+    assert_eq!(lp.stats().retract_cycles as usize, sent.len() - 3);
+}
+
+#[test]
+fn a_hold_is_bounded_in_time_then_the_tool_backs_off() {
+    // Two good samples, then the sensor only times out: the loop may hold 0.1 s (25 cycles of 4 ms).
+    let (mut lp, sent) = logged(|n| {
+        if n <= 2 {
+            Ok(sample(0.0))
+        } else {
+            Err(ErrorKind::Timeout)
+        }
+    });
+    let (sent, end) = run_until_end(&mut lp, &sent);
+    let LoopError::HoldTimeout { held, last } = end else {
+        panic!("expected a hold timeout, got {end:?}")
+    };
+    assert_eq!(last, Fault::Sensor(ErrorKind::Timeout));
+    let cfg = LoopConfig::default();
+    assert!(
+        held > cfg.max_hold && held <= cfg.max_hold + 0.004 + 1e-9,
+        "{held}"
+    );
+    let held_cycles = (held / 0.004).round() as usize;
+    // Every held cycle repeated the last good command.
+    for c in &sent[2..2 + held_cycles] {
+        assert_eq!(c, &sent[1]);
+    }
+    assert_backed_off(&sent, 1 + held_cycles);
+    // After the fault was reported, the loop keeps answering at the backed-off position.
+    let r = lp.cycle().expect("a halted loop still answers");
+    assert_eq!(r.fault, Some(Fault::Retracting));
+    assert_eq!(r.command, *sent.last().unwrap());
+}
+
+#[test]
+fn a_hold_shorter_than_max_hold_resumes_control() {
+    // A 20-cycle (80 ms) dropout, under the 100 ms bound: the law resumes, nothing backs off.
+    let (mut lp, sent) = logged(|n| {
+        if (3..23).contains(&n) {
+            Err(ErrorKind::Timeout)
+        } else {
+            Ok(sample(0.0))
+        }
+    });
+    for _ in 0..60 {
+        lp.cycle().expect("a short hold does not end the loop");
+    }
+    assert_eq!(lp.stats().retract_cycles, 0);
+    assert_eq!(lp.stats().sensor_faults, 20);
+    assert_eq!(sent.lock().unwrap().len(), 60);
+}
+
+/// The replies from `from` on report FAULT with `code` (on links with process channels the robot
+/// program sees it in `FcState`).
+fn assert_reported(sent: &[Correction], from: usize, code: ProcessFault) {
+    for c in &sent[from..] {
+        assert_eq!(c.process.phase, hal::ProcessPhase::Fault, "{c:?}");
+        assert_eq!(c.process.fault, code);
+    }
+    assert!(
+        sent[..from]
+            .iter()
+            .all(|c| c.process.phase == hal::ProcessPhase::Off),
+        "no fault reported before it happened"
+    );
+}
+
+#[test]
+fn without_process_channels_the_force_limit_retracts_and_ends_with_its_code() {
+    // Contact at 5 N, then the force jumps to 70 N (above the 60 N limit) on the sixth sample
+    // and stays there for the first 40 cycles of the back-off: the tool still touches, so it
+    // backs off until free (the 46th sample reads 0 N), then `retract_distance` further.
+    let (mut lp, sent) = logged(|n| {
+        Ok(sample(match n {
+            ..6 => 5.0,
+            6..46 => 70.0,
+            _ => 0.0,
+        }))
+    });
+    let (sent, end) = run_until_end(&mut lp, &sent);
+    let LoopError::Guard { code, reason } = &end else {
+        panic!("expected the guard to end the loop, got {end:?}")
+    };
+    assert_eq!(*code, ProcessFault::ForceLimit);
+    assert_eq!(end.code(), Some(ProcessFault::ForceLimit));
+    assert!(
+        reason.contains("70.0") && reason.contains("60.0"),
+        "{reason}"
+    );
+    assert!(end.to_string().contains("fault 2 (force limit)"), "{end}");
+    // The sixth cycle commands as the law asked; from then on the tool only backs off, the
+    // last 2 mm after it came free.
+    let z: Vec<f64> = sent.iter().map(|c| c.translation.z).collect();
+    for w in z[5..].windows(2) {
+        assert!(w[1] < w[0], "only backing off: {w:?}");
+    }
+    let free = z[44];
+    let backed = free - z[z.len() - 1];
+    assert!(
+        backed <= LoopConfig::default().retract_distance + 1e-12 && backed > 0.0019,
+        "{backed} m after the last touching sample"
+    );
+    assert!(
+        z[5] - z[z.len() - 1] > 0.0035,
+        "more than 2 mm in all: {z:?}"
+    );
+    assert_reported(&sent, 6, ProcessFault::ForceLimit);
+    assert_eq!(lp.process_fault_reason(), Some(reason.as_str()));
+    // The `Stop` that ends the session carries the fault too.
+    lp.stop().unwrap();
+    assert_eq!(lp.process_state().fault, ProcessFault::ForceLimit);
+}
+
+#[test]
+fn without_process_channels_a_contact_lost_too_long_retracts_and_ends() {
+    // Contact at 5 N for 20 cycles, then nothing: lost after 0.5 s of 4 ms cycles.
+    let (mut lp, sent) = logged(|n| Ok(sample(if n <= 20 { 5.0 } else { 0.0 })));
+    let (sent, end) = run_until_end(&mut lp, &sent);
+    assert_eq!(end.code(), Some(ProcessFault::ContactLost), "{end}");
+    let faulted = sent
+        .iter()
+        .position(|c| c.process.phase == hal::ProcessPhase::Fault)
+        .expect("a fault reported");
+    // The filtered force falls below the 2 N entry force a few cycles after the last contact;
+    // more than 0.5 s (125 cycles) later the loop faults.
+    assert!((20 + 125..20 + 125 + 10).contains(&faulted), "{faulted}");
+    assert_backed_off(&sent, faulted - 1);
+    assert_reported(&sent, faulted, ProcessFault::ContactLost);
+}
+
+#[test]
+fn a_short_loss_of_contact_does_not_end_the_loop() {
+    // 0.3 s without contact, under the 0.5 s bound, then contact again: control goes on.
+    let (mut lp, sent) = logged(|n| Ok(sample(if (20..95).contains(&n) { 0.0 } else { 5.0 })));
+    for _ in 0..400 {
+        lp.cycle().expect("a short loss does not end the loop");
+    }
+    assert_eq!(lp.stats().retract_cycles, 0);
+    assert!(
+        sent.lock()
+            .unwrap()
+            .iter()
+            .all(|c| c.process.phase == hal::ProcessPhase::Off)
+    );
+}
+
+/// A law that commands a fixed position.
+struct At(f64);
+
+impl ForceLaw for At {
+    fn start(&mut self, _x: f64) {}
+    fn step(&mut self, _x: f64, _f: f64, _dt: f64) -> Output {
+        Output {
+            x_cmd: self.0,
+            ..Output::default()
+        }
+    }
+    fn set_point(&self) -> f64 {
+        5.0
+    }
+    fn set_set_point(&mut self, _f_r: f64) -> Result<(), String> {
+        Ok(())
+    }
+}
+
+#[test]
+fn without_process_channels_the_correction_envelope_ends_the_loop() {
+    let mut robot = MockRobot::new();
+    let mut sensor = MockSensor::new();
+    let mut k = 0;
+    robot.expect_next_cycle().returning(move || {
+        k += 1;
+        Ok(cycle_at(k, 0.0))
+    });
+    sensor.expect_read().returning(|| Ok(sample(0.0)));
+    let sent: SentLog = Default::default();
+    let log = sent.clone();
+    robot.expect_reply().returning(move |c| {
+        log.lock().unwrap().push(*c);
+        Ok(())
+    });
+    // The law wants 8 mm; the envelope is 5 mm and a step 1 mm: five steps reach 5 mm, the sixth
+    // is clipped to the envelope.
+    let mut lp = ControlLoop::new(robot, sensor, At(0.008), LoopConfig::default());
+    let (sent, end) = loop {
+        if let Err(e) = lp.cycle() {
+            break (sent.lock().unwrap().clone(), e);
+        }
+    };
+    assert_eq!(end.code(), Some(ProcessFault::CorrectionLimit), "{end}");
+    let z: Vec<f64> = sent.iter().map(|c| c.translation.z).collect();
+    assert!(z.iter().all(|z| *z <= 0.005 + 1e-15), "{z:?}");
+    let at_limit = z.iter().position(|z| *z >= 0.005 - 1e-15).unwrap();
+    assert_eq!(at_limit, 4);
+    assert_eq!(z[5], z[4], "clipped");
+    assert_backed_off(&sent, 5);
+    assert_reported(&sent, 6, ProcessFault::CorrectionLimit);
+}
+
+#[test]
+fn a_hold_timeout_and_a_failed_sensor_report_their_codes() {
+    let (mut lp, sent) = logged(|n| {
+        if n <= 2 {
+            Ok(sample(0.0))
+        } else {
+            Err(ErrorKind::Timeout)
+        }
+    });
+    let (sent, end) = run_until_end(&mut lp, &sent);
+    assert_eq!(
+        end.code(),
+        Some(ProcessFault::SensorLost),
+        "a silent sensor: {end}"
+    );
+    assert_eq!(sent.last().unwrap().process.fault, ProcessFault::SensorLost);
+    let (mut lp, sent) = logged(|_| Ok(sample(0.0)));
+    lp.cycle().unwrap();
+    drop(sent);
+    let bus_off: LoopError<ErrorKind, ErrorKind> = LoopError::Sensor(ErrorKind::BusOff);
+    assert_eq!(bus_off.code(), Some(ProcessFault::SensorLost));
+    let pose: LoopError<ErrorKind, ErrorKind> = LoopError::HoldTimeout {
+        held: 0.2,
+        last: Fault::NonFinitePose,
+    };
+    assert_eq!(pose.code(), Some(ProcessFault::HoldTimeout));
+    assert_eq!(
+        LoopError::<ErrorKind, ErrorKind>::Robot(ErrorKind::LinkLost).code(),
+        None
+    );
+}
+
+#[test]
+fn hold_and_retract_limits_are_validated() {
+    for bad in [
+        LoopConfig {
+            max_hold: 0.0,
+            ..LoopConfig::default()
+        },
+        LoopConfig {
+            max_hold: f64::NAN,
+            ..LoopConfig::default()
+        },
+        LoopConfig {
+            max_hold: 5.0,
+            ..LoopConfig::default()
+        },
+        LoopConfig {
+            retract_distance: -0.001,
+            ..LoopConfig::default()
+        },
+        LoopConfig {
+            retract_speed: f64::INFINITY,
+            ..LoopConfig::default()
+        },
+    ] {
+        assert!(bad.validate().is_err(), "{bad:?}");
+    }
+    assert!(LoopConfig::default().validate().is_ok());
+}
+
+#[test]
+fn stop_answers_the_next_cycle_with_the_last_command_and_stop() {
+    let mut robot = MockRobot::new();
+    let mut sensor = MockSensor::new();
+    robot
+        .expect_next_cycle()
+        .returning(|| Ok(cycle_at(1, 0.001)));
+    sensor.expect_read().returning(|| Ok(sample(0.0)));
+    let sent = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let log = sent.clone();
+    robot.expect_reply().returning(move |c| {
+        log.lock().unwrap().push(*c);
+        Ok(())
+    });
+    let mut lp = ControlLoop::new(robot, sensor, fixed_law(0.002), LoopConfig::default());
+    lp.cycle().unwrap();
+    lp.stop().unwrap();
+    let sent = sent.lock().unwrap();
+    assert_eq!(sent.len(), 2);
+    assert!(!sent[0].stop && sent[1].stop);
+    assert_eq!(
+        sent[1].translation, sent[0].translation,
+        "stop holds the last command"
+    );
+}
+
+#[test]
+fn large_steps_are_limited_and_reported() {
+    let mut robot = MockRobot::new();
+    let mut sensor = MockSensor::new();
+    robot.expect_next_cycle().returning(|| Ok(cycle_at(1, 0.0)));
+    // A huge force error drives the fixed law hard towards x_r far away.
+    sensor.expect_read().returning(|| Ok(sample(-1.0e7)));
+    robot
+        .expect_reply()
+        .withf(|c: &Correction| c.translation.z.abs() <= 1e-4 + 1e-15)
+        .returning(|_| Ok(()));
+    let cfg = LoopConfig {
+        max_step: 1e-4,
+        ..LoopConfig::default()
+    };
+    let mut lp = ControlLoop::new(robot, sensor, fixed_law(0.0), cfg);
+    let r = lp.cycle().unwrap();
+    assert_eq!(r.fault, Some(Fault::StepLimited));
+    assert_eq!(lp.stats().limited, 1);
+}
+
+/// A law that records the `dt` of every step.
+#[derive(Default)]
+struct DtLaw(Vec<f64>);
+
+impl ForceLaw for DtLaw {
+    fn start(&mut self, _x: f64) {}
+    fn step(&mut self, x: f64, _f: f64, dt: f64) -> Output {
+        self.0.push(dt);
+        Output {
+            x_cmd: x,
+            ..Output::default()
+        }
+    }
+    fn set_point(&self) -> f64 {
+        0.0
+    }
+    fn set_set_point(&mut self, _f_r: f64) -> Result<(), String> {
+        Ok(())
+    }
+}
+
+#[test]
+fn the_laws_clock_is_the_robots_stamps_held_and_skipped_cycles_included() {
+    let mut robot = MockRobot::new();
+    // Cycles 0, 1, 2, then the robot skips 3 and 4 (a late PC), then 5, 6 (sensor timeout), 7.
+    let seqs = std::sync::Mutex::new(vec![0u64, 1, 2, 5, 6, 7].into_iter());
+    robot
+        .expect_next_cycle()
+        .returning(move || Ok(cycle_at(seqs.lock().unwrap().next().unwrap(), 0.001)));
+    robot.expect_reply().returning(|_| Ok(()));
+    let mut sensor = MockSensor::new();
+    let mut n = 0;
+    sensor.expect_read().returning(move || {
+        n += 1;
+        if n == 5 {
+            Err(ErrorKind::Timeout)
+        } else {
+            Ok(sample(1.0))
+        }
+    });
+    let mut lp = ControlLoop::new(robot, sensor, DtLaw::default(), LoopConfig::default());
+    for _ in 0..6 {
+        lp.cycle().unwrap();
+    }
+    let steps: Vec<u64> = lp
+        .law()
+        .0
+        .iter()
+        .map(|dt| (dt / 0.004).round() as u64)
+        .collect();
+    assert_eq!(steps, [1, 1, 1, 3, 2], "periods per step: {:?}", lp.law().0);
+    // Whole periods, exactly: the stamps' float error stays out of the law.
+    let whole = lp
+        .law()
+        .0
+        .iter()
+        .zip(&steps)
+        .all(|(dt, n)| *dt == *n as f64 * 0.004);
+    assert!(whole, "{:?}", lp.law().0);
+}
