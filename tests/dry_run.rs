@@ -204,3 +204,58 @@ fn a_client_without_fc_cmd_gets_the_scenarios_program_and_then_stop() {
     assert!(!out.contains("FAIL"), "{out}");
     assert_eq!(robot.z_corr, 0.0, "the correction is back at zero");
 }
+
+/// A scenario whose surface drops 5 mm away in a steady contact: the re-acquire search takes longer
+/// than the loop's `contact_loss_time`.
+const SURFACE_DROPS: &str = r#"name = "surface-drops"
+description = "the surface drops 5 mm away at 1.5 s"
+duration = 4.0
+plant = "p2"
+tuning = "robust"
+x0 = 0.009
+
+[environment]
+k_c = 70000.0
+x_c = 0.010
+x_c_events = [{ kind = "step", at = 1.5, delta = 0.005 }]
+"#;
+
+#[test]
+fn a_client_without_fc_cmd_sees_a_lost_contact_end_in_a_retract_and_stop() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("drops.toml"), SURFACE_DROPS).unwrap();
+    let (child, listen) = start(dir.path(), &["--scenario", "drops.toml"]);
+    let mut robot = Robot::connect(&listen);
+    let mut z = Vec::new();
+    let mut stopped = false;
+    for _ in 0..10_000 {
+        let Some(sen) = robot.cycle(None) else { break };
+        z.push(robot.z_corr);
+        if sen.contains("<Stop>1</Stop>") {
+            stopped = true;
+            break;
+        }
+    }
+    let o = finish(child);
+    let out = text(&o.stdout);
+    assert!(stopped, "the session ends with Stop: {out}");
+    assert_eq!(o.status.code(), Some(3), "ended early: {out}");
+    assert!(
+        out.contains("fault 5 (contact lost): contact lost for 500 ms"),
+        "{out}"
+    );
+    // The part is 1 mm beyond the start and drops 5 mm away at 1.5 s (375 cycles): before that the
+    // tool presses (5 N on 70 kN/m is 0.07 mm more); then it searches towards where the part went
+    // and, 0.5 s after contact was lost, backs off 2 mm (the tuning's retract distance) and stops.
+    assert!((1.0..1.2).contains(&z[370]), "pressing at {} mm", z[370]);
+    let deepest = z.iter().copied().fold(f64::MIN, f64::max);
+    assert!(deepest > 1.5, "searched after the part: {deepest} mm");
+    let at = z.iter().position(|v| *v == deepest).unwrap();
+    for w in z[at..].windows(2) {
+        assert!(w[1] <= w[0], "only backing off after the search: {w:?}");
+    }
+    let backed = deepest - z[z.len() - 1];
+    assert!((backed - 2.0).abs() < 0.01, "backed off {backed} mm");
+    // About 0.5 s of search at most: the run ended long before the scenario's 4 s.
+    assert!(z.len() < 700, "{} cycles", z.len());
+}
