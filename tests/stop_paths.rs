@@ -71,6 +71,28 @@ fn external_signalled(
     (code, text, report, dir)
 }
 
+/// Wait (at most 60 s) until the recording at `path` has grown past its header and attachments: the
+/// recorder flushes those at once and messages at least every second.
+fn wait_for_messages(path: &Path) {
+    let len = || path.metadata().map_or(0, |m| m.len());
+    let start = std::time::Instant::now();
+    let mut header = 0;
+    loop {
+        let now = len();
+        if header == 0 {
+            header = now;
+        } else if now > header {
+            return;
+        }
+        assert!(
+            start.elapsed() < std::time::Duration::from_secs(60),
+            "{}: no messages flushed",
+            path.display()
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
+
 /// The MCAP recording a signalled run left was finished (summary and index written), not cut off as
 /// after a kill, and holds every cycle of its CSV.
 fn assert_mcap_finished(path: &Path, text: &str) {
@@ -139,6 +161,9 @@ fn sigint_ends_sim_with_the_simulated_controller_in_real_time_with_a_recording()
         dir.path(),
     );
     let (seen, r) = read_until(&mut child, "robot: ");
+    // Signal once the recording holds messages (a signal before the first cycle leaves a finished
+    // recording without any, tested in `recording.rs`).
+    wait_for_messages(&dir.path().join("o/long.mcap"));
     signal(child.id(), "INT");
     let (code, text) = finish(child, seen, r);
     assert_eq!(code, 130, "{text}");
@@ -160,6 +185,7 @@ fn sigterm_ends_a_lockstep_sim_with_a_recording() {
     .unwrap();
     let mut child = spawn(&["sim", "-s", "long.toml", "--out", "o"], dir.path());
     let (seen, r) = read_until(&mut child, "robot: ");
+    wait_for_messages(&dir.path().join("o/long.mcap"));
     signal(child.id(), "TERM");
     let (code, text) = finish(child, seen, r);
     assert_eq!(code, 130, "{text}");

@@ -386,25 +386,6 @@ fn a_short_loss_of_contact_does_not_end_the_loop() {
     );
 }
 
-/// A law that commands a fixed position.
-struct At(f64);
-
-impl ForceLaw for At {
-    fn start(&mut self, _x: f64) {}
-    fn step(&mut self, _x: f64, _f: f64, _dt: f64) -> Output {
-        Output {
-            x_cmd: self.0,
-            ..Output::default()
-        }
-    }
-    fn set_point(&self) -> f64 {
-        5.0
-    }
-    fn set_set_point(&mut self, _f_r: f64) -> Result<(), String> {
-        Ok(())
-    }
-}
-
 #[test]
 fn without_process_channels_the_correction_envelope_ends_the_loop() {
     let mut robot = MockRobot::new();
@@ -423,7 +404,11 @@ fn without_process_channels_the_correction_envelope_ends_the_loop() {
     });
     // The law wants 8 mm; the envelope is 5 mm and a step 1 mm: five steps reach 5 mm, the sixth
     // is clipped to the envelope.
-    let mut lp = ControlLoop::new(robot, sensor, At(0.008), LoopConfig::default());
+    let law = DtLaw {
+        at: Some(0.008),
+        ..DtLaw::default()
+    };
+    let mut lp = ControlLoop::new(robot, sensor, law, LoopConfig::default());
     let (sent, end) = loop {
         if let Err(e) = lp.cycle() {
             break (sent.lock().unwrap().clone(), e);
@@ -547,21 +532,24 @@ fn large_steps_are_limited_and_reported() {
     assert_eq!(lp.stats().limited, 1);
 }
 
-/// A law that records the `dt` of every step.
+/// A law that records the `dt` of every step and commands where the tool is, or a fixed position.
 #[derive(Default)]
-struct DtLaw(Vec<f64>);
+struct DtLaw {
+    dts: Vec<f64>,
+    at: Option<f64>,
+}
 
 impl ForceLaw for DtLaw {
     fn start(&mut self, _x: f64) {}
     fn step(&mut self, x: f64, _f: f64, dt: f64) -> Output {
-        self.0.push(dt);
+        self.dts.push(dt);
         Output {
-            x_cmd: x,
+            x_cmd: self.at.unwrap_or(x),
             ..Output::default()
         }
     }
     fn set_point(&self) -> f64 {
-        0.0
+        5.0
     }
     fn set_set_point(&mut self, _f_r: f64) -> Result<(), String> {
         Ok(())
@@ -593,17 +581,22 @@ fn the_laws_clock_is_the_robots_stamps_held_and_skipped_cycles_included() {
     }
     let steps: Vec<u64> = lp
         .law()
-        .0
+        .dts
         .iter()
         .map(|dt| (dt / 0.004).round() as u64)
         .collect();
-    assert_eq!(steps, [1, 1, 1, 3, 2], "periods per step: {:?}", lp.law().0);
+    assert_eq!(
+        steps,
+        [1, 1, 1, 3, 2],
+        "periods per step: {:?}",
+        lp.law().dts
+    );
     // Whole periods, exactly: the stamps' float error stays out of the law.
     let whole = lp
         .law()
-        .0
+        .dts
         .iter()
         .zip(&steps)
         .all(|(dt, n)| *dt == *n as f64 * 0.004);
-    assert!(whole, "{:?}", lp.law().0);
+    assert!(whole, "{:?}", lp.law().dts);
 }
