@@ -2,8 +2,9 @@
 //! set-points 2–50 N, stiffness 10–500 kN/m with ×0.5/×2 changes at any time, cycles of 1, 4 and 12 ms
 //! with their delays, sensor noise up to 1 N, surface damping up to 200 N·s/m, surface steps up to
 //! ±3 mm. Closed loop against the simulated cell through `forcecell-scenario` (the same run and
-//! metrics as `forcecell sim`), shipped robust tuning (only the force limit follows the set-point: a
-//! 60 N limit means nothing at 50 N), simulated time only, seeded cases.
+//! metrics as `forcecell sim`), shipped robust tuning (only the force limit — the law's and the
+//! loop's — follows the set-point: a 60 N limit means nothing at 50 N), simulated time only, seeded
+//! cases.
 
 use controller::{LawConfig, Tuning};
 use proptest::prelude::*;
@@ -30,6 +31,7 @@ fn tuning(f_r: f64) -> Tuning {
     };
     p.f_r = f_r;
     p.limits.max_force = p.limits.max_force.max(3.0 * f_r);
+    t.loop_cfg.process.max_force = p.limits.max_force;
     t
 }
 
@@ -163,7 +165,9 @@ proptest! {
     }
 
     /// B3 carried over: the surface steps up to ±3 mm in a steady contact; the contact comes back and
-    /// the force settles at the set-point within 1 s.
+    /// the force settles at the set-point within 1 s — unless the step itself presses the tool past
+    /// the force limit (a surface that jumps `δ` towards the tool adds `k_c·δ` at once, before any
+    /// loop can act): then the loop must end on fault 2, backed off.
     #[test]
     fn surface_steps(
         f_r in 2.0f64..50.0,
@@ -173,9 +177,23 @@ proptest! {
     ) {
         let plant = CELLS[cell_i];
         let s = cell(4.0, k_c, 0.0, None, Some((2.0, delta)), 0.0, 1);
-        let r = run(&s, &plant, &tuning(f_r)).unwrap();
-        let after = r.metrics(2.0, f64::INFINITY);
-        prop_assert!(after.settle_time <= 1.0, "back in ±2 % after {} s", after.settle_time);
+        let t = tuning(f_r);
+        let LawConfig::Robust(p) = &t.law else { unreachable!() };
+        let jump = f_r + k_c * (-delta).max(0.0);
+        match run(&s, &plant, &t) {
+            Ok(r) => {
+                prop_assert!(jump <= p.limits.max_force, "a {jump} N step did not trip the limit");
+                let after = r.metrics(2.0, f64::INFINITY);
+                prop_assert!(after.settle_time <= 1.0, "back in ±2 % after {} s", after.settle_time);
+            }
+            Err(e) => {
+                let e = e.to_string();
+                prop_assert!(
+                    jump > p.limits.max_force && e.contains("fault 2 (force limit)"),
+                    "{jump} N: {e}"
+                );
+            }
+        }
     }
 }
 
