@@ -440,9 +440,27 @@ fn a_hold_timeout_and_a_failed_sensor_report_their_codes() {
         "a silent sensor: {end}"
     );
     assert_eq!(sent.last().unwrap().process.fault, ProcessFault::SensorLost);
-    let (mut lp, sent) = logged(|_| Ok(sample(0.0)));
-    lp.cycle().unwrap();
-    drop(sent);
+    // A saturated sensor (the ATI's status word says so) is held the same way, then fault 1.
+    let (mut lp, sent) = logged(|n| {
+        if n <= 2 {
+            Ok(sample(0.0))
+        } else {
+            Err(ErrorKind::Saturated)
+        }
+    });
+    let (sent, end) = run_until_end(&mut lp, &sent);
+    assert!(
+        matches!(
+            end,
+            LoopError::HoldTimeout {
+                last: Fault::Sensor(ErrorKind::Saturated),
+                ..
+            }
+        ),
+        "{end:?}"
+    );
+    assert_eq!(end.code(), Some(ProcessFault::SensorLost));
+    assert_backed_off(&sent, 1 + 26);
     let bus_off: LoopError<ErrorKind, ErrorKind> = LoopError::Sensor(ErrorKind::BusOff);
     assert_eq!(bus_off.code(), Some(ProcessFault::SensorLost));
     let pose: LoopError<ErrorKind, ErrorKind> = LoopError::HoldTimeout {
