@@ -37,23 +37,9 @@ fn time_scale() -> u32 {
 #[ignore = "needs a vcan0 interface: run scripts/vcan-tests.sh"]
 fn sensor_commands_talk_to_the_simulated_node_in_another_process() {
     let can = iface();
-    let _node = Kill(
-        forcecell()
-            .args([
-                "sim-sensor",
-                "ati",
-                "--can",
-                &can,
-                "--base",
-                "0x31",
-                "--fz",
-                "12.5",
-            ])
-            .args(["--noise", "0", "--seconds", "120"])
-            .stdout(Stdio::null())
-            .spawn()
-            .expect("start sim-sensor"),
-    );
+    let _node = ready_node(&[
+        "--can", &can, "--base", "0x31", "--fz", "12.5", "--noise", "0",
+    ]);
     let turnaround = (20_000 * time_scale()).to_string();
     let rate = (20.0 / f64::from(time_scale())).to_string();
     let common = [
@@ -140,23 +126,24 @@ fn sim_runs_a_scenario_through_the_driver_over_vcan() {
 
 /// The simulated node on `can` at the example's base (0x20), serving for up to two minutes.
 fn node(can: &str) -> Kill {
-    Kill(
-        forcecell()
-            .args([
-                "sim-sensor",
-                "ati",
-                "--can",
-                can,
-                "--fz",
-                "10",
-                "--noise",
-                "2",
-            ])
-            .args(["--seconds", "120"])
-            .stdout(Stdio::null())
-            .spawn()
-            .expect("start sim-sensor"),
-    )
+    ready_node(&["--can", can, "--fz", "10", "--noise", "2"])
+}
+
+/// `forcecell sim-sensor ati ARGS --seconds 120`, once it serves.
+fn ready_node(args: &[&str]) -> Kill {
+    let mut child = forcecell()
+        .args(["sim-sensor", "ati"])
+        .args(args)
+        .args(["--seconds", "120"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start sim-sensor");
+    // Its first line comes once its CAN socket is open: a driver started before that would ask
+    // into the void (seen under a loaded User-Mode Linux). The rest of its output is drained.
+    let (_, mut rest) = read_until(&mut child, "simulated ATI NETCANOEM node on");
+    std::thread::spawn(move || std::io::copy(&mut rest, &mut std::io::sink()));
+    Kill(child)
 }
 
 /// `examples/cell.toml` as shipped (`tare = true`, the `[gravity]` model), pointed at loopback and `can`,
