@@ -9,66 +9,11 @@
 //! * In a steady contact the slow least-squares fit ([`SteadyEstimator`]) learns from the loop's answer
 //!   to sensor noise, and once confident moves `k̂_c` to its estimate at a bounded rate.
 
-use serde::{Deserialize, Serialize};
+mod params;
+pub use params::IdentifyParams;
 
-use super::positive;
 use crate::estimator::{EstimatorParams, SteadyEstimator, StiffnessEstimator};
 use crate::onset::OnsetFit;
-
-/// Identification's advanced parameters (the defaults suit any cell).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct IdentifyParams {
-    /// How long after contact is declared the contact transient is fitted, s.
-    pub onset_window: f64,
-    /// How long the transient after a jump in a steady contact on a still surface (a stiffness
-    /// change, a surface step) is fitted to re-identify `k̂_c`, s.
-    pub refit_window: f64,
-    /// Forgetting time of the steady-contact estimator, s.
-    pub steady_memory: f64,
-    /// How long the steady-contact estimator must have run before it is used, s.
-    pub steady_min_age: f64,
-    /// Relative standard deviation below which the steady-contact estimate is used.
-    pub steady_confidence: f64,
-    /// Relative standard deviation at which the steady-contact estimator stops learning.
-    pub steady_done: f64,
-    /// Largest relative rate at which the steady-contact estimate moves `k̂_c`, 1/s.
-    pub steady_rate: f64,
-}
-
-impl Default for IdentifyParams {
-    fn default() -> Self {
-        Self {
-            onset_window: 0.1,
-            refit_window: 0.3,
-            steady_memory: 3600.0,
-            steady_min_age: 1.0,
-            steady_confidence: 0.1,
-            steady_done: 0.02,
-            steady_rate: 0.02,
-        }
-    }
-}
-
-impl IdentifyParams {
-    /// Checks the values.
-    pub fn validate(&self) -> Result<(), String> {
-        positive("identify.onset_window", self.onset_window)?;
-        positive("identify.refit_window", self.refit_window)?;
-        positive("identify.steady_memory", self.steady_memory)?;
-        positive("identify.steady_min_age", self.steady_min_age)?;
-        positive("identify.steady_confidence", self.steady_confidence)?;
-        positive("identify.steady_done", self.steady_done)?;
-        positive("identify.steady_rate", self.steady_rate)?;
-        if self.steady_done > self.steady_confidence {
-            return Err(format!(
-                "identify.steady_done {} must not be above identify.steady_confidence {}",
-                self.steady_done, self.steady_confidence
-            ));
-        }
-        Ok(())
-    }
-}
 
 /// What a contact step of identification did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -289,60 +234,4 @@ impl Identifier {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn est() -> EstimatorParams {
-        EstimatorParams {
-            kc0: 50_000.0,
-            kc_min: 10_000.0,
-            kc_max: 500_000.0,
-            memory: 0.3,
-            excitation: 1.5,
-            excitation_window: 0.05,
-            dead_zone: 0.02,
-            initial_uncertainty: 1.0,
-            max_surface_speed: 0.001,
-        }
-    }
-
-    #[test]
-    fn the_onset_of_a_contact_from_the_approach_is_fitted() {
-        let mut id = Identifier::new(IdentifyParams::default(), est(), 5.0 / 50_000.0);
-        let k: f64 = 70_000.0;
-        let mut x: f64 = 0.0095;
-        let (mut seeded, mut contact) = (false, false);
-        for _ in 0..2000 {
-            let f = (k * (x - 0.010)).max(0.0);
-            let mut first = false;
-            if !contact {
-                if f < 1.0 {
-                    id.remember(x, f);
-                    x += 2e-6;
-                    continue;
-                }
-                contact = true;
-                first = true;
-                id.begin_contact(x, f, true);
-            }
-            let out = id.step(x, f, f, 1e-3, false, first, false, 0.0, 0.02);
-            seeded |= out.seeded;
-            if x < 0.010 + 5.0 / k {
-                x += 2e-6;
-            }
-        }
-        assert!(seeded, "the transient was fitted");
-        assert!((id.kc() - k).abs() < 0.02 * k, "k̂ {}", id.kc());
-        id.reset();
-        assert_eq!(id.kc(), 50_000.0);
-    }
-
-    #[test]
-    fn validation_names_the_field() {
-        let p = IdentifyParams {
-            steady_done: 0.5,
-            ..IdentifyParams::default()
-        };
-        assert!(p.validate().unwrap_err().contains("steady_done"));
-    }
-}
+mod tests;
