@@ -40,6 +40,8 @@ pub struct Identifier {
     /// Where the transient being re-fitted started, `(x, f)`: its fit is taken at the window's end
     /// only, and only if the surface stayed still (a surface that starts moving makes a transient too).
     refit_from: Option<(f64, f64)>,
+    /// Surface damping identified by the last fit, N·s/m.
+    c_e: f64,
 }
 
 impl Identifier {
@@ -54,6 +56,7 @@ impl Identifier {
             off_band: 0.0,
             calm_at_start: false,
             refit_from: None,
+            c_e: 0.0,
         }
     }
 
@@ -71,6 +74,7 @@ impl Identifier {
         self.steady_var0 = f64::INFINITY;
         self.off_band = 0.0;
         self.refit_from = None;
+        self.c_e = 0.0;
     }
 
     /// Count whether the force is out of its band this step (`calm`: the contact is steady, on a
@@ -90,9 +94,14 @@ impl Identifier {
         self.est.kc()
     }
 
-    /// Keep a raw sample of the approach for the onset fit.
-    pub fn remember(&mut self, x: f64, f: f64) {
-        self.onset.remember(x, f);
+    /// Surface damping `ĉ_e` identified with `k̂_c`, N·s/m (0 until a fit has seen it).
+    pub fn damping(&self) -> f64 {
+        self.c_e
+    }
+
+    /// Keep a raw sample `(x, f)` of the approach, at velocity `v` (m/s), for the onset fit.
+    pub fn remember(&mut self, x: f64, f: f64, v: f64) {
+        self.onset.remember(x, f, v);
     }
 
     /// Contact is declared at `(x, f)`; `from_approach`: on a still surface, so the transient is fitted.
@@ -128,14 +137,16 @@ impl Identifier {
         self.onset.stop();
     }
 
-    /// One step in contact with the raw `(x, f)` and conditioned force `ff`. `moving`: the surface moves
-    /// (no stiffness to learn); `first`: contact was declared this step; `disturbed`: something moved
+    /// One step in contact with the raw `(x, f)`, the raw position's velocity `v` and conditioned force
+    /// `ff`. `moving`: the surface moves (no stiffness to learn; a re-fit is judged by its own
+    /// consistency instead, as the apparent motion of the stale `k̂_c` makes it look moving); `first`: contact was declared this step; `disturbed`: something moved
     /// or jumped lately; `noise_var` and `noise_floor` the sensor's noise, N², and its floor, N.
     #[allow(clippy::too_many_arguments)]
     pub fn step(
         &mut self,
         x: f64,
         f: f64,
+        v: f64,
         ff: f64,
         dt: f64,
         moving: bool,
@@ -144,13 +155,12 @@ impl Identifier {
         noise_var: f64,
         noise_floor: f64,
     ) -> Identified {
-        if moving {
+        if moving && self.refit_from.is_none() {
             self.onset.stop();
-            self.refit_from = None;
         }
         let onset = self.onset.active();
         if onset && !first {
-            self.onset.add(x, f, dt);
+            self.onset.add(x, f, v, dt);
         }
         let fit = match self.refit_from {
             // A contact onset: the fit so far, every step.
@@ -160,14 +170,18 @@ impl Identifier {
             // A re-fit: once, at the window's end, if significant.
             Some((x0, f0)) => {
                 self.refit_from = None;
-                let scale = self.est.scale();
+                let (scale, rel) = (self.est.scale(), self.p.steady_confidence);
+                let r = noise_var.max(noise_floor * noise_floor);
                 self.onset
                     .fit(noise_var)
                     .filter(|fit| {
+                        // Significant, different, and one still spring: what the plane leaves beyond
+                        // the noise is at most `rel` of the transient's variance (a surface that started
+                        // to move leaves the force unexplained by the position).
                         fit.b > 0.0
-                            && fit.var_b.sqrt() <= self.p.steady_confidence * fit.b
-                            && (fit.b / scale - self.est.kc()).abs()
-                                > self.p.steady_confidence * self.est.kc()
+                            && fit.var_b.sqrt() <= rel * fit.b
+                            && (fit.b / scale - self.est.kc()).abs() > rel * self.est.kc()
+                            && fit.residual_var - r <= rel * fit.force_var
                     })
                     .inspect(|_| self.est.begin_contact(x0, f0))
             }
@@ -175,6 +189,7 @@ impl Identifier {
         match fit {
             Some(fit) => {
                 let projected = self.est.seed(&fit, x, ff);
+                self.c_e = fit.c / self.est.scale();
                 self.steady.stop();
                 self.steady_var0 = self.est.seed_variance();
                 Identified {
@@ -183,9 +198,12 @@ impl Identifier {
                 }
             }
             None => {
-                let up = self.est.update(x, f, ff, dt, moving);
+                // The spring's force: the identified damping's share taken out.
+                let f_spring = f - self.c_e * v;
+                let up = self.est.update(x, f_spring, ff, dt, moving);
                 let r = noise_var.max(noise_floor * noise_floor);
-                self.steady_step(x, f, dt, moving || up.adapted || disturbed, r);
+                let calm = !(moving || up.adapted || disturbed);
+                self.steady_step(x, f_spring, dt, !calm, r);
                 Identified {
                     seeded: false,
                     projected: up.projected,

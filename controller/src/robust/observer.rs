@@ -60,6 +60,9 @@ pub struct SurfaceObserver {
     jump_started: bool,
     pred: SurfacePredictor,
     pred_jump_time: f64,
+    /// Time left for a jump the raw predictor saw to pass the conditioning, s: the conditioned
+    /// surface moves meanwhile, and that is no motion.
+    passing: f64,
     motion: Motion,
 }
 
@@ -74,6 +77,7 @@ impl SurfaceObserver {
             jump_started: false,
             pred: SurfacePredictor::new(),
             pred_jump_time: 0.0,
+            passing: 0.0,
             motion: Motion::default(),
         };
         o.reset();
@@ -100,6 +104,7 @@ impl SurfaceObserver {
         self.jump_started = false;
         self.pred.clear();
         self.pred_jump_time = 0.0;
+        self.passing = 0.0;
         self.motion.restart();
     }
 
@@ -132,7 +137,7 @@ impl SurfaceObserver {
     /// Run the motion holds for a step; `v_x` is the conditioned position's velocity. Returns whether
     /// the estimator is to take the surface for a moving one.
     pub fn hold(&mut self, v_x: f64, max_surface_speed: f64, in_contact: bool, dt: f64) -> bool {
-        let moving = surface_moving(self.vc, v_x, max_surface_speed);
+        let moving = surface_moving(self.vc, v_x, max_surface_speed) && self.passing <= 0.0;
         self.motion.hold(&self.p, moving && in_contact, dt) || moving
     }
 
@@ -144,6 +149,7 @@ impl SurfaceObserver {
         let jump = e.abs() > self.p.step_innovation * s.force_scale / s.k;
         self.jump_started = jump && self.jump_time == 0.0;
         self.jump_time = if jump { self.jump_time + dt } else { 0.0 };
+        self.passing = (self.passing - dt).max(0.0);
         if jump && self.jump_time <= s.step_time {
             self.zc = z;
         } else {
@@ -184,6 +190,11 @@ impl SurfaceObserver {
             p.jump_gate,
             jump_floor,
         );
+        if jumped {
+            // A step seen raw starts passing the conditioning now (and is the start of a jump).
+            self.jump_started |= self.pred_jump_time == 0.0;
+            self.passing = s.step_time;
+        }
         self.pred_jump_time = if jumped {
             self.pred_jump_time + dt
         } else {

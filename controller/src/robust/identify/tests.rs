@@ -27,7 +27,7 @@ fn the_onset_of_a_contact_from_the_approach_is_fitted() {
         let mut first = false;
         if !contact {
             if f < 1.0 {
-                id.remember(x, f);
+                id.remember(x, f, 2e-3);
                 x += 2e-6;
                 continue;
             }
@@ -35,7 +35,7 @@ fn the_onset_of_a_contact_from_the_approach_is_fitted() {
             first = true;
             id.begin_contact(x, f, true);
         }
-        let out = id.step(x, f, f, 1e-3, false, first, false, 0.0, 0.02);
+        let out = id.step(x, f, 0.0, f, 1e-3, false, first, false, 0.0, 0.02);
         seeded |= out.seeded;
         if x < 0.010 + 5.0 / k {
             x += 2e-6;
