@@ -130,6 +130,8 @@ pub struct LineFit {
     pub c: f64,
     /// Residual variance per degree of freedom, N².
     pub residual_var: f64,
+    /// Residual sum of squares, N².
+    pub sse: f64,
     /// Variance of the force about its mean, N².
     pub force_var: f64,
 }
@@ -264,12 +266,62 @@ impl OnsetFit {
             cov_ab: -var * (ub * m.i_uu + wb * m.i_uw),
             c: m.c,
             residual_var,
+            sse: m.sse,
             force_var: s.centred()[5] / (s.n - 1.0),
         };
         [fit.a, fit.b, fit.var_a, fit.var_b, fit.cov_ab, fit.c]
             .iter()
             .all(|v| v.is_finite())
             .then_some(fit)
+    }
+
+    /// The fit through the surface `x_c` (m) left where it was: `f = b·(x − x_c)/s + c·w`, no
+    /// intercept of its own (a change of stiffness alone pivots the spring line about the surface). The
+    /// intercept at `x₀` follows the slope; variances from the residuals, at least `noise_var` (N²).
+    pub fn fit_through(&self, x_c: f64, noise_var: f64) -> Option<LineFit> {
+        let s = &self.sums;
+        let d = (self.x0 - x_c) / self.scale;
+        if s.n < 4.0 || !d.is_finite() {
+            return None;
+        }
+        // Moments about the pivot, u_p = u + d, uncentred.
+        let pp = s.uu + 2.0 * d * s.u + s.n * d * d;
+        let pw = s.uw + d * s.w;
+        let pf = s.uf + d * s.f;
+        let (ww, wf, ff) = (s.ww, s.wf, s.ff);
+        if pp <= 0.0 {
+            return None;
+        }
+        let det = pp * ww - pw * pw;
+        let (mut b, mut c, mut i_pp) = (pf / pp, 0.0, 1.0 / pp);
+        let mut sse = ff - pf * pf / pp;
+        if det > COLLINEAR * pp * ww {
+            let (bb, cc) = ((ww * pf - pw * wf) / det, (pp * wf - pw * pf) / det);
+            if cc >= 0.0 {
+                (b, c, i_pp) = (bb, cc, ww / det);
+                sse = ff - b * pf - c * wf;
+            }
+        }
+        let sse = sse.max(0.0);
+        let dof = if c > 0.0 { 2.0 } else { 1.0 };
+        let residual_var = sse / (s.n - dof);
+        let var_b = residual_var.max(noise_var) * i_pp;
+        let fit = LineFit {
+            a: b * d,
+            b,
+            var_a: d * d * var_b,
+            var_b,
+            cov_ab: d * var_b,
+            c,
+            residual_var,
+            sse,
+            force_var: s.centred()[5] / (s.n - 1.0),
+        };
+        (b > 0.0
+            && [fit.a, fit.b, fit.var_b, fit.c]
+                .iter()
+                .all(|v| v.is_finite()))
+        .then_some(fit)
     }
 }
 

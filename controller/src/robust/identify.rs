@@ -10,6 +10,7 @@
 //!   to sensor noise, and once confident moves `k̂_c` to its estimate at a bounded rate.
 
 mod params;
+mod refit;
 pub use params::IdentifyParams;
 
 use crate::estimator::{EstimatorParams, SteadyEstimator, StiffnessEstimator};
@@ -39,7 +40,10 @@ pub struct Identifier {
     calm_at_start: bool,
     /// Where the transient being re-fitted started, `(x, f)`: its fit is taken at the window's end
     /// only, and only if the surface stayed still (a surface that starts moving makes a transient too).
-    refit_from: Option<(f64, f64)>,
+    /// With the surface before the jump, m: the pivot of a stiffness change.
+    refit_from: Option<(f64, f64, f64)>,
+    /// The surface of the last calm step, m.
+    calm_surface: f64,
     /// Surface damping identified by the last fit, N·s/m.
     c_e: f64,
 }
@@ -56,6 +60,7 @@ impl Identifier {
             off_band: 0.0,
             calm_at_start: false,
             refit_from: None,
+            calm_surface: f64::NAN,
             c_e: 0.0,
         }
     }
@@ -74,6 +79,7 @@ impl Identifier {
         self.steady_var0 = f64::INFINITY;
         self.off_band = 0.0;
         self.refit_from = None;
+        self.calm_surface = f64::NAN;
         self.c_e = 0.0;
     }
 
@@ -122,7 +128,7 @@ impl Identifier {
     pub fn refit(&mut self, x: f64, f: f64) {
         self.onset.clear();
         self.onset.begin(x, self.est.scale(), self.p.refit_window);
-        self.refit_from = Some((x, f));
+        self.refit_from = Some((x, f, self.calm_surface));
         self.steady.stop();
         self.steady_var0 = f64::INFINITY;
     }
@@ -168,12 +174,11 @@ impl Identifier {
             None => None,
             Some(_) if self.onset.active() => None,
             // A re-fit: once, at the window's end, if significant.
-            Some((x0, f0)) => {
+            Some((x0, f0, pivot)) => {
                 self.refit_from = None;
                 let (scale, rel) = (self.est.scale(), self.p.steady_confidence);
                 let r = noise_var.max(noise_floor * noise_floor);
-                self.onset
-                    .fit(noise_var)
+                refit::choose(&self.onset, pivot, noise_var, r, self.p.pivot_gate)
                     .filter(|fit| {
                         // Significant, different, and one still spring: what the plane leaves beyond
                         // the noise is at most `rel` of the transient's variance (a surface that started
@@ -203,6 +208,9 @@ impl Identifier {
                 let up = self.est.update(x, f_spring, ff, dt, moving);
                 let r = noise_var.max(noise_floor * noise_floor);
                 let calm = !(moving || up.adapted || disturbed);
+                if calm {
+                    self.calm_surface = self.est.xc();
+                }
                 self.steady_step(x, f_spring, dt, !calm, r);
                 Identified {
                     seeded: false,

@@ -13,6 +13,9 @@ pub struct IdentifyParams {
     /// How long the transient after a jump in a steady contact on a still surface (a stiffness
     /// change, a surface step) is fitted to re-identify `k̂_c`, s.
     pub refit_window: f64,
+    /// Significance, in standard deviations of the residual, at which a re-fit's line through the
+    /// surface before the jump (a stiffness change alone) gives way to a free line (the surface moved).
+    pub pivot_gate: f64,
     /// Forgetting time of the steady-contact estimator, s.
     pub steady_memory: f64,
     /// How long the steady-contact estimator must have run before it is used, s.
@@ -30,6 +33,7 @@ impl Default for IdentifyParams {
         Self {
             onset_window: 0.1,
             refit_window: 0.3,
+            pivot_gate: 3.0,
             steady_memory: 3600.0,
             steady_min_age: 1.0,
             steady_confidence: 0.1,
@@ -44,6 +48,7 @@ impl IdentifyParams {
     pub fn validate(&self) -> Result<(), String> {
         positive("identify.onset_window", self.onset_window)?;
         positive("identify.refit_window", self.refit_window)?;
+        positive("identify.pivot_gate", self.pivot_gate)?;
         positive("identify.steady_memory", self.steady_memory)?;
         positive("identify.steady_min_age", self.steady_min_age)?;
         positive("identify.steady_confidence", self.steady_confidence)?;
