@@ -43,7 +43,7 @@ pub struct Identifier {
     /// only, and only if the surface stayed still (a surface that starts moving makes a transient too).
     /// With the surface before the jump, m: the pivot of a stiffness change.
     refit_from: Option<(f64, f64, f64)>,
-    /// The surface of the last calm step, m.
+    /// The surface `x − f/k̂_c` of the calm steps since `k̂_c` last moved, averaged over `refit_window`, m.
     calm_surface: f64,
     /// Surface damping identified by the last fit, N·s/m.
     c_e: f64,
@@ -195,6 +195,7 @@ impl Identifier {
         match fit {
             Some(fit) => {
                 let projected = self.est.seed(&fit, x, ff);
+                self.calm_surface = f64::NAN;
                 self.c_e = fit.c / self.est.scale();
                 self.steady.stop();
                 self.steady_var0 = self.est.seed_variance();
@@ -209,8 +210,16 @@ impl Identifier {
                 let up = self.est.update(x, f_spring, ff, dt, moving);
                 let r = noise_var.max(noise_floor * noise_floor);
                 let calm = !(moving || up.adapted || disturbed);
-                if calm {
-                    self.calm_surface = self.est.xc();
+                if up.adapted {
+                    self.calm_surface = f64::NAN;
+                } else if calm {
+                    let z = x - f_spring / self.est.kc();
+                    let a = (dt / self.p.refit_window).min(1.0);
+                    self.calm_surface = if self.calm_surface.is_finite() {
+                        self.calm_surface + a * (z - self.calm_surface)
+                    } else {
+                        z
+                    };
                 }
                 self.steady_step(x, f_spring, dt, !calm, r);
                 Identified {
