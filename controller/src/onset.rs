@@ -349,4 +349,32 @@ mod tests {
         assert!((fit.b / s - k).abs() < 1.0, "k {}", fit.b / s);
         assert!((fit.a - k * (x - xc)).abs() < 1e-6);
     }
+
+    /// A damped transient: `f = k·(x − x_c) + c_e·ẋ` with the tool settling and a wobble on top.
+    fn damped(o: &mut OnsetFit, k: f64, xc: f64, c_e: f64) {
+        let dt = 1e-3;
+        for i in 0..300 {
+            let t = i as f64 * dt;
+            let x = 0.0101 - 5e-5 * (-t / 0.02).exp() + 2e-6 * (t * 40.0).sin();
+            let v = 5e-5 / 0.02 * (-t / 0.02).exp() + 2e-6 * 40.0 * (t * 40.0).cos();
+            o.add(x, k * (x - xc) + c_e * v, v, dt);
+        }
+    }
+
+    #[test]
+    fn the_damping_is_fitted_with_the_stiffness() {
+        let (k, xc, c_e, s) = (70_000.0, 0.010, 200.0, 1e-4);
+        let mut o = OnsetFit::new();
+        o.begin(0.0101, s, 1.0);
+        damped(&mut o, k, xc, c_e);
+        let fit = o.fit(0.0).unwrap();
+        assert!((fit.b / s - k).abs() < 1e-3 * k, "k {}", fit.b / s);
+        assert!((fit.c / s - c_e).abs() < 1e-3 * c_e, "c_e {}", fit.c / s);
+        let through = o.fit_through(xc, 0.0).unwrap();
+        assert!((through.b / s - k).abs() < 1e-3 * k, "k {}", through.b / s);
+        assert!(through.sse < 1e-9, "{}", through.sse);
+        // Through a surface 10 µm off the line leaves a residual.
+        let off = o.fit_through(xc + 1e-5, 0.0).unwrap().sse;
+        assert!(off > 1e-3, "{off}");
+    }
 }

@@ -55,3 +55,54 @@ fn validation_names_the_field() {
     };
     assert!(p.validate().unwrap_err().contains("steady_done"));
 }
+
+/// A steady contact at 5 N on a still surface at 10 mm of stiffness `k`, held for 1 s, then the
+/// environment changes to stiffness `k2` and surface `xc2` at the same position; the tool moves to the
+/// new equilibrium with a 20 ms time constant and `c_e` of damping, and the re-fit runs. Returns k̂_c.
+fn change(k: f64, k2: f64, xc2: f64, c_e: f64) -> f64 {
+    let (xc, f_r, dt) = (0.010, 5.0, 1e-3);
+    let mut id = Identifier::new(IdentifyParams::default(), est(), f_r / 50_000.0);
+    let mut x = xc + f_r / k;
+    id.begin_contact(x, f_r, false);
+    for _ in 0..1000 {
+        id.step(x, f_r, 0.0, f_r, dt, false, false, false, 0.0, 0.02);
+    }
+    assert!(
+        (id.kc() - k).abs() < 1e-6 * k,
+        "k̂ {} before the change",
+        id.kc()
+    );
+    let x_end = xc2 + f_r / k2;
+    id.refit(x, k2 * (x - xc2));
+    for _ in 0..1000 {
+        let v = (x_end - x) / 0.020;
+        x += v * dt;
+        let f = k2 * (x - xc2) + c_e * v;
+        id.step(x, f, v, f, dt, false, false, false, 0.0, 0.02);
+    }
+    id.kc()
+}
+
+#[test]
+fn a_stiffness_change_on_a_still_surface_is_re_learnt_through_the_surface() {
+    for (k2, c_e) in [
+        (100_000.0, 0.0),
+        (25_000.0, 0.0),
+        (100_000.0, 200.0),
+        (25_000.0, 200.0),
+    ] {
+        let k = change(50_000.0, k2, 0.010, c_e);
+        assert!((k - k2).abs() < 0.02 * k2, "k̂ {k} for {k2} at {c_e} N·s/m");
+    }
+}
+
+#[test]
+fn a_surface_step_is_no_stiffness_change() {
+    for step in [-3e-4, 3e-4] {
+        let k = change(50_000.0, 50_000.0, 0.010 + step, 0.0);
+        assert!(
+            (k - 50_000.0).abs() < 0.02 * 50_000.0,
+            "k̂ {k} after a {step} m step"
+        );
+    }
+}
