@@ -3,9 +3,13 @@
 //! * At a contact made from the approach (a still surface, the force rising from zero while the
 //!   position moves in), a hinge least-squares fit on the approach's raw samples and the first
 //!   `onset_window` of contact sets `k̂_c` ([`crate::onset`]). A contact re-acquired after a loss is not
-//!   fitted: the surface may be the one moving away.
+//!   fitted: the surface may be the one moving away. The fit has the velocity as a regressor of its own,
+//!   so surface damping `c_e·ẋ` is identified beside `k̂_c` instead of biasing it.
+//! * A jump under a steady contact on a still surface opens a re-fit over `refit_window`, judged at its
+//!   end by its own consistency (the stale `k̂_c` makes the still surface look moving meanwhile), through
+//!   the calm surface before the jump unless a surface step shows.
 //! * Afterwards the recursive estimator ([`StiffnessEstimator`]) goes on from the fitted values, with
-//!   its excitation, dead-zone and motion gates.
+//!   its excitation, dead-zone and motion gates, on the force less the identified damping.
 //! * In a steady contact the slow least-squares fit ([`SteadyEstimator`]) learns from the loop's answer
 //!   to sensor noise, and once confident moves `k̂_c` to its estimate at a bounded rate.
 
