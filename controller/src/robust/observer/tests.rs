@@ -43,3 +43,49 @@ fn a_still_surface_stays_still_and_a_moving_one_is_followed() {
     o.reset();
     assert!(o.surface().is_nan() && !o.disturbed());
 }
+
+#[test]
+fn a_jump_seen_raw_starts_a_jump_and_is_no_motion_while_it_passes() {
+    let r = crate::robust::ResponseParams {
+        kappa: 0.8,
+        integral: 1.5,
+        integral_limit: 3e-4,
+        surface_bandwidth: 8.0,
+        surface_jerk: 1e-3,
+        noise_floor: 0.02,
+        feedforward_deadband: 6e-4,
+        set_point_rate: 50.0,
+        noise_gate: 1.0,
+        integration_band: 0.05,
+    };
+    let (dt, x) = (1e-3, 0.010 + 5.0 / 70_000.0);
+    let mut o = SurfaceObserver::new(ObserverParams::default());
+    o.restart(0.010);
+    let mut step = |o: &mut SurfaceObserver, f: f64, ff: f64| {
+        let s = View {
+            f,
+            ff,
+            ..view(x, ff)
+        };
+        o.track(&s, 8.0, dt);
+        o.feedforward(&s, &r, 1e-3, 0.01, 0.004, dt, 0.03, dt);
+    };
+    for _ in 0..200 {
+        step(&mut o, 5.0, 5.0);
+    }
+    // The stiffness quadruples under the still tool: the raw force jumps to 20 N at once, the
+    // conditioned one rises over the step time; the tool has not moved yet.
+    let mut moving = false;
+    for i in 1..=25 {
+        let ff = 5.0 + 15.0 * (i as f64 / 25.0);
+        step(&mut o, 20.0, ff);
+        if i == 1 {
+            assert!(o.jump_on_still_surface(), "the raw jump starts a jump");
+        }
+        moving |= o.hold(0.0, 1e-3, true, dt);
+    }
+    assert!(
+        !moving && o.still(),
+        "the passing step was taken for motion"
+    );
+}
