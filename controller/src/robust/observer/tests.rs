@@ -61,7 +61,7 @@ fn a_jump_seen_raw_starts_a_jump_and_is_no_motion_while_it_passes() {
     let (dt, x) = (1e-3, 0.010 + 5.0 / 70_000.0);
     let mut o = SurfaceObserver::new(ObserverParams::default());
     o.restart(0.010);
-    let mut step = |o: &mut SurfaceObserver, f: f64, ff: f64| {
+    let step = |o: &mut SurfaceObserver, f: f64, ff: f64| {
         let s = View {
             f,
             ff,
