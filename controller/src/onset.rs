@@ -14,52 +14,109 @@
 /// Samples remembered out of contact.
 pub const CAPACITY: usize = 48;
 
-/// Running least-squares sums on `(u, f)`.
+/// Running least-squares sums on `(u, w, f)`: `u` the scaled position, `w` the scaled velocity.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct Sums {
     n: f64,
     u: f64,
+    w: f64,
     f: f64,
     uu: f64,
+    uw: f64,
+    ww: f64,
     uf: f64,
+    wf: f64,
     ff: f64,
 }
 
+/// Relative determinant below which the velocity column adds nothing the position column has not
+/// (a constant velocity, or one proportional to the position): the fit is then the line alone.
+const COLLINEAR: f64 = 1e-6;
+
+/// The centred normal equations' solution: slope `b` on `u`, slope `c` on `w` (0: line only), the
+/// inverse's entries `(i_uu, i_uw, i_ww)`, and the residual sum of squares.
+struct Solved {
+    b: f64,
+    c: f64,
+    i_uu: f64,
+    i_uw: f64,
+    i_ww: f64,
+    sse: f64,
+}
+
 impl Sums {
-    fn add(&mut self, u: f64, f: f64) {
+    fn add(&mut self, u: f64, w: f64, f: f64) {
         self.n += 1.0;
         self.u += u;
+        self.w += w;
         self.f += f;
         self.uu += u * u;
+        self.uw += u * w;
+        self.ww += w * w;
         self.uf += u * f;
+        self.wf += w * f;
         self.ff += f * f;
     }
 
-    /// Centred second moments `(Suu, Suf, Sff)`.
-    fn centred(&self) -> (f64, f64, f64) {
+    /// Centred second moments `[Suu, Suw, Sww, Suf, Swf, Sff]`.
+    fn centred(&self) -> [f64; 6] {
         let n = self.n.max(1.0);
-        (
+        [
             self.uu - self.u * self.u / n,
+            self.uw - self.u * self.w / n,
+            self.ww - self.w * self.w / n,
             self.uf - self.u * self.f / n,
+            self.wf - self.w * self.f / n,
             self.ff - self.f * self.f / n,
-        )
+        ]
     }
 
-    /// Residual sum of squares of the least-squares line (∞ when the line is undetermined).
-    fn sse(&self) -> f64 {
-        let (suu, suf, sff) = self.centred();
+    /// The least-squares plane `f = a + b·u + c·w` (the line `c = 0` when the velocity adds nothing
+    /// or asks for a negative damping, which no surface has); `None` when undetermined.
+    fn solve(&self) -> Option<Solved> {
+        let [suu, suw, sww, suf, swf, sff] = self.centred();
         if self.n < 2.0 || suu <= 0.0 {
-            f64::INFINITY
-        } else {
-            (sff - suf * suf / suu).max(0.0)
+            return None;
         }
+        let line = Solved {
+            b: suf / suu,
+            c: 0.0,
+            i_uu: 1.0 / suu,
+            i_uw: 0.0,
+            i_ww: 0.0,
+            sse: (sff - suf * suf / suu).max(0.0),
+        };
+        let det = suu * sww - suw * suw;
+        if self.n < 4.0 || det <= COLLINEAR * suu * sww {
+            return Some(line);
+        }
+        let (i_uu, i_uw, i_ww) = (sww / det, -suw / det, suu / det);
+        let b = i_uu * suf + i_uw * swf;
+        let c = i_uw * suf + i_ww * swf;
+        if c < 0.0 {
+            return Some(line);
+        }
+        let sse = (sff - b * suf - c * swf).max(0.0);
+        Some(Solved {
+            b,
+            c,
+            i_uu,
+            i_uw,
+            i_ww,
+            sse,
+        })
+    }
+
+    /// Residual sum of squares of the least-squares fit (∞ when undetermined).
+    fn sse(&self) -> f64 {
+        self.solve().map_or(f64::INFINITY, |s| s.sse)
     }
 }
 
-/// A line fit `f = a + b·u`, with its covariance.
+/// A fit `f = a + b·u + c·w` (`w` the scaled velocity), with its covariance.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LineFit {
-    /// Intercept at `u = 0`, N.
+    /// Intercept at `u = 0`, `w = 0`, N.
     pub a: f64,
     /// Slope, N per unit of `u`.
     pub b: f64,
@@ -69,12 +126,20 @@ pub struct LineFit {
     pub var_b: f64,
     /// Covariance of `a` and `b`, N².
     pub cov_ab: f64,
+    /// Damping, N per unit of `w` (`c_e = c·s` for the position scale `s`).
+    pub c: f64,
+    /// Residual variance per degree of freedom, N².
+    pub residual_var: f64,
+    /// Residual sum of squares, N².
+    pub sse: f64,
+    /// Variance of the force about its mean, N².
+    pub force_var: f64,
 }
 
 /// The onset identifier. See the module documentation.
 #[derive(Clone, Debug, PartialEq)]
 pub struct OnsetFit {
-    buf: [(f64, f64); CAPACITY],
+    buf: [(f64, f64, f64); CAPACITY],
     len: usize,
     head: usize,
     sums: Sums,
@@ -88,7 +153,7 @@ impl OnsetFit {
     /// An empty identifier.
     pub fn new() -> Self {
         Self {
-            buf: [(0.0, 0.0); CAPACITY],
+            buf: [(0.0, 0.0, 0.0); CAPACITY],
             len: 0,
             head: 0,
             sums: Sums::default(),
@@ -106,12 +171,12 @@ impl OnsetFit {
         self.left = 0.0;
     }
 
-    /// Remember a raw sample out of contact.
-    pub fn remember(&mut self, x: f64, f: f64) {
-        if !(x.is_finite() && f.is_finite()) {
+    /// Remember a raw sample out of contact: position `x` (m), force `f` (N), velocity `v` (m/s).
+    pub fn remember(&mut self, x: f64, f: f64, v: f64) {
+        if !(x.is_finite() && f.is_finite() && v.is_finite()) {
             return;
         }
-        self.buf[self.head] = (x, f);
+        self.buf[self.head] = (x, f, v);
         self.head = (self.head + 1) % CAPACITY;
         self.len = (self.len + 1).min(CAPACITY);
     }
@@ -139,11 +204,11 @@ impl OnsetFit {
         let mut pre_ff = total_ff;
         let mut best = (f64::INFINITY, Sums::default());
         for j in (0..self.len).rev() {
-            let (x, f) = at(j);
-            suffix.add((x - x0) / scale, f);
+            let (x, f, v) = at(j);
+            suffix.add((x - x0) / scale, v / scale, f);
             pre_ff -= f * f;
             if suffix.n >= 2.0 {
-                let (_, suf, _) = suffix.centred();
+                let suf = suffix.centred()[3];
                 let cost = pre_ff.max(0.0) + suffix.sse();
                 if suf > 0.0 && cost < best.0 {
                     best = (cost, suffix);
@@ -157,14 +222,14 @@ impl OnsetFit {
         self.head = 0;
     }
 
-    /// A sample in contact; returns whether the window is still open.
-    pub fn add(&mut self, x: f64, f: f64, dt: f64) -> bool {
+    /// A sample in contact at velocity `v` (m/s); returns whether the window is still open.
+    pub fn add(&mut self, x: f64, f: f64, v: f64, dt: f64) -> bool {
         if self.left <= 0.0 {
             return false;
         }
         self.left -= dt;
-        if x.is_finite() && f.is_finite() {
-            self.sums.add((x - self.x0) / self.scale, f);
+        if x.is_finite() && f.is_finite() && v.is_finite() {
+            self.sums.add((x - self.x0) / self.scale, v / self.scale, f);
         }
         self.left > 0.0
     }
@@ -177,29 +242,86 @@ impl OnsetFit {
     /// The fit so far, with residual variance at least `noise_var` (N²); `None` while undetermined.
     pub fn fit(&self, noise_var: f64) -> Option<LineFit> {
         let s = &self.sums;
-        if s.n < 4.0 {
+        if s.n < 4.0 || s.centred()[3] <= 0.0 {
             return None;
         }
-        let (suu, suf, _) = s.centred();
-        if !(suu > 0.0 && suf > 0.0) {
+        let m = s.solve()?;
+        if m.b <= 0.0 {
             return None;
         }
-        let b = suf / suu;
-        let ub = s.u / s.n;
-        let a = s.f / s.n - b * ub;
-        let var = (s.sse() / (s.n - 2.0)).max(noise_var);
-        let var_b = var / suu;
+        let (ub, wb) = (s.u / s.n, s.w / s.n);
+        let a = s.f / s.n - m.b * ub - m.c * wb;
+        let dof = if m.c > 0.0 { 3.0 } else { 2.0 };
+        let residual_var = m.sse / (s.n - dof);
+        let var = residual_var.max(noise_var);
+        let var_b = var * m.i_uu;
+        // a = f̄ − b·ū − c·w̄: its variance from the centred inverse and the mean's own.
+        let var_a =
+            var / s.n + var * (ub * ub * m.i_uu + 2.0 * ub * wb * m.i_uw + wb * wb * m.i_ww);
         let fit = LineFit {
             a,
-            b,
-            var_a: var / s.n + ub * ub * var_b,
+            b: m.b,
+            var_a,
             var_b,
-            cov_ab: -ub * var_b,
+            cov_ab: -var * (ub * m.i_uu + wb * m.i_uw),
+            c: m.c,
+            residual_var,
+            sse: m.sse,
+            force_var: s.centred()[5] / (s.n - 1.0),
         };
-        [fit.a, fit.b, fit.var_a, fit.var_b, fit.cov_ab]
+        [fit.a, fit.b, fit.var_a, fit.var_b, fit.cov_ab, fit.c]
             .iter()
             .all(|v| v.is_finite())
             .then_some(fit)
+    }
+
+    /// The fit through the surface `x_c` (m) left where it was: `f = b·(x − x_c)/s + c·w`, no
+    /// intercept of its own (a change of stiffness alone pivots the spring line about the surface). The
+    /// intercept at `x₀` follows the slope; variances from the residuals, at least `noise_var` (N²).
+    pub fn fit_through(&self, x_c: f64, noise_var: f64) -> Option<LineFit> {
+        let s = &self.sums;
+        let d = (self.x0 - x_c) / self.scale;
+        if s.n < 4.0 || !d.is_finite() {
+            return None;
+        }
+        // Moments about the pivot, u_p = u + d, uncentred.
+        let pp = s.uu + 2.0 * d * s.u + s.n * d * d;
+        let pw = s.uw + d * s.w;
+        let pf = s.uf + d * s.f;
+        let (ww, wf, ff) = (s.ww, s.wf, s.ff);
+        if pp <= 0.0 {
+            return None;
+        }
+        let det = pp * ww - pw * pw;
+        let (mut b, mut c, mut i_pp) = (pf / pp, 0.0, 1.0 / pp);
+        let mut sse = ff - pf * pf / pp;
+        if det > COLLINEAR * pp * ww {
+            let (bb, cc) = ((ww * pf - pw * wf) / det, (pp * wf - pw * pf) / det);
+            if cc >= 0.0 {
+                (b, c, i_pp) = (bb, cc, ww / det);
+                sse = ff - b * pf - c * wf;
+            }
+        }
+        let sse = sse.max(0.0);
+        let dof = if c > 0.0 { 2.0 } else { 1.0 };
+        let residual_var = sse / (s.n - dof);
+        let var_b = residual_var.max(noise_var) * i_pp;
+        let fit = LineFit {
+            a: b * d,
+            b,
+            var_a: d * d * var_b,
+            var_b,
+            cov_ab: d * var_b,
+            c,
+            residual_var,
+            sse,
+            force_var: s.centred()[5] / (s.n - 1.0),
+        };
+        (b > 0.0
+            && [fit.a, fit.b, fit.var_b, fit.c]
+                .iter()
+                .all(|v| v.is_finite()))
+        .then_some(fit)
     }
 }
 
@@ -219,12 +341,40 @@ mod tests {
         let mut o = OnsetFit::new();
         let mut x = 0.00996;
         for _ in 0..40 {
-            o.remember(x, (k * (x - xc)).max(0.0));
+            o.remember(x, (k * (x - xc)).max(0.0), 0.002);
             x += 2e-6;
         }
         o.begin(x, s, 0.1);
         let fit = o.fit(0.0).unwrap();
         assert!((fit.b / s - k).abs() < 1.0, "k {}", fit.b / s);
         assert!((fit.a - k * (x - xc)).abs() < 1e-6);
+    }
+
+    /// A damped transient: `f = k·(x − x_c) + c_e·ẋ` with the tool settling and a wobble on top.
+    fn damped(o: &mut OnsetFit, k: f64, xc: f64, c_e: f64) {
+        let dt = 1e-3;
+        for i in 0..300 {
+            let t = i as f64 * dt;
+            let x = 0.0101 - 5e-5 * (-t / 0.02).exp() + 2e-6 * (t * 40.0).sin();
+            let v = 5e-5 / 0.02 * (-t / 0.02).exp() + 2e-6 * 40.0 * (t * 40.0).cos();
+            o.add(x, k * (x - xc) + c_e * v, v, dt);
+        }
+    }
+
+    #[test]
+    fn the_damping_is_fitted_with_the_stiffness() {
+        let (k, xc, c_e, s) = (70_000.0, 0.010, 200.0, 1e-4);
+        let mut o = OnsetFit::new();
+        o.begin(0.0101, s, 1.0);
+        damped(&mut o, k, xc, c_e);
+        let fit = o.fit(0.0).unwrap();
+        assert!((fit.b / s - k).abs() < 1e-3 * k, "k {}", fit.b / s);
+        assert!((fit.c / s - c_e).abs() < 1e-3 * c_e, "c_e {}", fit.c / s);
+        let through = o.fit_through(xc, 0.0).unwrap();
+        assert!((through.b / s - k).abs() < 1e-3 * k, "k {}", through.b / s);
+        assert!(through.sse < 1e-9, "{}", through.sse);
+        // Through a surface 10 µm off the line leaves a residual.
+        let off = o.fit_through(xc + 1e-5, 0.0).unwrap().sse;
+        assert!(off > 1e-3, "{off}");
     }
 }

@@ -74,12 +74,13 @@ fn stiffness(lo: f64, hi: f64) -> impl Strategy<Value = f64> {
 /// * the impact criterion `≤ 2·f_r + k_c·v·(delay + cycle)` fails for large set-points on stiff surfaces
 ///   on P2 (f_r 36.6 N, k_c 354 kN/m: 115 N against 84.5 N): the first-contact transient overshoots
 ///   while `k̂_c` is still the tuning's guess;
-/// * `k̂_c` within 10 % after a change fails near the soft end (20 → 10 kN/m, f_r 2 N, P1: not re-learnt),
-///   where the stale estimate's apparent surface motion cancels the re-fit.
+/// * `k̂_c` within 10 % after a change holds without sensor noise, damped or not (asserted); with noise
+///   it fails at small set-points on the 12 ms cell (f_r 2 N, 20 → 10 kN/m, σ 0.43 N: 17 % off after
+///   2 s), where the few samples of the transient under noise do not carry the stiffness to 10 %;
 /// * back within ±2 % in 0.5 s after a change fails at small set-points (f_r 2 N, 20 → 40 kN/m, P2:
 ///   1.4 s);
-/// * a change on a damped surface can lose contact at small set-points (f_r 2 N, 20 → 40 kN/m,
-///   118 N·s/m, P2: 8 losses);
+/// * a change on a damped surface can lose contact at small set-points (f_r 2 N, 20 → 10 kN/m,
+///   118 N·s/m, P2: 3 losses);
 /// * with 64 cases instead of 24 two more show: σ 0.82 N at f_r 2 N on 10 kN/m (P1) loses contact
 ///   once in the hold; a doubling on a 178 N·s/m surface at f_r 2 N (P1) ends 12 N off.
 const IMPACT: bool = false;
@@ -133,8 +134,8 @@ proptest! {
     }
 
     /// B2 carried over: the stiffness halves or doubles at any time in a steady contact; the force
-    /// comes back, the contact holds, and without damping `k̂_c` ends within 10 % of the new stiffness
-    /// within 2 s.
+    /// comes back, the contact holds, and `k̂_c` ends within 10 % of the new stiffness within 2 s, with
+    /// surface damping or without.
     #[test]
     fn stiffness_changes(
         f_r in 2.0f64..50.0,
@@ -159,7 +160,7 @@ proptest! {
         if SETTLE_AFTER_CHANGE && noise == 0.0 && c_e == 0.0 {
             prop_assert!(after.settle_time <= 0.5, "back in ±2 % after {} s", after.settle_time);
         }
-        if REIDENTIFY && c_e == 0.0 {
+        if noise == 0.0 || REIDENTIFY {
             prop_assert!(after.kc_rel_error <= 0.1, "k̂ off by {}", after.kc_rel_error);
         }
     }

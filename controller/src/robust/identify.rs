@@ -3,72 +3,23 @@
 //! * At a contact made from the approach (a still surface, the force rising from zero while the
 //!   position moves in), a hinge least-squares fit on the approach's raw samples and the first
 //!   `onset_window` of contact sets `k̂_c` ([`crate::onset`]). A contact re-acquired after a loss is not
-//!   fitted: the surface may be the one moving away.
+//!   fitted: the surface may be the one moving away. The fit has the velocity as a regressor of its own,
+//!   so surface damping `c_e·ẋ` is identified beside `k̂_c` instead of biasing it.
+//! * A jump under a steady contact on a still surface opens a re-fit over `refit_window`, judged at its
+//!   end by its own consistency (the stale `k̂_c` makes the still surface look moving meanwhile), through
+//!   the calm surface before the jump unless a surface step shows.
 //! * Afterwards the recursive estimator ([`StiffnessEstimator`]) goes on from the fitted values, with
-//!   its excitation, dead-zone and motion gates.
+//!   its excitation, dead-zone and motion gates, on the force less the identified damping.
 //! * In a steady contact the slow least-squares fit ([`SteadyEstimator`]) learns from the loop's answer
 //!   to sensor noise, and once confident moves `k̂_c` to its estimate at a bounded rate.
 
-use serde::{Deserialize, Serialize};
+mod params;
+mod refit;
+mod steady;
+pub use params::IdentifyParams;
 
-use super::positive;
 use crate::estimator::{EstimatorParams, SteadyEstimator, StiffnessEstimator};
 use crate::onset::OnsetFit;
-
-/// Identification's advanced parameters (the defaults suit any cell).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct IdentifyParams {
-    /// How long after contact is declared the contact transient is fitted, s.
-    pub onset_window: f64,
-    /// How long the transient after a jump in a steady contact on a still surface (a stiffness
-    /// change, a surface step) is fitted to re-identify `k̂_c`, s.
-    pub refit_window: f64,
-    /// Forgetting time of the steady-contact estimator, s.
-    pub steady_memory: f64,
-    /// How long the steady-contact estimator must have run before it is used, s.
-    pub steady_min_age: f64,
-    /// Relative standard deviation below which the steady-contact estimate is used.
-    pub steady_confidence: f64,
-    /// Relative standard deviation at which the steady-contact estimator stops learning.
-    pub steady_done: f64,
-    /// Largest relative rate at which the steady-contact estimate moves `k̂_c`, 1/s.
-    pub steady_rate: f64,
-}
-
-impl Default for IdentifyParams {
-    fn default() -> Self {
-        Self {
-            onset_window: 0.1,
-            refit_window: 0.3,
-            steady_memory: 3600.0,
-            steady_min_age: 1.0,
-            steady_confidence: 0.1,
-            steady_done: 0.02,
-            steady_rate: 0.02,
-        }
-    }
-}
-
-impl IdentifyParams {
-    /// Checks the values.
-    pub fn validate(&self) -> Result<(), String> {
-        positive("identify.onset_window", self.onset_window)?;
-        positive("identify.refit_window", self.refit_window)?;
-        positive("identify.steady_memory", self.steady_memory)?;
-        positive("identify.steady_min_age", self.steady_min_age)?;
-        positive("identify.steady_confidence", self.steady_confidence)?;
-        positive("identify.steady_done", self.steady_done)?;
-        positive("identify.steady_rate", self.steady_rate)?;
-        if self.steady_done > self.steady_confidence {
-            return Err(format!(
-                "identify.steady_done {} must not be above identify.steady_confidence {}",
-                self.steady_done, self.steady_confidence
-            ));
-        }
-        Ok(())
-    }
-}
 
 /// What a contact step of identification did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -94,7 +45,12 @@ pub struct Identifier {
     calm_at_start: bool,
     /// Where the transient being re-fitted started, `(x, f)`: its fit is taken at the window's end
     /// only, and only if the surface stayed still (a surface that starts moving makes a transient too).
-    refit_from: Option<(f64, f64)>,
+    /// With the surface before the jump, m: the pivot of a stiffness change.
+    refit_from: Option<(f64, f64, f64)>,
+    /// The surface `x − f/k̂_c` of the calm steps since `k̂_c` last moved, averaged over `refit_window`, m.
+    calm_surface: f64,
+    /// Surface damping identified by the last fit, N·s/m.
+    c_e: f64,
 }
 
 impl Identifier {
@@ -109,6 +65,8 @@ impl Identifier {
             off_band: 0.0,
             calm_at_start: false,
             refit_from: None,
+            calm_surface: f64::NAN,
+            c_e: 0.0,
         }
     }
 
@@ -126,6 +84,8 @@ impl Identifier {
         self.steady_var0 = f64::INFINITY;
         self.off_band = 0.0;
         self.refit_from = None;
+        self.calm_surface = f64::NAN;
+        self.c_e = 0.0;
     }
 
     /// Count whether the force is out of its band this step (`calm`: the contact is steady, on a
@@ -145,9 +105,14 @@ impl Identifier {
         self.est.kc()
     }
 
-    /// Keep a raw sample of the approach for the onset fit.
-    pub fn remember(&mut self, x: f64, f: f64) {
-        self.onset.remember(x, f);
+    /// Surface damping `ĉ_e` identified with `k̂_c`, N·s/m (0 until a fit has seen it).
+    pub fn damping(&self) -> f64 {
+        self.c_e
+    }
+
+    /// Keep a raw sample `(x, f)` of the approach, at velocity `v` (m/s), for the onset fit.
+    pub fn remember(&mut self, x: f64, f: f64, v: f64) {
+        self.onset.remember(x, f, v);
     }
 
     /// Contact is declared at `(x, f)`; `from_approach`: on a still surface, so the transient is fitted.
@@ -168,7 +133,7 @@ impl Identifier {
     pub fn refit(&mut self, x: f64, f: f64) {
         self.onset.clear();
         self.onset.begin(x, self.est.scale(), self.p.refit_window);
-        self.refit_from = Some((x, f));
+        self.refit_from = Some((x, f, self.calm_surface));
         self.steady.stop();
         self.steady_var0 = f64::INFINITY;
     }
@@ -183,14 +148,16 @@ impl Identifier {
         self.onset.stop();
     }
 
-    /// One step in contact with the raw `(x, f)` and conditioned force `ff`. `moving`: the surface moves
-    /// (no stiffness to learn); `first`: contact was declared this step; `disturbed`: something moved
+    /// One step in contact with the raw `(x, f)`, the raw position's velocity `v` and conditioned force
+    /// `ff`. `moving`: the surface moves (no stiffness to learn; a re-fit is judged by its own
+    /// consistency instead, as the apparent motion of the stale `k̂_c` makes it look moving); `first`: contact was declared this step; `disturbed`: something moved
     /// or jumped lately; `noise_var` and `noise_floor` the sensor's noise, N², and its floor, N.
     #[allow(clippy::too_many_arguments)]
     pub fn step(
         &mut self,
         x: f64,
         f: f64,
+        v: f64,
         ff: f64,
         dt: f64,
         moving: bool,
@@ -199,13 +166,12 @@ impl Identifier {
         noise_var: f64,
         noise_floor: f64,
     ) -> Identified {
-        if moving {
+        if moving && self.refit_from.is_none() {
             self.onset.stop();
-            self.refit_from = None;
         }
         let onset = self.onset.active();
         if onset && !first {
-            self.onset.add(x, f, dt);
+            self.onset.add(x, f, v, dt);
         }
         let fit = match self.refit_from {
             // A contact onset: the fit so far, every step.
@@ -213,16 +179,19 @@ impl Identifier {
             None => None,
             Some(_) if self.onset.active() => None,
             // A re-fit: once, at the window's end, if significant.
-            Some((x0, f0)) => {
+            Some((x0, f0, pivot)) => {
                 self.refit_from = None;
-                let scale = self.est.scale();
-                self.onset
-                    .fit(noise_var)
+                let (scale, rel) = (self.est.scale(), self.p.steady_confidence);
+                let r = noise_var.max(noise_floor * noise_floor);
+                refit::choose(&self.onset, pivot, noise_var, r, self.p.pivot_gate)
                     .filter(|fit| {
+                        // Significant, different, and one still spring: what the plane leaves beyond
+                        // the noise is at most `rel` of the transient's variance (a surface that started
+                        // to move leaves the force unexplained by the position).
                         fit.b > 0.0
-                            && fit.var_b.sqrt() <= self.p.steady_confidence * fit.b
-                            && (fit.b / scale - self.est.kc()).abs()
-                                > self.p.steady_confidence * self.est.kc()
+                            && fit.var_b.sqrt() <= rel * fit.b
+                            && (fit.b / scale - self.est.kc()).abs() > rel * self.est.kc()
+                            && fit.residual_var - r <= rel * fit.force_var
                     })
                     .inspect(|_| self.est.begin_contact(x0, f0))
             }
@@ -230,6 +199,8 @@ impl Identifier {
         match fit {
             Some(fit) => {
                 let projected = self.est.seed(&fit, x, ff);
+                self.calm_surface = f64::NAN;
+                self.c_e = fit.c / self.est.scale();
                 self.steady.stop();
                 self.steady_var0 = self.est.seed_variance();
                 Identified {
@@ -238,9 +209,23 @@ impl Identifier {
                 }
             }
             None => {
-                let up = self.est.update(x, f, ff, dt, moving);
+                // The spring's force: the identified damping's share taken out.
+                let f_spring = f - self.c_e * v;
+                let up = self.est.update(x, f_spring, ff, dt, moving);
                 let r = noise_var.max(noise_floor * noise_floor);
-                self.steady_step(x, f, dt, moving || up.adapted || disturbed, r);
+                let calm = !(moving || up.adapted || disturbed);
+                if up.adapted {
+                    self.calm_surface = f64::NAN;
+                } else if calm {
+                    let z = x - f_spring / self.est.kc();
+                    let a = (dt / self.p.refit_window).min(1.0);
+                    self.calm_surface = if self.calm_surface.is_finite() {
+                        self.calm_surface + a * (z - self.calm_surface)
+                    } else {
+                        z
+                    };
+                }
+                self.steady_step(x, f_spring, dt, !calm, r);
                 Identified {
                     seeded: false,
                     projected: up.projected,
@@ -248,101 +233,7 @@ impl Identifier {
             }
         }
     }
-
-    /// The steady-contact estimator: runs while nothing moves, jumps or adapts, and once confident
-    /// moves `k̂_c` to its estimate at a bounded rate. `r` is the force noise variance, N².
-    fn steady_step(&mut self, x: f64, f: f64, dt: f64, disturbed: bool, r: f64) {
-        let p = self.p;
-        if disturbed {
-            self.steady.stop();
-            self.steady_var0 = f64::INFINITY;
-            return;
-        }
-        if !self.steady.active() {
-            let s = self.est.scale();
-            let theta0 = self.est.kc() * s;
-            let u = self.est.params().initial_uncertainty * theta0;
-            let var0 = self.steady_var0.min(u * u);
-            self.steady.start(x, self.est.predict(x), theta0, var0, s);
-            self.steady_var0 = f64::INFINITY;
-            return;
-        }
-        // Learnt: a steady contact has nothing more to teach, and a sensor bias that has drifted as
-        // far as the set-point lifts the tool off unseen (the law holds the measured force), which
-        // would teach it wrong.
-        let learnt = self
-            .steady
-            .estimate()
-            .is_some_and(|(_, rel)| rel <= p.steady_done);
-        if !learnt {
-            self.steady.update(x, f, r, dt);
-        }
-        if let Some((k, rel)) = self.steady.estimate()
-            && self.steady.age() >= p.steady_min_age
-            && rel <= p.steady_confidence
-        {
-            let now = self.est.kc();
-            let step = p.steady_rate * dt * now;
-            self.est.set_kc(now + (k - now).clamp(-step, step), x);
-        }
-    }
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn est() -> EstimatorParams {
-        EstimatorParams {
-            kc0: 50_000.0,
-            kc_min: 10_000.0,
-            kc_max: 500_000.0,
-            memory: 0.3,
-            excitation: 1.5,
-            excitation_window: 0.05,
-            dead_zone: 0.02,
-            initial_uncertainty: 1.0,
-            max_surface_speed: 0.001,
-        }
-    }
-
-    #[test]
-    fn the_onset_of_a_contact_from_the_approach_is_fitted() {
-        let mut id = Identifier::new(IdentifyParams::default(), est(), 5.0 / 50_000.0);
-        let k: f64 = 70_000.0;
-        let mut x: f64 = 0.0095;
-        let (mut seeded, mut contact) = (false, false);
-        for _ in 0..2000 {
-            let f = (k * (x - 0.010)).max(0.0);
-            let mut first = false;
-            if !contact {
-                if f < 1.0 {
-                    id.remember(x, f);
-                    x += 2e-6;
-                    continue;
-                }
-                contact = true;
-                first = true;
-                id.begin_contact(x, f, true);
-            }
-            let out = id.step(x, f, f, 1e-3, false, first, false, 0.0, 0.02);
-            seeded |= out.seeded;
-            if x < 0.010 + 5.0 / k {
-                x += 2e-6;
-            }
-        }
-        assert!(seeded, "the transient was fitted");
-        assert!((id.kc() - k).abs() < 0.02 * k, "k̂ {}", id.kc());
-        id.reset();
-        assert_eq!(id.kc(), 50_000.0);
-    }
-
-    #[test]
-    fn validation_names_the_field() {
-        let p = IdentifyParams {
-            steady_done: 0.5,
-            ..IdentifyParams::default()
-        };
-        assert!(p.validate().unwrap_err().contains("steady_done"));
-    }
-}
+mod tests;

@@ -256,7 +256,7 @@ impl ForceLaw for RobustLaw {
             self.contact.state(),
             ContactState::Approach | ContactState::Reacquire
         ) {
-            self.identify.remember(x, f);
+            self.identify.remember(x, f, s.v_raw);
         }
         let receding = self.observer.receding();
         let th = self.thresholds(cycle);
@@ -302,6 +302,7 @@ impl ForceLaw for RobustLaw {
             let id = self.identify.step(
                 x,
                 f,
+                s.v_raw,
                 s.ff,
                 dt,
                 moving,

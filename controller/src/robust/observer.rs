@@ -9,63 +9,12 @@
 //!   0 until real surface motion is established (the apparent motion of a stale `k̂_c` is tied to the
 //!   robot's), then `m²/(m² + 1)` with `m` the estimated motion in units of its own uncertainty.
 
-use serde::{Deserialize, Serialize};
+mod params;
+pub use params::ObserverParams;
 
 use super::motion::Motion;
-use super::positive;
 use crate::estimator::surface_moving;
 use crate::predictor::SurfacePredictor;
-
-/// The observer's and predictor's advanced parameters (the defaults suit any cell).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct ObserverParams {
-    /// An innovation above this fraction of the set-point's penetration `f_r/k̂_c` in one step is a
-    /// jump, not motion.
-    pub step_innovation: f64,
-    /// Innovation of the predictor, in its own standard deviations, beyond which (and beyond the step
-    /// floor) a measurement is a jump.
-    pub jump_gate: f64,
-    /// How long the feed-forward stays on after real surface motion was last seen, s (it passes
-    /// through zero velocity at every turn of a curved surface).
-    pub motion_hold: f64,
-    /// How long the predictor must see surface motion without a break before it is believed, s.
-    pub motion_confirm: f64,
-    /// How long the robot must have moved both with and against one run of surface velocity for
-    /// that run to count as real motion, s.
-    pub opposed_confirm: f64,
-    /// Significance, in standard deviations, at which the fed-forward motion gets half its weight.
-    pub motion_significance: f64,
-    /// Smallest dead-band on the fallback feed-forward velocity, m/s.
-    pub deadband_floor: f64,
-}
-
-impl Default for ObserverParams {
-    fn default() -> Self {
-        Self {
-            step_innovation: 0.25,
-            jump_gate: 6.0,
-            motion_hold: 0.5,
-            motion_confirm: 0.008,
-            opposed_confirm: 0.01,
-            motion_significance: 3.0,
-            deadband_floor: 0.0001,
-        }
-    }
-}
-
-impl ObserverParams {
-    /// Checks the values.
-    pub fn validate(&self) -> Result<(), String> {
-        positive("observer.step_innovation", self.step_innovation)?;
-        positive("observer.jump_gate", self.jump_gate)?;
-        positive("observer.motion_hold", self.motion_hold)?;
-        positive("observer.motion_confirm", self.motion_confirm)?;
-        positive("observer.opposed_confirm", self.opposed_confirm)?;
-        positive("observer.motion_significance", self.motion_significance)?;
-        positive("observer.deadband_floor", self.deadband_floor)
-    }
-}
 
 /// What the observer needs from the rest of the law in one contact step.
 #[derive(Clone, Copy, Debug)]
@@ -111,6 +60,9 @@ pub struct SurfaceObserver {
     jump_started: bool,
     pred: SurfacePredictor,
     pred_jump_time: f64,
+    /// Time left for a jump the raw predictor saw to pass the conditioning, s: the conditioned
+    /// surface moves meanwhile, and that is no motion.
+    passing: f64,
     motion: Motion,
 }
 
@@ -125,6 +77,7 @@ impl SurfaceObserver {
             jump_started: false,
             pred: SurfacePredictor::new(),
             pred_jump_time: 0.0,
+            passing: 0.0,
             motion: Motion::default(),
         };
         o.reset();
@@ -151,6 +104,7 @@ impl SurfaceObserver {
         self.jump_started = false;
         self.pred.clear();
         self.pred_jump_time = 0.0;
+        self.passing = 0.0;
         self.motion.restart();
     }
 
@@ -183,7 +137,7 @@ impl SurfaceObserver {
     /// Run the motion holds for a step; `v_x` is the conditioned position's velocity. Returns whether
     /// the estimator is to take the surface for a moving one.
     pub fn hold(&mut self, v_x: f64, max_surface_speed: f64, in_contact: bool, dt: f64) -> bool {
-        let moving = surface_moving(self.vc, v_x, max_surface_speed);
+        let moving = surface_moving(self.vc, v_x, max_surface_speed) && self.passing <= 0.0;
         self.motion.hold(&self.p, moving && in_contact, dt) || moving
     }
 
@@ -195,6 +149,7 @@ impl SurfaceObserver {
         let jump = e.abs() > self.p.step_innovation * s.force_scale / s.k;
         self.jump_started = jump && self.jump_time == 0.0;
         self.jump_time = if jump { self.jump_time + dt } else { 0.0 };
+        self.passing = (self.passing - dt).max(0.0);
         if jump && self.jump_time <= s.step_time {
             self.zc = z;
         } else {
@@ -235,6 +190,11 @@ impl SurfaceObserver {
             p.jump_gate,
             jump_floor,
         );
+        if jumped {
+            // A step seen raw starts passing the conditioning now (and is the start of a jump).
+            self.jump_started |= self.pred_jump_time == 0.0;
+            self.passing = s.step_time;
+        }
         self.pred_jump_time = if jumped {
             self.pred_jump_time + dt
         } else {
@@ -266,48 +226,4 @@ impl SurfaceObserver {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn view(xf: f64, ff: f64) -> View {
-        View {
-            x: xf,
-            f: ff,
-            xf,
-            ff,
-            v_raw: 0.0,
-            k: 70_000.0,
-            force_scale: 5.0,
-            noise_var: 0.0,
-            step_time: 0.03,
-        }
-    }
-
-    #[test]
-    fn a_step_moves_the_observed_surface_without_a_velocity_kick() {
-        let mut o = SurfaceObserver::new(ObserverParams::default());
-        o.restart(0.010);
-        // The surface seen jumps 0.5 mm (35 N at the same position).
-        o.track(&view(0.0105, 0.0), 8.0, 1e-3);
-        assert_eq!(o.surface(), 0.0105);
-        assert_eq!(o.receding(), 0.0);
-        assert!(o.disturbed(), "a jump is a disturbance");
-    }
-
-    #[test]
-    fn a_still_surface_stays_still_and_a_moving_one_is_followed() {
-        let mut o = SurfaceObserver::new(ObserverParams::default());
-        o.restart(0.010);
-        for _ in 0..1000 {
-            o.track(&view(0.010 + 5.0 / 70_000.0, 5.0), 8.0, 1e-3);
-        }
-        assert!((o.surface() - 0.010).abs() < 1e-12 && !o.disturbed());
-        for i in 0..1000 {
-            let z = 0.010 + 0.002 * i as f64 * 1e-3;
-            o.track(&view(z + 5.0 / 70_000.0, 5.0), 8.0, 1e-3);
-        }
-        assert!((o.receding() - 0.002).abs() < 1e-4, "{}", o.receding());
-        o.reset();
-        assert!(o.surface().is_nan() && !o.disturbed());
-    }
-}
+mod tests;

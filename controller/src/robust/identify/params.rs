@@ -1,0 +1,65 @@
+//! Identification's parameters.
+
+use serde::{Deserialize, Serialize};
+
+use super::super::positive;
+
+/// Identification's advanced parameters (the defaults suit any cell).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct IdentifyParams {
+    /// How long after contact is declared the contact transient is fitted, s.
+    pub onset_window: f64,
+    /// How long the transient after a jump in a steady contact on a still surface (a stiffness
+    /// change, a surface step) is fitted to re-identify `k̂_c`, s.
+    pub refit_window: f64,
+    /// Significance, in standard deviations of the residual, at which a re-fit's line through the
+    /// surface before the jump (a stiffness change alone) gives way to a free line (the surface moved).
+    pub pivot_gate: f64,
+    /// Forgetting time of the steady-contact estimator, s.
+    pub steady_memory: f64,
+    /// How long the steady-contact estimator must have run before it is used, s.
+    pub steady_min_age: f64,
+    /// Relative standard deviation below which the steady-contact estimate is used.
+    pub steady_confidence: f64,
+    /// Relative standard deviation at which the steady-contact estimator stops learning.
+    pub steady_done: f64,
+    /// Largest relative rate at which the steady-contact estimate moves `k̂_c`, 1/s.
+    pub steady_rate: f64,
+}
+
+impl Default for IdentifyParams {
+    fn default() -> Self {
+        Self {
+            onset_window: 0.1,
+            refit_window: 0.3,
+            pivot_gate: 3.0,
+            steady_memory: 3600.0,
+            steady_min_age: 1.0,
+            steady_confidence: 0.1,
+            steady_done: 0.02,
+            steady_rate: 0.02,
+        }
+    }
+}
+
+impl IdentifyParams {
+    /// Checks the values.
+    pub fn validate(&self) -> Result<(), String> {
+        positive("identify.onset_window", self.onset_window)?;
+        positive("identify.refit_window", self.refit_window)?;
+        positive("identify.pivot_gate", self.pivot_gate)?;
+        positive("identify.steady_memory", self.steady_memory)?;
+        positive("identify.steady_min_age", self.steady_min_age)?;
+        positive("identify.steady_confidence", self.steady_confidence)?;
+        positive("identify.steady_done", self.steady_done)?;
+        positive("identify.steady_rate", self.steady_rate)?;
+        if self.steady_done > self.steady_confidence {
+            return Err(format!(
+                "identify.steady_done {} must not be above identify.steady_confidence {}",
+                self.steady_done, self.steady_confidence
+            ));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,108 @@
+//! Unit tests of the identification stage.
+
+use super::*;
+
+fn est() -> EstimatorParams {
+    EstimatorParams {
+        kc0: 50_000.0,
+        kc_min: 10_000.0,
+        kc_max: 500_000.0,
+        memory: 0.3,
+        excitation: 1.5,
+        excitation_window: 0.05,
+        dead_zone: 0.02,
+        initial_uncertainty: 1.0,
+        max_surface_speed: 0.001,
+    }
+}
+
+#[test]
+fn the_onset_of_a_contact_from_the_approach_is_fitted() {
+    let mut id = Identifier::new(IdentifyParams::default(), est(), 5.0 / 50_000.0);
+    let k: f64 = 70_000.0;
+    let mut x: f64 = 0.0095;
+    let (mut seeded, mut contact) = (false, false);
+    for _ in 0..2000 {
+        let f = (k * (x - 0.010)).max(0.0);
+        let mut first = false;
+        if !contact {
+            if f < 1.0 {
+                id.remember(x, f, 2e-3);
+                x += 2e-6;
+                continue;
+            }
+            contact = true;
+            first = true;
+            id.begin_contact(x, f, true);
+        }
+        let out = id.step(x, f, 0.0, f, 1e-3, false, first, false, 0.0, 0.02);
+        seeded |= out.seeded;
+        if x < 0.010 + 5.0 / k {
+            x += 2e-6;
+        }
+    }
+    assert!(seeded, "the transient was fitted");
+    assert!((id.kc() - k).abs() < 0.02 * k, "k̂ {}", id.kc());
+    id.reset();
+    assert_eq!(id.kc(), 50_000.0);
+}
+
+#[test]
+fn validation_names_the_field() {
+    let p = IdentifyParams {
+        steady_done: 0.5,
+        ..IdentifyParams::default()
+    };
+    assert!(p.validate().unwrap_err().contains("steady_done"));
+}
+
+/// A steady contact at 5 N on a still surface at 10 mm of stiffness `k`, held for 1 s, then the
+/// environment changes to stiffness `k2` and surface `xc2` at the same position; the tool moves to the
+/// new equilibrium with a 20 ms time constant and `c_e` of damping, and the re-fit runs. Returns k̂_c.
+fn change(k: f64, k2: f64, xc2: f64, c_e: f64) -> f64 {
+    let (xc, f_r, dt) = (0.010, 5.0, 1e-3);
+    let mut id = Identifier::new(IdentifyParams::default(), est(), f_r / 50_000.0);
+    let mut x = xc + f_r / k;
+    id.begin_contact(x, f_r, false);
+    for _ in 0..1000 {
+        id.step(x, f_r, 0.0, f_r, dt, false, false, false, 0.0, 0.02);
+    }
+    assert!(
+        (id.kc() - k).abs() < 1e-6 * k,
+        "k̂ {} before the change",
+        id.kc()
+    );
+    let x_end = xc2 + f_r / k2;
+    id.refit(x, k2 * (x - xc2));
+    for _ in 0..1000 {
+        let v = (x_end - x) / 0.020;
+        x += v * dt;
+        let f = k2 * (x - xc2) + c_e * v;
+        id.step(x, f, v, f, dt, false, false, false, 0.0, 0.02);
+    }
+    id.kc()
+}
+
+#[test]
+fn a_stiffness_change_on_a_still_surface_is_re_learnt_through_the_surface() {
+    for (k2, c_e) in [
+        (100_000.0, 0.0),
+        (25_000.0, 0.0),
+        (100_000.0, 200.0),
+        (25_000.0, 200.0),
+    ] {
+        let k = change(50_000.0, k2, 0.010, c_e);
+        assert!((k - k2).abs() < 0.02 * k2, "k̂ {k} for {k2} at {c_e} N·s/m");
+    }
+}
+
+#[test]
+fn a_surface_step_is_no_stiffness_change() {
+    for step in [-3e-4, 3e-4] {
+        let k = change(50_000.0, 50_000.0, 0.010 + step, 0.0);
+        assert!(
+            (k - 50_000.0).abs() < 0.02 * 50_000.0,
+            "k̂ {k} after a {step} m step"
+        );
+    }
+}

@@ -1,0 +1,56 @@
+//! The observer's and predictor's parameters.
+
+use serde::{Deserialize, Serialize};
+
+use super::super::positive;
+
+/// The observer's and predictor's advanced parameters (the defaults suit any cell).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ObserverParams {
+    /// An innovation above this fraction of the set-point's penetration `f_r/k̂_c` in one step is a
+    /// jump, not motion.
+    pub step_innovation: f64,
+    /// Innovation of the predictor, in its own standard deviations, beyond which (and beyond the step
+    /// floor) a measurement is a jump.
+    pub jump_gate: f64,
+    /// How long the feed-forward stays on after real surface motion was last seen, s (it passes
+    /// through zero velocity at every turn of a curved surface).
+    pub motion_hold: f64,
+    /// How long the predictor must see surface motion without a break before it is believed, s.
+    pub motion_confirm: f64,
+    /// How long the robot must have moved both with and against one run of surface velocity for
+    /// that run to count as real motion, s.
+    pub opposed_confirm: f64,
+    /// Significance, in standard deviations, at which the fed-forward motion gets half its weight.
+    pub motion_significance: f64,
+    /// Smallest dead-band on the fallback feed-forward velocity, m/s.
+    pub deadband_floor: f64,
+}
+
+impl Default for ObserverParams {
+    fn default() -> Self {
+        Self {
+            step_innovation: 0.25,
+            jump_gate: 6.0,
+            motion_hold: 0.5,
+            motion_confirm: 0.008,
+            opposed_confirm: 0.01,
+            motion_significance: 3.0,
+            deadband_floor: 0.0001,
+        }
+    }
+}
+
+impl ObserverParams {
+    /// Checks the values.
+    pub fn validate(&self) -> Result<(), String> {
+        positive("observer.step_innovation", self.step_innovation)?;
+        positive("observer.jump_gate", self.jump_gate)?;
+        positive("observer.motion_hold", self.motion_hold)?;
+        positive("observer.motion_confirm", self.motion_confirm)?;
+        positive("observer.opposed_confirm", self.opposed_confirm)?;
+        positive("observer.motion_significance", self.motion_significance)?;
+        positive("observer.deadband_floor", self.deadband_floor)
+    }
+}
