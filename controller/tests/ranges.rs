@@ -69,9 +69,6 @@ fn stiffness(lo: f64, hi: f64) -> impl Strategy<Value = f64> {
 }
 
 /// Known limits, measured, not hidden (flip to see them fail):
-/// * the impact criterion `≤ 2·f_r + k_c·v·(delay + cycle)` fails for large set-points on stiff surfaces
-///   on P2 (f_r 36.6 N, k_c 354 kN/m: 115 N against 84.5 N): the first-contact transient overshoots
-///   while `k̂_c` is still the tuning's guess;
 /// * `k̂_c` within 10 % after a change fails near the soft end (20 → 10 kN/m, f_r 2 N, P1: not re-learnt),
 ///   where the stale estimate's apparent surface motion cancels the re-fit.
 /// * back within ±2 % in 0.5 s after a change fails at small set-points (f_r 2 N, 20 → 40 kN/m, P2:
@@ -79,8 +76,11 @@ fn stiffness(lo: f64, hi: f64) -> impl Strategy<Value = f64> {
 /// * a change on a damped surface can lose contact at small set-points (f_r 2 N, 20 → 40 kN/m,
 ///   118 N·s/m, P2: 8 losses);
 /// * with 64 cases instead of 24 two more show: σ 0.82 N at f_r 2 N on 10 kN/m (P1) loses contact
-///   once in the hold; a doubling on a 178 N·s/m surface at f_r 2 N (P1) ends 12 N off.
-const IMPACT: bool = false;
+///   once in the hold; a doubling on a 178 N·s/m surface at f_r 2 N (P1) ends 12 N off;
+/// * with 200 cases the impact criterion fails under noise at the smallest set-point (σ 0.82 N, f_r
+///   2 N, 10 kN/m, P1: 4.46 N against 4.1 N). (The touch-down goes on at approach speed until `k̂_c`
+///   is identified; before that, f_r 36.6 N on 354 kN/m on P2 hit 115 N against 84.5 N, now 37 N.)
+const IMPACT: bool = true;
 const DAMPED_CHANGE: bool = false;
 const SETTLE_AFTER_CHANGE: bool = false;
 const REIDENTIFY: bool = false;

@@ -107,6 +107,7 @@ impl RobustLaw {
             // The observed surface is x − f/k̂_c: a k̂_c that moves would show it moving. While the
             // transient is identified the observers restart on every new k̂_c, at rest.
             self.observer.restart(s.xf - s.ff / self.identify.kc());
+            self.contact.identified();
         }
         ev.estimator_bound |= id.projected;
     }

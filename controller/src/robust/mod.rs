@@ -237,7 +237,12 @@ impl ForceLaw for RobustLaw {
             .command(x, self.limiter.command(), &speeds, anchor, dt)
         {
             Some(u) => u,
-            None => self.in_contact(&s, cycle, dt),
+            None => {
+                let want = self.in_contact(&s, cycle, dt);
+                let window = self.p.identify.onset_window;
+                self.contact
+                    .land(want, self.limiter.command(), &speeds, window, dt)
+            }
         };
         if want.is_finite() {
             self.limiter.step(want, dt, &mut ev);

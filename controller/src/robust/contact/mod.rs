@@ -125,6 +125,8 @@ pub struct ContactMachine {
     v_lost: f64,
     /// The measured position when contact was last lost, m.
     x_lost: f64,
+    /// A touch-down from the approach whose stiffness is not identified yet.
+    landing: bool,
 }
 
 impl ContactMachine {
@@ -139,6 +141,7 @@ impl ContactMachine {
             in_contact: f64::INFINITY,
             v_lost: 0.0,
             x_lost: 0.0,
+            landing: false,
         };
         m.reset();
         m
@@ -158,6 +161,7 @@ impl ContactMachine {
         self.in_contact = f64::INFINITY;
         self.v_lost = 0.0;
         self.x_lost = 0.0;
+        self.landing = false;
     }
 
     /// Whether the contact has lasted longer than a bounce (a steady contact), s.
@@ -200,6 +204,7 @@ impl ContactMachine {
         let c = self.p;
         if s.ff > max_force && self.state != ContactState::Retract {
             self.state = ContactState::Retract;
+            self.landing = false;
             self.travelled = 0.0;
             return Transition::ForceLimit;
         }
@@ -209,6 +214,7 @@ impl ContactMachine {
                 // contact just lost), or one strong raw sample.
                 if (s.ff >= th.contact && s.f >= th.lift) || s.f >= c.strong_contact * th.contact {
                     let from_approach = self.state == ContactState::Approach;
+                    self.landing = from_approach;
                     self.state = ContactState::Contact;
                     self.below = 0.0;
                     self.below_samples = 0;
@@ -234,6 +240,7 @@ impl ContactMachine {
                             c.reacquire_distance
                         };
                         self.v_lost = receding;
+                        self.landing = false;
                         self.x_lost = s.x;
                         return Transition::LiftOff;
                     }

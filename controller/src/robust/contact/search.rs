@@ -48,6 +48,24 @@ impl ContactMachine {
         }
     }
 
+    /// The stiffness of the surface touched down on is identified: the landing is over.
+    pub fn identified(&mut self) {
+        self.landing = false;
+    }
+
+    /// The command in contact `want` during a touch-down (s since contact below `window`, the
+    /// stiffness not identified yet): until `k̂_c` is the surface's and not the tuning's guess, the
+    /// command goes on in at no more than the approach speed from the last command `u` (a guess too
+    /// soft would command a step deep into the surface; the approach's speed is what the impact
+    /// bound is made of).
+    pub fn land(&self, want: f64, u: f64, sp: &Speeds, window: f64, dt: f64) -> f64 {
+        if self.landing && self.in_contact < window {
+            want.min(u + sp.approach * dt)
+        } else {
+            want
+        }
+    }
+
     /// The command out of contact (`None` in contact): from the last command `u` and the measured
     /// position `x`, never more than `anchor` (s at approach speed) ahead of the robot.
     pub fn command(&mut self, x: f64, u: f64, sp: &Speeds, anchor: f64, dt: f64) -> Option<f64> {

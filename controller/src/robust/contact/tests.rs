@@ -150,3 +150,22 @@ fn validation_names_the_field() {
     };
     assert!(p.validate().unwrap_err().contains("lift_force"));
 }
+
+#[test]
+fn a_touch_down_goes_on_at_approach_speed_until_the_stiffness_is_identified() {
+    let mut m = ContactMachine::new(params());
+    m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
+    assert_eq!(m.state(), ContactState::Contact);
+    // A guess too soft wants 1 mm in; the landing goes on at 2 mm/s.
+    let capped = m.land(0.011, 0.010, &SP, 0.1, 1e-3);
+    assert!((capped - (0.010 + 0.002e-3)).abs() < 1e-15, "{capped}");
+    // Backing off is never held.
+    assert_eq!(m.land(0.009, 0.010, &SP, 0.1, 1e-3), 0.009);
+    // Past the window, or once identified, the law's command goes through.
+    m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 0.2);
+    assert_eq!(m.land(0.011, 0.010, &SP, 0.1, 1e-3), 0.011);
+    let mut m = ContactMachine::new(params());
+    m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
+    m.identified();
+    assert_eq!(m.land(0.011, 0.010, &SP, 0.1, 1e-3), 0.011);
+}
