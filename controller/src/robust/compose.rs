@@ -111,4 +111,28 @@ impl RobustLaw {
         }
         ev.estimator_bound |= id.projected;
     }
+
+    /// The command before limits: out of contact the state machine's (approach, search, retract), in
+    /// contact the law's, held to the approach speed while touching down.
+    pub(super) fn command(&mut self, x: f64, s: &Signals, cycle: f64, dt: f64) -> f64 {
+        let anchor = self.anchor_time(cycle);
+        let speeds = self.contact.speeds(
+            self.identify.kc(),
+            self.response.set_point(),
+            self.p.limits.max_force,
+            self.p.cell.stopping_time(cycle),
+        );
+        match self
+            .contact
+            .command(x, self.limiter.command(), &speeds, anchor, dt)
+        {
+            Some(u) => u,
+            None => {
+                let want = self.in_contact(s, cycle, dt);
+                let window = self.p.identify.onset_window;
+                self.contact
+                    .land(want, self.limiter.command(), &speeds, window, dt)
+            }
+        }
+    }
 }

@@ -225,25 +225,7 @@ impl ForceLaw for RobustLaw {
         if in_contact {
             self.identify_in_contact(x, f, &s, cycle, moving, &mut ev, dt);
         }
-        let anchor = self.anchor_time(cycle);
-        let speeds = self.contact.speeds(
-            self.identify.kc(),
-            self.response.set_point(),
-            self.p.limits.max_force,
-            self.p.cell.stopping_time(cycle),
-        );
-        let want = match self
-            .contact
-            .command(x, self.limiter.command(), &speeds, anchor, dt)
-        {
-            Some(u) => u,
-            None => {
-                let want = self.in_contact(&s, cycle, dt);
-                let window = self.p.identify.onset_window;
-                self.contact
-                    .land(want, self.limiter.command(), &speeds, window, dt)
-            }
-        };
+        let want = self.command(x, &s, cycle, dt);
         if want.is_finite() {
             self.limiter.step(want, dt, &mut ev);
         } else {
