@@ -67,11 +67,9 @@ impl RobustLaw {
     }
 
     /// In contact: re-identify `k̂_c` when the environment changed under a steady contact, and run the
-    /// identifier on the sample `(x, f)`; `moving`: the surface counts as moving.
+    /// identifier on the raw sample `(s.x, s.f)`; `moving`: the surface counts as moving.
     pub(super) fn identify_in_contact(
         &mut self,
-        x: f64,
-        f: f64,
         s: &Signals,
         cycle: f64,
         moving: bool,
@@ -89,12 +87,12 @@ impl RobustLaw {
             self.contact.steady() && !moving && !self.identify.fitting() && self.observer.still();
         let excursion = self.identify.excursion(off, calm, persist, dt);
         if excursion || (calm && self.observer.jump_on_still_surface()) {
-            self.identify.refit(x, f);
+            self.identify.refit(s.x, s.f);
         }
         let disturbed = self.observer.disturbed();
         let id = self.identify.step(
-            x,
-            f,
+            s.x,
+            s.f,
             s.ff,
             dt,
             moving,

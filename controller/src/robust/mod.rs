@@ -223,7 +223,7 @@ impl ForceLaw for RobustLaw {
             .observer
             .hold(s.v_x, self.p.estimator.max_surface_speed, in_contact, dt);
         if in_contact {
-            self.identify_in_contact(x, f, &s, cycle, moving, &mut ev, dt);
+            self.identify_in_contact(&s, cycle, moving, &mut ev, dt);
         }
         let want = self.command(x, &s, cycle, dt);
         if want.is_finite() {
