@@ -80,7 +80,10 @@ fn stiffness(lo: f64, hi: f64) -> impl Strategy<Value = f64> {
 /// * with 64 cases instead of 24 two more show: σ 0.82 N at f_r 2 N on 10 kN/m (P1) loses contact
 ///   once in the hold; a doubling on a 178 N·s/m surface at f_r 2 N (P1) ends 12 N off;
 /// * with 200 cases the impact criterion fails under noise at the smallest set-point (σ 0.82 N, f_r
-///   2 N, 10 kN/m, P1: 4.46 N against 4.1 N). (The touch-down goes on at approach speed until `k̂_c`
+///   2 N, 10 kN/m, P1: 4.46 N against 4.1 N);
+/// * near the top of the noise range a noise spike can be taken for contact short of the surface, the
+///   onset fit of noise sets `k̂_c` to its floor, and the law drives in (σ 0.9 N, f_r 20 N, 500 kN/m,
+///   P2, seed 7: 547 N; 100 kN/m: 109 N; the 24 cases drawn here do not hit it). (The touch-down goes on at approach speed until `k̂_c`
 ///   is identified; before that, f_r 36.6 N on 354 kN/m on P2 hit 115 N against 84.5 N, now 37 N.)
 const IMPACT: bool = true;
 const DAMPED_CHANGE: bool = false;
