@@ -71,19 +71,23 @@ fn stiffness(lo: f64, hi: f64) -> impl Strategy<Value = f64> {
 }
 
 /// Known limits, measured, not hidden (flip to see them fail):
-/// * the impact criterion `≤ 2·f_r + k_c·v·(delay + cycle)` fails for large set-points on stiff surfaces
-///   on P2 (f_r 36.6 N, k_c 354 kN/m: 115 N against 84.5 N): the first-contact transient overshoots
-///   while `k̂_c` is still the tuning's guess;
 /// * `k̂_c` within 10 % after a change holds without sensor noise, damped or not (asserted); with noise
 ///   it fails at small set-points on the 12 ms cell (f_r 2 N, 20 → 10 kN/m, σ 0.43 N: 17 % off after
 ///   2 s), where the few samples of the transient under noise do not carry the stiffness to 10 %;
 /// * back within ±2 % in 0.5 s after a change fails at small set-points (f_r 2 N, 20 → 40 kN/m, P2:
-///   1.4 s);
+///   1.4 s at 2 s, 1.3 s at 2.3 s; the 24 cases drawn here pass);
+/// * the same doubling later in the contact (f_r 2 N, 20 → 40 kN/m, no damping, P2, at 2.7 s and 3 s)
+///   loses contact 3 and 2 times, which the contact assertion would catch if drawn;
 /// * a change on a damped surface can lose contact at small set-points (f_r 2 N, 20 → 10 kN/m,
 ///   118 N·s/m, P2: 3 losses);
 /// * with 64 cases instead of 24 two more show: σ 0.82 N at f_r 2 N on 10 kN/m (P1) loses contact
-///   once in the hold; a doubling on a 178 N·s/m surface at f_r 2 N (P1) ends 12 N off.
-const IMPACT: bool = false;
+///   once in the hold; a doubling on a 178 N·s/m surface at f_r 2 N (P1) ends 12 N off;
+/// * with 200 cases the impact criterion fails under noise at the smallest set-point (σ 0.82 N, f_r
+///   2 N, 10 kN/m, P1: 4.46 N against 4.1 N);
+/// * near the top of the noise range a noise spike can be taken for contact short of the surface, the
+///   onset fit of noise sets `k̂_c` to its floor, and the law drives in (σ 0.9 N, f_r 20 N, 500 kN/m,
+///   P2, seed 7: 547 N; 100 kN/m: 109 N; the 24 cases drawn here do not hit it). (The touch-down goes on at approach speed until `k̂_c`
+///   is identified; before that, f_r 36.6 N on 354 kN/m on P2 hit 115 N against 84.5 N, now 37 N.)
 const DAMPED_CHANGE: bool = false;
 const SETTLE_AFTER_CHANGE: bool = false;
 const REIDENTIFY: bool = false;
@@ -117,9 +121,7 @@ proptest! {
         let all = r.metrics(0.0, f64::INFINITY);
         let limit = 2.0 * f_r + floor(k_c, 0.002, &plant);
         prop_assert!(all.first_contact.is_finite(), "no contact");
-        if IMPACT {
-            prop_assert!(all.peak_force <= limit, "impact {} N > {limit} N", all.peak_force);
-        }
+        prop_assert!(all.peak_force <= limit, "impact {} N > {limit} N", all.peak_force);
         let hold = r.metrics(all.first_contact + 0.5, f64::INFINITY);
         prop_assert!(hold.contact_losses == 0.0, "{} contact losses", hold.contact_losses);
         let end = r.metrics(2.5, f64::INFINITY);

@@ -10,6 +10,9 @@
 use super::observer::ObserverParams;
 use crate::estimator::surface_moving;
 
+/// The fewest samples a surface motion is confirmed on, whatever the cycle.
+const MIN_SAMPLES: f64 = 2.0;
+
 /// The motion tests' state.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Motion {
@@ -63,9 +66,13 @@ impl Motion {
     /// Test the predictor's surface velocity `v` against the robot's raw velocity `v_raw` (m/s), with
     /// `thr` the speed below which a surface counts as still.
     pub fn observe(&mut self, p: &ObserverParams, v: f64, v_raw: f64, thr: f64, dt: f64) {
+        // Confirmed over `motion_confirm`, and never on fewer than `MIN_SAMPLES` samples: on a slow
+        // cycle one noisy sample would otherwise be a motion (half a cycle of margin for the sum's
+        // rounding).
+        let confirm = p.motion_confirm.max((MIN_SAMPLES - 0.5) * dt);
         if surface_moving(v, v_raw, thr) {
             self.time += dt;
-            if self.time >= p.motion_confirm {
+            if self.time >= confirm {
                 self.hold = p.motion_hold;
             }
         } else {
@@ -84,7 +91,8 @@ impl Motion {
                     self.run_against += dt;
                 }
             }
-            if self.run_with >= p.opposed_confirm && self.run_against >= p.opposed_confirm {
+            let opposed = p.opposed_confirm.max((MIN_SAMPLES - 0.5) * dt);
+            if self.run_with >= opposed && self.run_against >= opposed {
                 self.est_hold = p.motion_hold;
                 self.hold = p.motion_hold;
             }

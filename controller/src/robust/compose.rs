@@ -1,0 +1,137 @@
+//! The composed step's pieces that read several stages: the detector's thresholds, the approach's
+//! anchor, the re-identification and the command in contact.
+
+use super::{RobustLaw, Signals, contact, observer};
+use crate::law::Events;
+
+impl RobustLaw {
+    /// The force a jump or a band is measured against: the set-point, at least the contact force, N.
+    pub(super) fn force_scale(&self) -> f64 {
+        self.response.set_point().max(self.p.contact.contact_force)
+    }
+
+    /// The contact detector's thresholds now: scaled to the active set-point and the measured noise
+    /// (the conditioned force's noise from the raw one through the conditioning's noise bandwidth).
+    pub(super) fn thresholds(&self, cycle: f64) -> contact::Thresholds {
+        let sigma = self.noise.std();
+        let sigma_ff = sigma * self.signals.noise_gain(cycle);
+        self.contact
+            .thresholds(self.response.set_point(), sigma, sigma_ff)
+    }
+
+    /// How far ahead of the robot the approach may command, in time at approach speed, s.
+    pub(super) fn anchor_time(&self, cycle: f64) -> f64 {
+        let c = &self.p.cell;
+        (4.0 * (c.lag + c.delay + self.signals.delay(cycle))).max(0.05)
+    }
+
+    /// The command in contact before limits.
+    pub(super) fn in_contact(&mut self, s: &Signals, cycle: f64, dt: f64) -> f64 {
+        let k = self.identify.kc();
+        let view = observer::View {
+            x: s.x,
+            f: s.f,
+            xf: s.xf,
+            ff: s.ff,
+            v_raw: s.v_raw,
+            k,
+            force_scale: self.force_scale(),
+            noise_var: self.noise.var(),
+            step_time: self.signals.step_time(cycle),
+        };
+        self.observer
+            .track(&view, self.p.response.surface_bandwidth, dt);
+        let (proportional, integral) =
+            self.response
+                .correction(s.ff, k, view.noise_var, view.force_scale, dt);
+        let cell = self.p.cell;
+        let lead = cell.lag + cell.delay + self.signals.delay(cycle);
+        let ff = self.observer.feedforward(
+            &view,
+            &self.p.response,
+            self.p.estimator.max_surface_speed,
+            cell.lag,
+            cell.delay,
+            cycle,
+            lead,
+            dt,
+        );
+        // The set-point's own motion, fed forward over the loop's lead time: a ramp is followed, not
+        // chased (the force lags the command by the inner loop's lag and delay and the conditioning).
+        let ramp = self.response.rate() / k * (cell.lag + cell.delay);
+        s.xf + proportional
+            + ff.weight * ff.predicted
+            + (1.0 - ff.weight) * ff.fallback
+            + integral
+            + ramp
+    }
+
+    /// In contact: re-identify `k̂_c` when the environment changed under a steady contact, and run the
+    /// identifier on the raw sample `(s.x, s.f)`; `moving`: the surface counts as moving.
+    pub(super) fn identify_in_contact(
+        &mut self,
+        s: &Signals,
+        cycle: f64,
+        moving: bool,
+        ev: &mut Events,
+        dt: f64,
+    ) {
+        // The environment changed under a steady contact on a still surface: the observed
+        // surface jumped, or the force left its band (a stiffness change the observer follows
+        // smoothly). Re-identify from the transient that follows.
+        let band =
+            (0.2 * self.force_scale()).max(5.0 * self.noise.std() * self.signals.noise_gain(cycle));
+        let off = (s.ff - self.response.set_point()).abs() > band;
+        let persist = 0.5 * self.signals.step_time(cycle);
+        let calm =
+            self.contact.steady() && !moving && !self.identify.fitting() && self.observer.still();
+        let excursion = self.identify.excursion(off, calm, persist, dt);
+        if excursion || (calm && self.observer.jump_on_still_surface()) {
+            self.identify.refit(s.x, s.f);
+        }
+        let disturbed = self.observer.disturbed();
+        let id = self.identify.step(
+            s.x,
+            s.f,
+            s.v_raw,
+            s.ff,
+            dt,
+            moving,
+            ev.contact,
+            disturbed,
+            self.noise.var(),
+            self.p.response.noise_floor,
+        );
+        if id.seeded {
+            // The observed surface is x − f/k̂_c: a k̂_c that moves would show it moving. While the
+            // transient is identified the observers restart on every new k̂_c, at rest.
+            self.observer.restart(s.xf - s.ff / self.identify.kc());
+            self.contact.identified();
+        }
+        ev.estimator_bound |= id.projected;
+    }
+
+    /// The command before limits: out of contact the state machine's (approach, search, retract), in
+    /// contact the law's, held to the approach speed while touching down.
+    pub(super) fn command(&mut self, x: f64, s: &Signals, cycle: f64, dt: f64) -> f64 {
+        let anchor = self.anchor_time(cycle);
+        let speeds = self.contact.speeds(
+            self.identify.kc(),
+            self.response.set_point(),
+            self.p.limits.max_force,
+            self.p.cell.stopping_time(cycle),
+        );
+        match self
+            .contact
+            .command(x, self.limiter.command(), &speeds, anchor, dt)
+        {
+            Some(u) => u,
+            None => {
+                let want = self.in_contact(s, cycle, dt);
+                let window = self.p.identify.onset_window;
+                self.contact
+                    .land(want, self.limiter.command(), &speeds, window, dt)
+            }
+        }
+    }
+}

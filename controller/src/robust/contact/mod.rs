@@ -1,0 +1,196 @@
+//! The contact state machine: `Approach` (bounded speed, anchored to the measured position) → `Contact`
+//! when the conditioned force reaches `contact_force` (confirmed by the raw one), or one raw sample
+//! `strong_contact` times that → `Reacquire` when the raw force stays below `lift_force` for `lift_time`
+//! (fast for `reacquire_distance`, optionally bounded by what the cell can stop near where contact was
+//! lost, then at approach speed: [`search`]) → `Contact` … and from anywhere `Retract` when the
+//! conditioned force exceeds the force limit.
+
+use super::signals::Signals;
+use crate::law::ContactState;
+
+/// The detector's thresholds for one step, scaled to the set-point and the measured noise (see
+/// [`ContactMachine::thresholds`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Thresholds {
+    /// Conditioned force that means contact, N.
+    pub contact: f64,
+    /// Raw force below which a sample counts towards a lift-off, N.
+    pub lift: f64,
+    /// Consecutive samples below `lift` a lift-off needs (never one: a single bad or zero sample, or
+    /// the first sample after a dropout, is not a lift-off; more under noise).
+    pub samples: u32,
+}
+
+/// What a step of the state machine did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Transition {
+    /// Nothing.
+    None,
+    /// Contact declared; `from_approach`: made from the approach (a still surface).
+    Contact {
+        /// Made from the approach (a still surface).
+        from_approach: bool,
+    },
+    /// Contact lost.
+    LiftOff,
+    /// The force limit: retracting.
+    ForceLimit,
+}
+
+/// The state machine's state.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ContactMachine {
+    p: ContactParams,
+    state: ContactState,
+    /// Time the raw force has been below the lift force, s, and for how many samples.
+    below: f64,
+    below_samples: u32,
+    /// Distance travelled in the current re-acquire or retract, m.
+    travelled: f64,
+    /// Time since contact was last detected, s.
+    in_contact: f64,
+    /// The observed surface velocity away from the tool when contact was last lost, m/s.
+    v_lost: f64,
+    /// The measured position when contact was last lost, m.
+    x_lost: f64,
+    /// A touch-down from the approach whose stiffness is not identified yet.
+    landing: bool,
+}
+
+impl ContactMachine {
+    /// A machine approaching.
+    pub fn new(p: ContactParams) -> Self {
+        let mut m = Self {
+            p,
+            state: ContactState::Approach,
+            below: 0.0,
+            below_samples: 0,
+            travelled: 0.0,
+            in_contact: f64::INFINITY,
+            v_lost: 0.0,
+            x_lost: 0.0,
+            landing: false,
+        };
+        m.reset();
+        m
+    }
+
+    /// Take new parameters, keeping the state.
+    pub fn set_params(&mut self, p: ContactParams) {
+        self.p = p;
+    }
+
+    /// Back to the approach.
+    pub fn reset(&mut self) {
+        self.state = ContactState::Approach;
+        self.below = 0.0;
+        self.below_samples = 0;
+        self.travelled = 0.0;
+        self.in_contact = f64::INFINITY;
+        self.v_lost = 0.0;
+        self.x_lost = 0.0;
+        self.landing = false;
+    }
+
+    /// Whether the contact has lasted longer than a bounce (a steady contact), s.
+    pub fn steady(&self) -> bool {
+        self.state == ContactState::Contact && self.in_contact >= self.p.bounce_time
+    }
+
+    /// The state.
+    pub fn state(&self) -> ContactState {
+        self.state
+    }
+
+    /// The thresholds for set-point `f_r` (N) and the conditioned force's noise `sigma_ff` (N) and the
+    /// raw force's `sigma` (N): `contact_force` and `lift_force` as configured for a set-point of at
+    /// least twice `contact_force`, scaled down with a smaller set-point (contact at half of it), and
+    /// raised to four standard deviations of the conditioned force's noise; a lift-off needs two
+    /// samples, and one more per `lift_force` of raw noise.
+    pub fn thresholds(&self, f_r: f64, sigma: f64, sigma_ff: f64) -> Thresholds {
+        let c = &self.p;
+        let contact = c.contact_force.min(0.5 * f_r).max(4.0 * sigma_ff);
+        let lift = c.lift_force * contact / c.contact_force;
+        let extra = (sigma / lift.max(1e-9)).ceil().min(64.0);
+        Thresholds {
+            contact,
+            lift,
+            samples: 2 + extra as u32,
+        }
+    }
+
+    /// Advance with this step's signals; `max_force` is the force limit, N, and `receding` the observed
+    /// surface's velocity away from the tool, m/s.
+    pub fn step(
+        &mut self,
+        s: &Signals,
+        th: &Thresholds,
+        max_force: f64,
+        receding: f64,
+        dt: f64,
+    ) -> Transition {
+        let c = self.p;
+        if s.ff > max_force && self.state != ContactState::Retract {
+            self.state = ContactState::Retract;
+            self.landing = false;
+            self.travelled = 0.0;
+            return Transition::ForceLimit;
+        }
+        match self.state {
+            ContactState::Approach | ContactState::Reacquire => {
+                // The conditioned force, confirmed by the raw one (the filter still remembers a
+                // contact just lost), or one strong raw sample.
+                if (s.ff >= th.contact && s.f >= th.lift) || s.f >= c.strong_contact * th.contact {
+                    let from_approach = self.state == ContactState::Approach;
+                    self.landing = from_approach;
+                    self.state = ContactState::Contact;
+                    self.below = 0.0;
+                    self.below_samples = 0;
+                    self.in_contact = 0.0;
+                    return Transition::Contact { from_approach };
+                }
+            }
+            ContactState::Contact => {
+                self.in_contact += dt;
+                if s.f < th.lift {
+                    self.below += dt;
+                    self.below_samples += 1;
+                    if self.below >= c.lift_time && self.below_samples >= th.samples {
+                        self.state = ContactState::Reacquire;
+                        // The fast search is for a surface that went away. A contact lost while the
+                        // tool itself was moving away (the law's own answer to a force jump), or lost
+                        // again soon after a re-acquisition (a bounce), is searched for at approach
+                        // speed.
+                        let retracting = s.v_x < -c.approach_speed;
+                        self.travelled = if !retracting && self.in_contact >= c.bounce_time {
+                            0.0
+                        } else {
+                            c.reacquire_distance
+                        };
+                        self.v_lost = receding;
+                        self.landing = false;
+                        self.x_lost = s.x;
+                        return Transition::LiftOff;
+                    }
+                } else {
+                    self.below = 0.0;
+                    self.below_samples = 0;
+                }
+            }
+            ContactState::Retract => {
+                if self.travelled >= c.retract_distance && s.ff < th.lift {
+                    self.state = ContactState::Approach;
+                }
+            }
+        }
+        Transition::None
+    }
+}
+
+mod params;
+mod search;
+#[cfg(test)]
+mod tests;
+
+pub use params::ContactParams;
+pub use search::Speeds;

@@ -1,0 +1,100 @@
+//! The command out of contact: the approach, the search after a lost contact, the retract.
+//!
+//! Every speed towards a surface is bounded by what the cell can stop: after a stop command the tool
+//! still travels `v·T_s` (`T_s` the delay and one cycle) into a surface of stiffness `k̂_c`. The
+//! approach stops within `2·f_r` (`v ≤ 2·f_r/(k̂_c·T_s)`), the fast search after a lost contact below
+//! the force limit; after `reacquire_distance` the search is at approach speed.
+//!
+//! The fast search cannot also stop within `2·f_r` where a lost surface is found again close by (a
+//! transient, B8): the commands that catch up with a retreating surface in time (B3: 1 mm in 50 ms on
+//! P2, whose delay alone is 12 ms) are in the delay line before the tool has moved at all, so a surface
+//! found close by is pressed by all of them. `reacquire_margin` trades one for the other: within
+//! `reacquire_margin·f_r/k̂_c` of the position where contact was lost the search moves at the speed
+//! that stops within `2·f_r`, which costs a surface that went away about `reacquire_margin·T_s/2`.
+
+use super::ContactMachine;
+use crate::law::ContactState;
+
+/// Speeds out of contact for one step, bounded by what the cell can stop (see
+/// [`ContactMachine::speeds`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Speeds {
+    /// Approach and slow search, m/s.
+    pub approach: f64,
+    /// Search near where contact was lost: stops within twice the set-point, m/s.
+    pub near: f64,
+    /// Fast search after a loss of contact, farther on: stops below the force limit, m/s.
+    pub reacquire: f64,
+    /// How far beyond the position where contact was lost the search is `near`, m.
+    pub margin: f64,
+}
+
+impl ContactMachine {
+    /// Speeds for stiffness estimate `k` (N/m), set-point `f_r` (N), force limit `max_force` (N) and
+    /// stopping time `stop` (s: after a stop command the tool still travels for the delay and one
+    /// cycle): the approach and the search near the lost contact no faster than stops within `2·f_r`,
+    /// the fast search no faster than stops below the force limit.
+    pub fn speeds(&self, k: f64, f_r: f64, max_force: f64, stop: f64) -> Speeds {
+        let c = &self.p;
+        let per_newton = 1.0 / (k * stop).max(1e-12);
+        let gentle = 2.0 * f_r.max(c.contact_force) * per_newton;
+        let approach = c.approach_speed.min(gentle);
+        let near = c.reacquire_speed.min(gentle).max(approach);
+        Speeds {
+            approach,
+            near,
+            reacquire: c.reacquire_speed.min(max_force * per_newton).max(near),
+            margin: c.reacquire_margin * f_r.max(c.contact_force) / k.max(1e-12),
+        }
+    }
+
+    /// The stiffness of the surface touched down on is identified: the landing is over.
+    pub fn identified(&mut self) {
+        self.landing = false;
+    }
+
+    /// The command in contact `want` during a touch-down (s since contact below `window`, the
+    /// stiffness not identified yet): until `k̂_c` is the surface's and not the tuning's guess, the
+    /// command goes on in at no more than the approach speed from the last command `u` (a guess too
+    /// soft would command a step deep into the surface; the approach's speed is what the impact
+    /// bound is made of).
+    pub fn land(&self, want: f64, u: f64, sp: &Speeds, window: f64, dt: f64) -> f64 {
+        if self.landing && self.in_contact < window {
+            want.min(u + sp.approach * dt)
+        } else {
+            want
+        }
+    }
+
+    /// The command out of contact (`None` in contact): from the last command `u` and the measured
+    /// position `x`, never more than `anchor` (s at approach speed) ahead of the robot.
+    pub fn command(&mut self, x: f64, u: f64, sp: &Speeds, anchor: f64, dt: f64) -> Option<f64> {
+        let c = self.p;
+        match self.state {
+            ContactState::Approach => {
+                let gap = sp.approach * anchor;
+                Some((u + sp.approach * dt).min(x + gap))
+            }
+            ContactState::Reacquire => {
+                // Bounded near the lost contact, fast beyond it; then at approach speed, or faster
+                // when the surface was seen receding at lift-off (a receding surface outruns a slow
+                // search).
+                let speed = if self.travelled >= c.reacquire_distance {
+                    (sp.approach + 1.5 * self.v_lost).min(sp.reacquire)
+                } else if sp.margin > 0.0 && u < self.x_lost + sp.margin {
+                    sp.near
+                } else {
+                    sp.reacquire
+                };
+                self.travelled += speed * dt;
+                let gap = c.reacquire_distance + sp.approach * anchor;
+                Some((u + speed * dt).min(x + gap))
+            }
+            ContactState::Retract => {
+                self.travelled += c.retract_speed * dt;
+                Some(u - c.retract_speed * dt)
+            }
+            ContactState::Contact => None,
+        }
+    }
+}

@@ -1,0 +1,171 @@
+//! The contact state machine's unit tests.
+
+use super::*;
+
+fn params() -> ContactParams {
+    ContactParams {
+        approach_speed: 0.002,
+        contact_force: 1.0,
+        lift_force: 0.3,
+        lift_time: 0.002,
+        reacquire_speed: 0.05,
+        reacquire_distance: 0.002,
+        retract_speed: 0.01,
+        retract_distance: 0.001,
+        bounce_time: 0.5,
+        strong_contact: 3.0,
+        reacquire_margin: 1.0,
+    }
+}
+
+const TH: Thresholds = Thresholds {
+    contact: 1.0,
+    lift: 0.3,
+    samples: 2,
+};
+const SP: Speeds = Speeds {
+    approach: 0.002,
+    near: 0.0089,
+    reacquire: 0.05,
+    margin: 0.0001,
+};
+
+fn sig(f: f64, ff: f64) -> Signals {
+    Signals {
+        x: 0.0,
+        f,
+        ff,
+        xf: 0.0,
+        v_x: 0.0,
+        v_raw: 0.0,
+    }
+}
+
+#[test]
+fn contact_lift_off_after_lift_time_and_force_limit() {
+    let mut m = ContactMachine::new(params());
+    assert_eq!(
+        m.step(&sig(0.5, 0.5), &TH, 60.0, 0.0, 1e-3),
+        Transition::None
+    );
+    assert_eq!(
+        m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3),
+        Transition::Contact {
+            from_approach: true
+        }
+    );
+    // One low sample is not a lift-off; `lift_time` of them is.
+    assert_eq!(
+        m.step(&sig(0.0, 1.0), &TH, 60.0, 0.0, 1e-3),
+        Transition::None
+    );
+    assert_eq!(
+        m.step(&sig(5.0, 1.0), &TH, 60.0, 0.0, 1e-3),
+        Transition::None
+    );
+    m.step(&sig(0.0, 1.0), &TH, 60.0, 0.0, 1e-3);
+    assert_eq!(
+        m.step(&sig(0.0, 1.0), &TH, 60.0, 0.0, 1e-3),
+        Transition::LiftOff
+    );
+    assert_eq!(m.state(), ContactState::Reacquire);
+    // A bounce: the search goes on at approach speed.
+    let u = m.command(0.0, 0.0, &SP, 0.1, 1e-3).unwrap();
+    assert!((u - 0.002e-3).abs() < 1e-15, "{u}");
+    assert_eq!(
+        m.step(&sig(70.0, 61.0), &TH, 60.0, 0.0, 1e-3),
+        Transition::ForceLimit
+    );
+    assert!(m.command(0.0, 0.0, &SP, 0.1, 1e-3).unwrap() < 0.0);
+    m.reset();
+    assert_eq!(m.state(), ContactState::Approach);
+}
+
+#[test]
+fn thresholds_scale_with_set_point_and_noise_and_speeds_with_stiffness() {
+    let m = ContactMachine::new(params());
+    assert_eq!(m.thresholds(5.0, 0.0, 0.0), TH);
+    let small = m.thresholds(1.0, 0.0, 0.0);
+    assert!((small.contact - 0.5).abs() < 1e-12 && (small.lift - 0.15).abs() < 1e-12);
+    let noisy = m.thresholds(5.0, 1.0, 0.4);
+    assert!(
+        (noisy.contact - 1.6).abs() < 1e-12 && noisy.samples > 3,
+        "{noisy:?}"
+    );
+    // 70 kN/m, 16 ms to stop: 2·5 N is 8.9 mm/s, 60 N is 54 mm/s; 5 N is 71 µm in.
+    let sp = m.speeds(70_000.0, 5.0, 60.0, 0.016);
+    assert_eq!((sp.approach, sp.reacquire), (0.002, 0.05));
+    assert!((sp.near - 10.0 / 1120.0).abs() < 1e-12, "{sp:?}");
+    assert!((sp.margin - 5.0 / 70_000.0).abs() < 1e-15, "{sp:?}");
+    let stiff = m.speeds(500_000.0, 5.0, 60.0, 0.016);
+    assert!((stiff.approach - 0.00125).abs() < 1e-12);
+    assert!((stiff.near - 0.00125).abs() < 1e-12);
+    assert!((stiff.reacquire - 0.0075).abs() < 1e-12);
+}
+
+/// A steady contact at `x`, lost: the machine searches from there.
+fn lost_at(x: f64) -> ContactMachine {
+    let mut m = ContactMachine::new(params());
+    let at = |f: f64| Signals { x, ..sig(f, f) };
+    m.step(&at(5.0), &TH, 60.0, 0.0, 1e-3);
+    for _ in 0..600 {
+        m.step(&at(5.0), &TH, 60.0, 0.0, 1e-3);
+    }
+    while m.step(&at(0.0), &TH, 60.0, 0.0, 1e-3) != Transition::LiftOff {}
+    m
+}
+
+#[test]
+fn the_search_is_bounded_near_the_lost_contact_and_fast_beyond_it() {
+    let mut m = lost_at(0.01);
+    let (mut u, mut speeds) = (0.01, Vec::new());
+    while m.state() == ContactState::Reacquire && u < 0.0125 {
+        let next = m.command(u, u, &SP, 0.1, 1e-3).unwrap();
+        speeds.push(((u - 0.01) * 1e6, (next - u) / 1e-3));
+        u = next;
+    }
+    // Within 100 µm of the lost contact at the speed that stops within 2·f_r, then fast, and slow
+    // after `reacquire_distance`.
+    for &(at_um, v) in &speeds {
+        let want = if at_um < 100.0 - 1e-6 {
+            SP.near
+        } else if at_um < 2000.0 - 1e-6 {
+            SP.reacquire
+        } else {
+            SP.approach
+        };
+        assert!(
+            (v - want).abs() < 1e-9,
+            "{v} m/s at {at_um} µm, want {want}"
+        );
+    }
+    assert!(speeds.iter().any(|&(_, v)| (v - SP.reacquire).abs() < 1e-9));
+}
+
+#[test]
+fn validation_names_the_field() {
+    let p = ContactParams {
+        lift_force: 1.0,
+        ..params()
+    };
+    assert!(p.validate().unwrap_err().contains("lift_force"));
+}
+
+#[test]
+fn a_touch_down_goes_on_at_approach_speed_until_the_stiffness_is_identified() {
+    let mut m = ContactMachine::new(params());
+    m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
+    assert_eq!(m.state(), ContactState::Contact);
+    // A guess too soft wants 1 mm in; the landing goes on at 2 mm/s.
+    let capped = m.land(0.011, 0.010, &SP, 0.1, 1e-3);
+    assert!((capped - (0.010 + 0.002e-3)).abs() < 1e-15, "{capped}");
+    // Backing off is never held.
+    assert_eq!(m.land(0.009, 0.010, &SP, 0.1, 1e-3), 0.009);
+    // Past the window, or once identified, the law's command goes through.
+    m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 0.2);
+    assert_eq!(m.land(0.011, 0.010, &SP, 0.1, 1e-3), 0.011);
+    let mut m = ContactMachine::new(params());
+    m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
+    m.identified();
+    assert_eq!(m.land(0.011, 0.010, &SP, 0.1, 1e-3), 0.011);
+}
