@@ -475,6 +475,13 @@ impl RobotSetup {
         let fl = format!("$FLAG[{}]", p.flag);
         let irq = p.interrupt;
         let wait_ms = (p.wait_timeout * 1000.0).round() as u64;
+        // A `WAIT FOR` bounded by the timer: `cond` or the wait timeout.
+        let wait = |k: &mut String, indent: &str, cond: &str| {
+            let _ = writeln!(k, "{indent}{tm} = 0");
+            let _ = writeln!(k, "{indent}{tms} = FALSE");
+            let _ = writeln!(k, "{indent}WAIT FOR {cond} OR ({tm} > {wait_ms})");
+            let _ = writeln!(k, "{indent}{tms} = TRUE");
+        };
         let first = p.segments[0];
         let mut k = String::new();
         let _ = writeln!(k, "DEF {n}()");
@@ -543,26 +550,14 @@ impl RobotSetup {
         let _ = writeln!(k, "  {fo} = {}", krl_real(first.force));
         let _ = writeln!(k, "  {sg} = 1");
         let _ = writeln!(k, "  {md} = 1");
-        let _ = writeln!(k, "  {tm} = 0");
-        let _ = writeln!(k, "  {tms} = FALSE");
-        let _ = writeln!(
-            k,
-            "  WAIT FOR ({st} == 3) OR ({st} == 9) OR ({tm} > {wait_ms})"
-        );
-        let _ = writeln!(k, "  {tms} = TRUE");
+        wait(&mut k, "  ", &format!("({st} == 3) OR ({st} == 9)"));
         let _ = writeln!(k, "  IF {st} <> 3 THEN");
         let _ = writeln!(
             k,
             "    ; no PRESSING (timeout or FAULT): release, switch off, end cleanly"
         );
         let _ = writeln!(k, "    {md} = 2");
-        let _ = writeln!(k, "    {tm} = 0");
-        let _ = writeln!(k, "    {tms} = FALSE");
-        let _ = writeln!(
-            k,
-            "    WAIT FOR ({st} == 0) OR ({st} == 9) OR ({tm} > {wait_ms})"
-        );
-        let _ = writeln!(k, "    {tms} = TRUE");
+        wait(&mut k, "    ", &format!("({st} == 0) OR ({st} == 9)"));
         let _ = writeln!(k, "    {md} = 0");
         let _ = writeln!(k, "    ret = RSI_OFF()");
         let _ = writeln!(k, "    ret = RSI_DELETE(CONTID)");
@@ -593,10 +588,7 @@ impl RobotSetup {
         let _ = writeln!(k, "  IF {fl} THEN");
         let _ = writeln!(k, "    LIN_REL {{Z 50.0}} ; lift clear (base Z) first");
         let _ = writeln!(k, "    {md} = 0");
-        let _ = writeln!(k, "    {tm} = 0");
-        let _ = writeln!(k, "    {tms} = FALSE");
-        let _ = writeln!(k, "    WAIT FOR ({st} == 0) OR ({tm} > {wait_ms})");
-        let _ = writeln!(k, "    {tms} = TRUE");
+        wait(&mut k, "    ", &format!("({st} == 0)"));
         let _ = writeln!(k, "    ret = RSI_OFF()");
         let _ = writeln!(k, "    ret = RSI_DELETE(CONTID)");
         let _ = writeln!(
@@ -608,13 +600,7 @@ impl RobotSetup {
         let _ = writeln!(k);
         let _ = writeln!(k, "  ; 5. RELEASE; wait for OFF (State 0)");
         let _ = writeln!(k, "  {md} = 2");
-        let _ = writeln!(k, "  {tm} = 0");
-        let _ = writeln!(k, "  {tms} = FALSE");
-        let _ = writeln!(
-            k,
-            "  WAIT FOR ({st} == 0) OR ({st} == 9) OR ({tm} > {wait_ms})"
-        );
-        let _ = writeln!(k, "  {tms} = TRUE");
+        wait(&mut k, "  ", &format!("({st} == 0) OR ({st} == 9)"));
         let _ = writeln!(k, "  IF {st} <> 0 THEN");
         let _ = writeln!(
             k,
