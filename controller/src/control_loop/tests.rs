@@ -181,28 +181,37 @@ type SentLog = std::sync::Arc<std::sync::Mutex<Vec<Correction>>>;
 
 /// A robot at a fixed pose whose replies are logged, and a sensor that answers `read` in turn.
 fn logged(
-    mut read: impl FnMut(u64) -> Result<Sample, ErrorKind> + Send + 'static,
+    read: impl FnMut(u64) -> Result<Sample, ErrorKind> + Send + 'static,
 ) -> (MockLoop, SentLog) {
+    let (robot, sensor, sent) = devices(0.001, read);
+    let lp = ControlLoop::new(robot, sensor, fixed_law(0.001), LoopConfig::default());
+    (lp, sent)
+}
+
+/// A robot at `x` whose replies are logged, and a sensor that answers `read` in turn.
+fn devices(
+    x: f64,
+    mut read: impl FnMut(u64) -> Result<Sample, ErrorKind> + Send + 'static,
+) -> (MockRobot, MockSensor, SentLog) {
     let mut robot = MockRobot::new();
     let mut sensor = MockSensor::new();
     let mut k = 0;
     robot.expect_next_cycle().returning(move || {
         k += 1;
-        Ok(cycle_at(k, 0.001))
+        Ok(cycle_at(k, x))
     });
     let mut n = 0;
     sensor.expect_read().returning(move || {
         n += 1;
         read(n)
     });
-    let sent = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let sent = SentLog::default();
     let log = sent.clone();
     robot.expect_reply().returning(move |c| {
         log.lock().unwrap().push(*c);
         Ok(())
     });
-    let lp = ControlLoop::new(robot, sensor, fixed_law(0.001), LoopConfig::default());
-    (lp, sent)
+    (robot, sensor, sent)
 }
 
 /// The commands after `from` only ever back off (−z), by no more than the retract speed allows per
@@ -388,20 +397,7 @@ fn a_short_loss_of_contact_does_not_end_the_loop() {
 
 #[test]
 fn without_process_channels_the_correction_envelope_ends_the_loop() {
-    let mut robot = MockRobot::new();
-    let mut sensor = MockSensor::new();
-    let mut k = 0;
-    robot.expect_next_cycle().returning(move || {
-        k += 1;
-        Ok(cycle_at(k, 0.0))
-    });
-    sensor.expect_read().returning(|| Ok(sample(0.0)));
-    let sent: SentLog = Default::default();
-    let log = sent.clone();
-    robot.expect_reply().returning(move |c| {
-        log.lock().unwrap().push(*c);
-        Ok(())
-    });
+    let (robot, sensor, sent) = devices(0.0, |_| Ok(sample(0.0)));
     // The law wants 8 mm; the envelope is 5 mm and a step 1 mm: five steps reach 5 mm, the sixth
     // is clipped to the envelope.
     let law = DtLaw {
