@@ -205,46 +205,48 @@ fn hold_code(last: Fault) -> ProcessFault {
     }
 }
 
-impl<RE: fmt::Display, SE: fmt::Display> fmt::Display for LoopError<RE, SE> {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if let Some(code) = self.code() {
-            write!(f, "fault {} ({}): ", code.code(), code.name())?;
-        }
+impl<RE: fmt::Display, SE: fmt::Display> LoopError<RE, SE> {
+    /// Why the loop ended, without the code.
+    pub fn reason(&self) -> String {
         match self {
-            Self::Robot(e) => write!(f, "robot link: {e}"),
-            Self::Sensor(e) => write!(f, "force sensor: {e}; the tool backed off"),
-            Self::HoldTimeout { held, last } => write!(
-                f,
-                "held the last command for {:.0} ms without a usable input (last: {last:?}); the tool backed off",
+            Self::Robot(e) => format!("robot link: {e}"),
+            Self::Sensor(e) => format!("force sensor: {e}"),
+            Self::HoldTimeout { held, last } => format!(
+                "held the last command for {:.0} ms without a usable input (last: {last:?})",
                 held * 1e3
             ),
-            Self::Guard { reason, .. } => write!(f, "{reason}; the tool backed off"),
+            Self::Guard { reason, .. } => reason.clone(),
         }
     }
 }
 
-/// A fault that ends the loop once the tool has backed off.
-enum Ending<SE> {
-    Sensor(SE),
-    HoldTimeout { held: f64, last: Fault },
-    Guard { code: ProcessFault, reason: String },
+impl<RE: fmt::Display, SE: fmt::Display> fmt::Display for LoopError<RE, SE> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.code() {
+            Some(code) => write!(
+                f,
+                "fault {} ({}): {}; the tool backed off",
+                code.code(),
+                code.name(),
+                self.reason()
+            ),
+            None => f.write_str(&self.reason()),
+        }
+    }
 }
 
+/// A fault that ends the loop once the tool has backed off: a [`LoopError`] that is never the
+/// robot's (there is a link to back off through).
+type Ending<SE> = LoopError<core::convert::Infallible, SE>;
+
 impl<SE> Ending<SE> {
-    fn into_error<RE>(self) -> LoopError<RE, SE> {
+    /// The same error, typed for the loop's robot.
+    fn widen<RE>(self) -> LoopError<RE, SE> {
         match self {
+            Self::Robot(never) => match never {},
             Self::Sensor(e) => LoopError::Sensor(e),
             Self::HoldTimeout { held, last } => LoopError::HoldTimeout { held, last },
             Self::Guard { code, reason } => LoopError::Guard { code, reason },
-        }
-    }
-
-    /// The fault's code in the process contract.
-    fn code(&self) -> ProcessFault {
-        match self {
-            Self::Sensor(_) => ProcessFault::SensorLost,
-            Self::HoldTimeout { last, .. } => hold_code(*last),
-            Self::Guard { code, .. } => *code,
         }
     }
 }
@@ -432,17 +434,10 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             let target = (cmd - self.cfg.retract_distance).max(-self.cfg.max_offset);
             // Reported as FAULT with its code while backing off and with `Stop`, on links that
             // carry process channels (the program is not using them, but the integrator sees it).
-            let why = || match &end {
-                Ending::Guard { reason, .. } => reason.clone(),
-                Ending::Sensor(_) => "the force sensor failed".into(),
-                Ending::HoldTimeout { held, .. } => format!(
-                    "held the last command for {:.0} ms without a usable input",
-                    held * 1e3
-                ),
-            };
+            let code = end.code().expect("an ending is never the robot's");
             self.process.latch(
-                end.code(),
-                why,
+                code,
+                || end.reason(),
                 cmd,
                 self.cfg.retract_distance,
                 -self.cfg.max_offset,
@@ -638,10 +633,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         let held = self.count(fault) && controlling;
         self.held = if held { self.held + cycle.period } else { 0.0 };
         if self.held > self.cfg.max_hold {
-            let code = match fault {
-                Some(Fault::Sensor(_) | Fault::NonFiniteSample) => ProcessFault::SensorLost,
-                _ => ProcessFault::HoldTimeout,
-            };
+            let code = fault.map_or(ProcessFault::HoldTimeout, hold_code);
             let held = self.held;
             let why = || {
                 format!(
@@ -729,10 +721,8 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
 
     /// One cycle of the back-off after a fault: step the command towards the phase's target at
     /// `retract_speed` (within `max_step`) and reply; once there, end the loop with the fault
-    /// (reported once; later cycles hold the backed-off command). While a usable sample shows the tool
-    /// still touching (above the entry force: the surface came after it, or the force limit tripped
-    /// deeper than `retract_distance`), the target moves on by `retract_distance`, never beyond the
-    /// envelope: the tool backs off until it is free, then `retract_distance` further.
+    /// (reported once; later cycles hold the backed-off command). The target moves on while the
+    /// sensor shows the tool still touching ([`guard::back_off_target`]).
     fn retract(
         &mut self,
         cycle: Cycle,
@@ -747,13 +737,16 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         };
         let floor = -self.cfg.max_offset;
         let step = (self.cfg.retract_speed * cycle.period).min(self.cfg.max_step);
-        let touching = f.is_some_and(|f| f > self.cfg.process.entry_force);
-        let further = (self.last_cmd - self.cfg.retract_distance).max(floor);
         let target = match &mut self.phase {
             Phase::Retract { target, .. } | Phase::Halted { target } => {
-                if touching && further < *target {
-                    *target = further;
-                }
+                *target = guard::back_off_target(
+                    *target,
+                    f,
+                    self.cfg.process.entry_force,
+                    self.last_cmd,
+                    self.cfg.retract_distance,
+                    floor,
+                );
                 *target
             }
             Phase::Control => unreachable!("retract() runs only after a fault"),
@@ -772,7 +765,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             && let Phase::Retract { end, .. } =
                 core::mem::replace(&mut self.phase, Phase::Halted { target })
         {
-            return Err(end.into_error());
+            return Err(end.widen());
         }
         Ok(CycleReport {
             cycle,

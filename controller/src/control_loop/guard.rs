@@ -78,6 +78,25 @@ impl Guard {
     }
 }
 
+/// Where a fault's back-off ends: `target`, or — while force `f` shows the tool still touching
+/// (above `entry_force`: the surface came after it, or the limit tripped deeper than `lift`) — `lift`
+/// beyond the command `cmd`, never beyond `floor`. The tool backs off until it is free, then `lift`
+/// further.
+pub(super) fn back_off_target(
+    target: f64,
+    f: Option<f64>,
+    entry_force: f64,
+    cmd: f64,
+    lift: f64,
+    floor: f64,
+) -> f64 {
+    if f.is_some_and(|f| f > entry_force) {
+        target.min((cmd - lift).max(floor))
+    } else {
+        target
+    }
+}
+
 /// The fault of a command the loop had to clip to its envelope (`max_offset`).
 pub(super) fn envelope(max_offset: f64) -> Tripped {
     (

@@ -7,7 +7,7 @@
 use hal::{ProcessCommand, ProcessFault, ProcessMode, ProcessPhase, ProcessState};
 use serde::{Deserialize, Serialize};
 
-use super::guard::{Guard, Tripped};
+use super::guard::{Guard, Tripped, back_off_target};
 use crate::law::Output;
 
 /// How the process reacts to the program's commands. Forces in N, times in s.
@@ -230,12 +230,18 @@ impl Process {
         self.retract_target = (cmd - lift).max(floor);
     }
 
-    /// While a latched fault backs off and force `f` shows the tool still touching (above the entry
-    /// force), its target moves on to `lift` beyond the command `cmd`, within `floor`: the tool
-    /// backs off until it is free, then `lift` further.
+    /// While a latched fault backs off: its target moves on while force `f` shows the tool still
+    /// touching ([`back_off_target`]).
     pub fn back_off_further(&mut self, f: f64, cmd: f64, lift: f64, floor: f64) {
-        if self.phase == ProcessPhase::Fault && f > self.cfg.entry_force {
-            self.retract_target = self.retract_target.min((cmd - lift).max(floor));
+        if self.phase == ProcessPhase::Fault {
+            self.retract_target = back_off_target(
+                self.retract_target,
+                Some(f),
+                self.cfg.entry_force,
+                cmd,
+                lift,
+                floor,
+            );
         }
     }
 
