@@ -1,8 +1,6 @@
 //! Programmed polishing passes (`scenarios/pass-*.toml`): the robot program commands the force process
 //! over the process channels, the tool moves along a formed part. Every target of every pass is
-//! checked on P1 and P2 with the shipped tuning; the ones the robust law does not meet yet are listed
-//! in [`KNOWN_MISSES`] (and in the README) — any other miss fails, and a listed miss that starts to
-//! pass fails too, so the list only ever shrinks.
+//! checked on P1 and P2 with the shipped tuning, and every one is met.
 
 use forcecell::runner::{RunSpec, run_inproc};
 use forcecell::scenario::Scenario;
@@ -15,20 +13,8 @@ const PASSES: &[&str] = &[
     "pass-force-steps",
 ];
 
-/// `(scenario, plant, metric)` the robust law misses today: on P2 its recovery from a 0.3 mm surface
-/// step under a tilt overshoots and leaves the ±5 % band for longer than 2 % of the pass (97.5 %,
-/// 14.6 %). The surface predictor takes the step (15 % of the set-point's penetration, below the
-/// observer's `step_innovation` of 25 %) for motion, and the predicted feed-forward extrapolates it
-/// over P2's lead: without that term the pass is met (98.2 %, 0.8 %); with `step_innovation` 0.1 or
-/// 0.12 in the tuning too (98.5 %, 2.1 %), but at 0.1 and at 0.13 range cases fail (surface steps and
-/// halvings at small set-points, touch-down under 0.85 N of noise).
-const KNOWN_MISSES: &[(&str, &str, &str)] = &[
-    ("pass-tilt-step", "p2", "pressing_in_band_pct"),
-    ("pass-tilt-step", "p2", "press_overshoot_pct"),
-];
-
 #[test]
-fn every_pass_meets_its_targets_on_p1_and_p2_but_the_listed_misses() {
+fn every_pass_meets_its_targets_on_p1_and_p2() {
     let mut wrong = Vec::new();
     for name in PASSES {
         let scenario = Scenario::load(name).unwrap();
@@ -45,23 +31,16 @@ fn every_pass_meets_its_targets_on_p1_and_p2_but_the_listed_misses() {
                 "{name} on {plant}: the program ran to its end"
             );
             for v in run.verdicts(&spec.scenario.targets) {
-                let listed = KNOWN_MISSES.contains(&(*name, plant, v.target.metric.as_str()));
                 println!(
                     "{name:18} {plant} {:22} {:10.4} {}",
                     v.target.metric,
                     v.value,
                     if v.pass { "pass" } else { "MISS" }
                 );
-                if v.pass == listed {
+                if !v.pass {
                     wrong.push(format!(
-                        "{name} on {plant}: {} = {:.4} {}",
-                        v.target.metric,
-                        v.value,
-                        if listed {
-                            "now passes: take it off KNOWN_MISSES"
-                        } else {
-                            "misses its target"
-                        }
+                        "{name} on {plant}: {} = {:.4} misses its target",
+                        v.target.metric, v.value
                     ));
                 }
             }

@@ -10,14 +10,50 @@
 //! clean sensor, low under noise — no dead-band.
 //!
 //! A jump (a surface step, an apparent one from a stiffness change seen through a stale `k̂_c`) is an
-//! innovation far outside both the filter's own prediction uncertainty and a physical floor: the
-//! position is moved there without touching velocity and acceleration, so a step never throws the tool.
+//! innovation far outside both the filter's own prediction uncertainty and a physical floor, or one so
+//! far outside the uncertainty that no cycle of motion makes it while the robot's own displacement
+//! cannot explain it ([`JumpTest`]): the position is moved there without touching velocity and
+//! acceleration, so a step never throws the tool.
 //!
 //! # Inversion of the inner loop
 //! The robot's inner loop is a pure delay `T_d` and a first-order lag `τ` discretised at the control
 //! period `dt` (`x_{k+1} = x_k + α·(u_{k−D} − x_k)`, `α = 1 − e^{−dt/τ}`). The command that makes the
 //! position follow a target `X(t)` exactly is `u_k = X(t_k + T_d) + [X(t_k + T_d + dt) − X(t_k + T_d)]/α`;
 //! [`SurfacePredictor::command`] evaluates it on the filter's local polynomial.
+
+/// When an innovation `y` (of standard deviation `σ`) is a jump rather than motion: `|y| > gate·σ`,
+/// and either `|y| > floor` or both `|y| > step_gate·σ` and `|y| > step_floor`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct JumpTest {
+    /// Standard deviations every jump exceeds.
+    pub gate: f64,
+    /// Size above which an innovation beyond `gate` is a jump, m.
+    pub floor: f64,
+    /// Standard deviations beyond which a smaller innovation is a jump too…
+    pub step_gate: f64,
+    /// …when it is also above this size, m (what the robot's own motion may explain).
+    pub step_floor: f64,
+}
+
+impl JumpTest {
+    /// Whether innovation `y` of variance `var` is a jump.
+    pub fn is_jump(&self, y: f64, var: f64) -> bool {
+        let y2 = y * y;
+        y2 > self.gate * self.gate * var
+            && (y.abs() > self.floor
+                || (y2 > self.step_gate * self.step_gate * var && y.abs() > self.step_floor))
+    }
+
+    /// The test of a gate and a floor only.
+    pub fn gated(gate: f64, floor: f64) -> Self {
+        Self {
+            gate,
+            floor,
+            step_gate: f64::INFINITY,
+            step_floor: f64::INFINITY,
+        }
+    }
+}
 
 /// State and covariance of the surface filter.
 #[derive(Clone, Debug, PartialEq)]
@@ -77,15 +113,15 @@ impl SurfacePredictor {
     }
 
     /// One step of `dt` (s) with measurement `z` (m) of variance `r` (m²), process noise `q` (m²/s⁵).
-    /// An innovation above both `gate` standard deviations and `jump` (m) is a jump: the position is
-    /// moved there, velocity and acceleration are kept. Returns whether it was a jump.
-    pub fn update(&mut self, z: f64, r: f64, q: f64, dt: f64, gate: f64, jump: f64) -> bool {
+    /// An innovation that passes `jump` is a jump: the position is moved there, velocity and
+    /// acceleration are kept. Returns the jump's innovation, m (`None`: tracked as motion).
+    pub fn update(&mut self, z: f64, r: f64, q: f64, dt: f64, jump: &JumpTest) -> Option<f64> {
         if !(z.is_finite() && r.is_finite() && r > 0.0 && dt.is_finite() && dt > 0.0) {
-            return false;
+            return None;
         }
         if !self.started {
             self.start(z, r);
-            return false;
+            return None;
         }
         // Predict: s ← F s, P ← F P Fᵀ + Q.
         let h2 = 0.5 * dt * dt;
@@ -119,7 +155,7 @@ impl SurfacePredictor {
         // Update on the position.
         let y = z - self.s[0];
         let sv = self.p[0][0] + r;
-        if y.abs() > jump && y * y > gate * gate * sv {
+        if jump.is_jump(y, sv) {
             self.s[0] = z;
             // The position is now known to the measurement's accuracy; its correlations are gone.
             self.p[0][0] = r;
@@ -127,7 +163,7 @@ impl SurfacePredictor {
                 self.p[0][i] = 0.0;
                 self.p[i][0] = 0.0;
             }
-            return true;
+            return Some(y);
         }
         let k = [self.p[0][0] / sv, self.p[1][0] / sv, self.p[2][0] / sv];
         for (si, ki) in self.s.iter_mut().zip(k) {
@@ -156,7 +192,7 @@ impl SurfacePredictor {
         {
             self.start(z, r);
         }
-        false
+        None
     }
 
     /// The command (m) that brings the tool to `offset` (m) beyond the surface through an inner loop of
@@ -196,7 +232,7 @@ mod tests {
             if k > 2000 {
                 worst = worst.max((x - xc(t)).abs());
             }
-            p.update(xc(t), 1e-14, 1e-3, dt, 6.0, 1e-5);
+            p.update(xc(t), 1e-14, 1e-3, dt, &JumpTest::gated(6.0, 1e-5));
             let u = p.command(0.0, delay, lag, dt, 1.0, 1.0);
             let applied = queue[k % 4];
             queue[k % 4] = u;
@@ -224,7 +260,13 @@ mod tests {
                         .wrapping_add(1442695040888963407);
                     u += (seed >> 11) as f64 / (1u64 << 53) as f64;
                 }
-                p.update(sigma * (u - 6.0), r, 1e-3, 1e-3, 6.0, 1e-3);
+                p.update(
+                    sigma * (u - 6.0),
+                    r,
+                    1e-3,
+                    1e-3,
+                    &JumpTest::gated(6.0, 1e-3),
+                );
                 if k > 2000 {
                     sum += p.state()[1].powi(2);
                     n += 1.0;
@@ -241,11 +283,44 @@ mod tests {
     #[test]
     fn a_step_is_a_jump_not_a_velocity() {
         let mut p = SurfacePredictor::new();
+        let test = JumpTest::gated(6.0, 1e-5);
         for _ in 0..100 {
-            p.update(0.0, 1e-14, 1e-3, 1e-3, 6.0, 1e-5);
+            p.update(0.0, 1e-14, 1e-3, 1e-3, &test);
         }
-        assert!(p.update(0.001, 1e-14, 1e-3, 1e-3, 6.0, 1e-5));
+        assert_eq!(p.update(0.001, 1e-14, 1e-3, 1e-3, &test), Some(0.001));
         let [x, v, a] = p.state();
         assert_eq!((x, v, a), (0.001, 0.0, 0.0));
+    }
+
+    /// A still surface measured at `r` for 100 steps of 4 ms, then `z`: what the filter made of it.
+    fn after_still(z: f64, test: &JumpTest) -> (Option<f64>, f64) {
+        let mut p = SurfacePredictor::new();
+        for _ in 0..100 {
+            p.update(0.0, 1e-12, 1e-3, 4e-3, test);
+        }
+        let out = p.update(z, 1e-12, 1e-3, 4e-3, test);
+        (out, p.state()[1])
+    }
+
+    #[test]
+    fn a_step_below_the_floor_is_a_jump_where_no_motion_or_robot_explains_it() {
+        // 0.3 mm on a surface measured to 1 µm, under a 0.5 mm floor (a soft pad's).
+        let mut test = JumpTest {
+            gate: 6.0,
+            floor: 5e-4,
+            step_gate: 70.0,
+            step_floor: 2e-6,
+        };
+        assert_eq!(after_still(3e-4, &test), (Some(3e-4), 0.0));
+        // The gate and the floor alone: the same step would be a surface velocity.
+        let (out, v) = after_still(3e-4, &JumpTest::gated(6.0, 5e-4));
+        assert!(out.is_none() && v > 0.01, "{out:?}, {v} m/s");
+        // A robot that moved 0.4 mm in the cycle explains it (a stale k̂_c's apparent motion).
+        test.step_floor = 4e-4;
+        assert!(after_still(3e-4, &test).0.is_none());
+        // Within the step gate (the start of real motion) it is motion.
+        test.step_floor = 2e-6;
+        let (out, v) = after_still(2e-5, &test);
+        assert!(out.is_none() && v > 0.0, "{out:?}, {v} m/s");
     }
 }

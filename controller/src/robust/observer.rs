@@ -14,7 +14,7 @@ pub use params::ObserverParams;
 
 use super::motion::Motion;
 use crate::estimator::surface_moving;
-use crate::predictor::SurfacePredictor;
+use crate::predictor::{JumpTest, SurfacePredictor};
 
 /// What the observer needs from the rest of the law in one contact step.
 #[derive(Clone, Copy, Debug)]
@@ -63,6 +63,11 @@ pub struct SurfaceObserver {
     /// Time left for a jump the raw predictor saw to pass the conditioning, s: the conditioned
     /// surface moves meanwhile, and that is no motion.
     passing: f64,
+    /// The same for a jump below the observer's own floor (which the observer would take for
+    /// motion): it moves the observed surface there, without a velocity, until it has passed, s.
+    passing_small: f64,
+    /// The observer's velocity before its last step (undone when that step was a small jump), m/s.
+    vc_before: f64,
     motion: Motion,
 }
 
@@ -78,6 +83,8 @@ impl SurfaceObserver {
             pred: SurfacePredictor::new(),
             pred_jump_time: 0.0,
             passing: 0.0,
+            passing_small: 0.0,
+            vc_before: 0.0,
             motion: Motion::default(),
         };
         o.reset();
@@ -105,6 +112,8 @@ impl SurfaceObserver {
         self.pred.clear();
         self.pred_jump_time = 0.0;
         self.passing = 0.0;
+        self.passing_small = 0.0;
+        self.vc_before = 0.0;
         self.motion.restart();
     }
 
@@ -150,7 +159,9 @@ impl SurfaceObserver {
         self.jump_started = jump && self.jump_time == 0.0;
         self.jump_time = if jump { self.jump_time + dt } else { 0.0 };
         self.passing = (self.passing - dt).max(0.0);
-        if jump && self.jump_time <= s.step_time {
+        self.passing_small = (self.passing_small - dt).max(0.0);
+        self.vc_before = self.vc;
+        if (jump && self.jump_time <= s.step_time) || self.passing_small > 0.0 {
             self.zc = z;
         } else {
             self.vc += dt * w * w * e;
@@ -177,23 +188,34 @@ impl SurfaceObserver {
         let k = s.k;
         let floor = r.noise_floor;
         let var = (s.noise_var + floor * floor) / (k * k);
-        let jump_floor = if self.pred_jump_time <= s.step_time {
-            p.step_innovation * s.force_scale / k
+        // A jump: beyond the floor of a set-point's share of the penetration, or far beyond what a
+        // cycle of motion makes and beyond the robot's own displacement in the cycle (a stale k̂_c
+        // within a factor of two of k_c makes the surface appear to move by at most that much). A
+        // jump that goes on for longer than the conditioning takes to pass one is motion.
+        let test = if self.pred_jump_time <= s.step_time {
+            JumpTest {
+                gate: p.jump_gate,
+                floor: p.step_innovation * s.force_scale / k,
+                step_gate: p.step_gate,
+                step_floor: s.v_raw.abs() * dt,
+            }
         } else {
-            f64::INFINITY
+            JumpTest::gated(p.jump_gate, f64::INFINITY)
         };
-        let jumped = self.pred.update(
-            s.x - s.f / k,
-            var,
-            r.surface_jerk,
-            dt,
-            p.jump_gate,
-            jump_floor,
-        );
-        if jumped {
+        let jump = self
+            .pred
+            .update(s.x - s.f / k, var, r.surface_jerk, dt, &test);
+        let jumped = jump.is_some();
+        if let Some(y) = jump {
             // A step seen raw starts passing the conditioning now (and is the start of a jump).
             self.jump_started |= self.pred_jump_time == 0.0;
             self.passing = s.step_time;
+            if y.abs() <= test.floor {
+                // The observer took this step's start for motion: undone.
+                self.passing_small = s.step_time;
+                self.vc = self.vc_before;
+                self.zc = s.xf - s.ff / k;
+            }
         }
         self.pred_jump_time = if jumped {
             self.pred_jump_time + dt

@@ -44,9 +44,8 @@ fn a_still_surface_stays_still_and_a_moving_one_is_followed() {
     assert!(o.surface().is_nan() && !o.disturbed());
 }
 
-#[test]
-fn a_jump_seen_raw_starts_a_jump_and_is_no_motion_while_it_passes() {
-    let r = crate::robust::ResponseParams {
+fn response() -> crate::robust::ResponseParams {
+    crate::robust::ResponseParams {
         kappa: 0.8,
         integral: 1.5,
         integral_limit: 3e-4,
@@ -57,7 +56,12 @@ fn a_jump_seen_raw_starts_a_jump_and_is_no_motion_while_it_passes() {
         set_point_rate: 50.0,
         noise_gate: 1.0,
         integration_band: 0.05,
-    };
+    }
+}
+
+#[test]
+fn a_jump_seen_raw_starts_a_jump_and_is_no_motion_while_it_passes() {
+    let r = response();
     let (dt, x) = (1e-3, 0.010 + 5.0 / 70_000.0);
     let mut o = SurfaceObserver::new(ObserverParams::default());
     o.restart(0.010);
@@ -87,5 +91,59 @@ fn a_jump_seen_raw_starts_a_jump_and_is_no_motion_while_it_passes() {
     assert!(
         !moving && o.still(),
         "the passing step was taken for motion"
+    );
+}
+
+/// A soft pad (10 N/mm) pressed at 20 N on a 4 ms cycle, still, then the part steps 0.3 mm away under
+/// the still tool (−3 N at once raw, over the step time conditioned): below the observer's jump floor
+/// (a quarter of the 2 mm penetration). Returns whether motion was established, the largest fallback
+/// feed-forward and the observed surface at the end.
+fn soft_pad_step(p: ObserverParams) -> (bool, f64, f64) {
+    let (r, dt, k) = (response(), 4e-3, 10_000.0);
+    let x = 0.010 + 20.0 / k;
+    let mut o = SurfaceObserver::new(p);
+    o.restart(0.010);
+    let step = |o: &mut SurfaceObserver, f: f64, ff: f64| {
+        let s = View {
+            f,
+            ff,
+            k,
+            force_scale: 20.0,
+            step_time: 0.03,
+            ..view(x, ff)
+        };
+        o.track(&s, 8.0, dt);
+        let ff = o.feedforward(&s, &r, 1e-3, 0.01, 0.012, dt, 0.03, dt);
+        o.hold(0.0, 1e-3, true, dt);
+        (ff.weight, ff.fallback)
+    };
+    for _ in 0..100 {
+        step(&mut o, 20.0, 20.0);
+    }
+    let (mut established, mut fallback) = (false, 0.0f64);
+    for i in 1..=50 {
+        let ff = 20.0 - 3.0 * (i as f64 / 8.0).min(1.0);
+        let (w, fb) = step(&mut o, 17.0, ff);
+        established |= w > 0.0 || !o.still();
+        fallback = fallback.max(fb.abs());
+    }
+    (established, fallback, o.surface())
+}
+
+#[test]
+fn a_step_below_the_floor_that_nothing_else_explains_is_no_motion() {
+    let (established, fallback, surface) = soft_pad_step(ObserverParams::default());
+    assert!(!established, "the step was taken for motion");
+    assert!(fallback < 1e-6, "fed forward {fallback} m");
+    assert!((surface - 0.0103).abs() < 1e-6, "surface at {surface} m");
+    // Without the step gate the same step is a motion, and the feed-forward throws the tool.
+    let old = ObserverParams {
+        step_gate: f64::INFINITY,
+        ..ObserverParams::default()
+    };
+    let (established, fallback, _) = soft_pad_step(old);
+    assert!(
+        established && fallback > 1e-5,
+        "{established}, {fallback} m"
     );
 }
