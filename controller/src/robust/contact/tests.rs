@@ -15,6 +15,7 @@ fn params() -> ContactParams {
         bounce_time: 0.5,
         strong_contact: 3.0,
         reacquire_margin: 1.0,
+        reacquire_outrun: 1.5,
     }
 }
 
