@@ -110,9 +110,11 @@ impl Identifier {
         self.c_e
     }
 
-    /// Keep a raw sample `(x, f)` of the approach, at velocity `v` (m/s), for the onset fit.
-    pub fn remember(&mut self, x: f64, f: f64, v: f64) {
-        self.onset.remember(x, f, v);
+    /// Keep a raw sample `(x, f)` of the approach, at velocity `v` (m/s), for the onset fit: the last
+    /// `approach_memory` at control cycle `cycle` (s).
+    pub fn remember(&mut self, x: f64, f: f64, v: f64, cycle: f64) {
+        let keep = OnsetFit::samples(self.p.approach_memory, cycle);
+        self.onset.remember(x, f, v, keep);
     }
 
     /// Contact is declared at `(x, f)`; `from_approach`: on a still surface, so the transient is fitted.

@@ -27,7 +27,7 @@ fn the_onset_of_a_contact_from_the_approach_is_fitted() {
         let mut first = false;
         if !contact {
             if f < 1.0 {
-                id.remember(x, f, 2e-3);
+                id.remember(x, f, 2e-3, 1e-3);
                 x += 2e-6;
                 continue;
             }
