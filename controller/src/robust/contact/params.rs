@@ -28,7 +28,9 @@ pub struct ContactParams {
     /// it is at approach speed (advanced).
     #[serde(default = "default_bounce_time")]
     pub bounce_time: f64,
-    /// One raw sample this many times `contact_force` is contact on its own (advanced).
+    /// One raw sample this many times the contact threshold (`contact_force`, scaled), or this many
+    /// times the significance in the raw force's own noise, is contact on its own (advanced; see
+    /// [`ContactMachine::thresholds`](super::ContactMachine::thresholds)).
     #[serde(default = "default_strong_contact")]
     pub strong_contact: f64,
     /// How far beyond the position where contact was lost the search stays at the speed the cell can
