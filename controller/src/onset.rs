@@ -4,15 +4,23 @@
 //! force rises from zero along `f = k_c·(x − x_c)`. The conditioned force that confirms contact lags the
 //! raw one, so by the time contact is declared most of that rise has passed; it is kept here.
 //!
-//! Out of contact the last [`CAPACITY`] raw samples `(x, f)` are remembered. When contact is declared,
+//! Out of contact the raw samples `(x, f)` of the last stretch of the approach are remembered (as many
+//! as the caller keeps, at most [`CAPACITY`]). When contact is declared,
 //! a hinge is fitted to them: samples before the break carry no force (`f ≈ 0`), samples from it on lie
 //! on a line `f = a + b·u`, `u = (x − x₀)/s`; the break is the one with the least total squared residual.
 //! The samples on the line, and every sample of the window [`OnsetFit::begin`] opens, make an ordinary
 //! least-squares fit of `(a, b)` whose uncertainty comes from its own residuals (or the
 //! measured sensor noise, whichever is larger). A fixed-size buffer and running sums: no allocation.
 
-/// Samples remembered out of contact.
-pub const CAPACITY: usize = 48;
+/// The fastest control cycle the buffer is sized for, s (KUKA RSI at 1 kHz).
+pub const FASTEST_CYCLE: f64 = 0.001;
+
+/// Samples remembered out of contact at most: [`MAX_MEMORY`] at [`FASTEST_CYCLE`] (a faster cycle
+/// remembers a shorter time). A fixed size: remembering never allocates.
+pub const CAPACITY: usize = 256;
+
+/// The longest stretch of the approach that can be remembered at [`FASTEST_CYCLE`], s.
+pub const MAX_MEMORY: f64 = CAPACITY as f64 * FASTEST_CYCLE;
 
 /// Running least-squares sums on `(u, w, f)`: `u` the scaled position, `w` the scaled velocity.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -171,14 +179,25 @@ impl OnsetFit {
         self.left = 0.0;
     }
 
-    /// Remember a raw sample out of contact: position `x` (m), force `f` (N), velocity `v` (m/s).
-    pub fn remember(&mut self, x: f64, f: f64, v: f64) {
+    /// Remember a raw sample out of contact: position `x` (m), force `f` (N), velocity `v` (m/s); the
+    /// last `keep` samples (at most [`CAPACITY`]) are kept.
+    pub fn remember(&mut self, x: f64, f: f64, v: f64, keep: usize) {
         if !(x.is_finite() && f.is_finite() && v.is_finite()) {
             return;
         }
         self.buf[self.head] = (x, f, v);
         self.head = (self.head + 1) % CAPACITY;
-        self.len = (self.len + 1).min(CAPACITY);
+        self.len = (self.len + 1).min(keep.clamp(1, CAPACITY));
+    }
+
+    /// How many samples at control cycle `cycle` (s) span `memory` (s): at least two, at most
+    /// [`CAPACITY`].
+    pub fn samples(memory: f64, cycle: f64) -> usize {
+        if cycle > 0.0 && memory.is_finite() {
+            ((memory / cycle).round().max(2.0) as usize).min(CAPACITY)
+        } else {
+            CAPACITY
+        }
     }
 
     /// Whether the onset window is open.
@@ -341,7 +360,7 @@ mod tests {
         let mut o = OnsetFit::new();
         let mut x = 0.00996;
         for _ in 0..40 {
-            o.remember(x, (k * (x - xc)).max(0.0), 0.002);
+            o.remember(x, (k * (x - xc)).max(0.0), 0.002, 48);
             x += 2e-6;
         }
         o.begin(x, s, 0.1);

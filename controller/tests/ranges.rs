@@ -80,14 +80,20 @@ fn stiffness(lo: f64, hi: f64) -> impl Strategy<Value = f64> {
 ///   loses contact 3 and 2 times, which the contact assertion would catch if drawn;
 /// * a change on a damped surface can lose contact at small set-points (f_r 2 N, 20 → 10 kN/m,
 ///   118 N·s/m, P2: 3 losses);
-/// * with 64 cases instead of 24 two more show: σ 0.82 N at f_r 2 N on 10 kN/m (P1) loses contact
-///   once in the hold; a doubling on a 178 N·s/m surface at f_r 2 N (P1) ends 12 N off;
-/// * with 200 cases the impact criterion fails under noise at the smallest set-point (σ 0.82 N, f_r
-///   2 N, 10 kN/m, P1: 4.46 N against 4.1 N);
-/// * near the top of the noise range a noise spike can be taken for contact short of the surface, the
-///   onset fit of noise sets `k̂_c` to its floor, and the law drives in (σ 0.9 N, f_r 20 N, 500 kN/m,
-///   P2, seed 7: 547 N; 100 kN/m: 109 N; the 24 cases drawn here do not hit it). (The touch-down goes on at approach speed until `k̂_c`
-///   is identified; before that, f_r 36.6 N on 354 kN/m on P2 hit 115 N against 84.5 N, now 37 N.)
+/// * the touch-down under noise still fails at its corners, where the noise is a large part of a small
+///   set-point or the cycle is slow: `noise_corners` (ignored; `--ignored` runs it) counts the seeds
+///   1–199 that fail the touch-down criteria — f_r 2 N on 10 kN/m, P1: 21 at σ 0.82 N, 46 at 1 N
+///   (the impact within 0.7 of its bound; the mean error at the end, e.g. 0.13–0.25 N against
+///   0.12 N); on the 12 ms cell at σ 1 N: f_r 5 N on 50 kN/m 90, f_r 2 N on 10 kN/m 181 (impacts up
+///   to 4.7 times the bound, contact losses, mean errors). Before
+///   the noise was measured from the first samples and a single raw sample had to stand out of the raw
+///   noise, they were 94, 158, 183 and 198, and f_r 20 N on 500 kN/m, P2, σ 1 N failed 106 (now 0).
+///   The 24 cases drawn here, and 64 or 200, pass;
+/// * (fixed, `a_noise_spike_in_free_air_is_no_touch_down`: a noise spike taken for contact short of
+///   the surface — σ 0.9 N, f_r 20 N, 500 kN/m, P2, seed 7 — ended the run on fault 2 at 65.9 N; the
+///   touch-down now peaks at 23.9 N, 21.0 N on 100 kN/m. The touch-down goes on at approach speed
+///   until `k̂_c` is identified; before that, f_r 36.6 N on 354 kN/m on P2 hit 115 N against 84.5 N,
+///   now 37 N.)
 const DAMPED_CHANGE: bool = false;
 const SETTLE_AFTER_CHANGE: bool = false;
 const REIDENTIFY: bool = false;
@@ -112,27 +118,10 @@ proptest! {
         f_r in 2.0f64..50.0,
         k_c in stiffness(10e3, 500e3),
         cell_i in 0usize..3,
-        noise in prop_oneof![Just(0.0), 0.0f64..1.0],
+        noise in prop_oneof![Just(0.0), 0.0f64..=1.0],
         seed in 1u64..1000,
     ) {
-        let plant = CELLS[cell_i];
-        let s = cell(3.0, k_c, 0.0, None, None, noise, seed);
-        let r = run(&s, &plant, &tuning(f_r)).unwrap();
-        let all = r.metrics(0.0, f64::INFINITY);
-        let limit = 2.0 * f_r + floor(k_c, 0.002, &plant);
-        prop_assert!(all.first_contact.is_finite(), "no contact");
-        prop_assert!(all.peak_force <= limit, "impact {} N > {limit} N", all.peak_force);
-        let hold = r.metrics(all.first_contact + 0.5, f64::INFINITY);
-        prop_assert!(hold.contact_losses == 0.0, "{} contact losses", hold.contact_losses);
-        let end = r.metrics(2.5, f64::INFINITY);
-        let mean_err = mean_error(&r.rows, 2.5);
-        prop_assert!(
-            mean_err <= 0.02 * f_r + 0.1 * noise,
-            "mean error {mean_err} N at the end (ripple {})", end.ss_ripple
-        );
-        if noise == 0.0 {
-            prop_assert!(all.settle_time <= 1.0, "settle {} s", all.settle_time);
-        }
+        touch_down(f_r, k_c, &CELLS[cell_i], noise, seed)?;
     }
 
     /// B2 carried over: the stiffness halves or doubles at any time in a steady contact; the force
@@ -197,6 +186,94 @@ proptest! {
                 );
             }
         }
+    }
+}
+
+/// The touch-down criteria (see `touch_down_and_hold`).
+fn touch_down(
+    f_r: f64,
+    k_c: f64,
+    plant: &InnerLoopModel,
+    noise: f64,
+    seed: u64,
+) -> Result<(), TestCaseError> {
+    let s = cell(3.0, k_c, 0.0, None, None, noise, seed);
+    let r = run(&s, plant, &tuning(f_r)).map_err(|e| TestCaseError::fail(e.to_string()))?;
+    let all = r.metrics(0.0, f64::INFINITY);
+    let limit = 2.0 * f_r + floor(k_c, 0.002, plant);
+    prop_assert!(all.first_contact.is_finite(), "no contact");
+    prop_assert!(
+        all.peak_force <= limit,
+        "impact {} N > {limit} N",
+        all.peak_force
+    );
+    let hold = r.metrics(all.first_contact + 0.5, f64::INFINITY);
+    prop_assert!(
+        hold.contact_losses == 0.0,
+        "{} contact losses",
+        hold.contact_losses
+    );
+    let end = r.metrics(2.5, f64::INFINITY);
+    let mean_err = mean_error(&r.rows, 2.5);
+    prop_assert!(
+        mean_err <= 0.02 * f_r + 0.1 * noise,
+        "mean error {mean_err} N at the end (ripple {})",
+        end.ss_ripple
+    );
+    if noise == 0.0 {
+        prop_assert!(all.settle_time <= 1.0, "settle {} s", all.settle_time);
+    }
+    Ok(())
+}
+
+/// A noise spike in free air is no touch-down (issue #11): σ 0.9 N, f_r 20 N, P2, seed 7. No contact
+/// is declared before the tool reaches the surface, and the touch-down criteria hold. (Before, the
+/// noise meter was still rising from zero 0.2 s into the approach, the conditioned noise crossed the
+/// 1 N contact threshold 0.6 mm short of the surface, that contact was lost, the surface was found as a
+/// re-acquisition and not fitted, and on 500 kN/m the guess of 50 kN/m drove the force to 65.9 N:
+/// fault 2 ended the run.)
+#[test]
+fn a_noise_spike_in_free_air_is_no_touch_down() {
+    for k_c in [500e3, 100e3] {
+        let plant = CELLS[1];
+        let s = cell(3.0, k_c, 0.0, None, None, 0.9, 7);
+        let r = run(&s, &plant, &tuning(20.0)).expect("no fault");
+        let touched = r.metrics(0.0, f64::INFINITY).first_contact;
+        // The observed surface exists from the first declared contact on.
+        let declared = r
+            .rows
+            .iter()
+            .find(|row| !row.xc_hat.is_nan())
+            .map(|row| row.t);
+        assert!(
+            declared.is_some_and(|t| t >= touched),
+            "{k_c} N/m: contact declared at {declared:?} s, the surface touched at {touched} s"
+        );
+        if let Err(e) = touch_down(20.0, k_c, &plant, 0.9, 7) {
+            panic!("{k_c} N/m: {e}");
+        }
+    }
+}
+
+/// The touch-down's known limits under noise (see above), as failing seeds out of 1–199 per corner:
+/// no more than measured when this was written.
+#[test]
+#[ignore = "995 closed-loop runs: the known limits' figures, not a criterion"]
+fn noise_corners() {
+    // (f_r, k_c, cell, σ, failing seeds measured)
+    let corners = [
+        (2.0, 10e3, 0, 0.82, 21),
+        (2.0, 10e3, 0, 1.0, 46),
+        (20.0, 500e3, 1, 1.0, 0),
+        (5.0, 50e3, 2, 1.0, 90),
+        (2.0, 10e3, 2, 1.0, 181),
+    ];
+    for (f_r, k_c, cell_i, noise, measured) in corners {
+        let failing = (1..200u64)
+            .filter(|&seed| touch_down(f_r, k_c, &CELLS[cell_i], noise, seed).is_err())
+            .count();
+        println!("f_r {f_r} N, {k_c} N/m, cell {cell_i}, σ {noise} N: {failing} of 199 fail");
+        assert!(failing <= measured, "{failing} > {measured}");
     }
 }
 

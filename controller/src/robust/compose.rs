@@ -12,11 +12,19 @@ impl RobustLaw {
 
     /// The contact detector's thresholds now: scaled to the active set-point and the measured noise
     /// (the conditioned force's noise from the raw one through the conditioning's noise bandwidth).
+    /// Until the noise has been measured for as long as a step takes to pass the conditioning, the
+    /// conditioned force is still the first raw sample's, noise and all, and the noise unknown: only
+    /// a strong raw sample is contact.
     pub(super) fn thresholds(&self, cycle: f64) -> contact::Thresholds {
         let sigma = self.noise.std();
         let sigma_ff = sigma * self.signals.noise_gain(cycle);
-        self.contact
-            .thresholds(self.response.set_point(), sigma, sigma_ff)
+        let mut th = self
+            .contact
+            .thresholds(self.response.set_point(), sigma, sigma_ff);
+        if self.noise.age() < self.signals.step_time(cycle) {
+            th.contact = f64::INFINITY;
+        }
+        th
     }
 
     /// How far ahead of the robot the approach may command, in time at approach speed, s.

@@ -2,7 +2,8 @@
 //!
 //! * At a contact made from the approach (a still surface, the force rising from zero while the
 //!   position moves in), a hinge least-squares fit on the approach's raw samples and the first
-//!   `onset_window` of contact sets `k̂_c` ([`crate::onset`]). A contact re-acquired after a loss is not
+//!   `onset_window` of contact sets `k̂_c` once its slope is significant ([`crate::onset`]; a contact
+//!   declared on noise has none). A contact re-acquired after a loss is not
 //!   fitted: the surface may be the one moving away. The fit has the velocity as a regressor of its own,
 //!   so surface damping `c_e·ẋ` is identified beside `k̂_c` instead of biasing it.
 //! * A jump under a steady contact on a still surface opens a re-fit over `refit_window`, judged at its
@@ -110,9 +111,11 @@ impl Identifier {
         self.c_e
     }
 
-    /// Keep a raw sample `(x, f)` of the approach, at velocity `v` (m/s), for the onset fit.
-    pub fn remember(&mut self, x: f64, f: f64, v: f64) {
-        self.onset.remember(x, f, v);
+    /// Keep a raw sample `(x, f)` of the approach, at velocity `v` (m/s), for the onset fit: the last
+    /// `approach_memory` at control cycle `cycle` (s).
+    pub fn remember(&mut self, x: f64, f: f64, v: f64, cycle: f64) {
+        let keep = OnsetFit::samples(self.p.approach_memory, cycle);
+        self.onset.remember(x, f, v, keep);
     }
 
     /// Contact is declared at `(x, f)`; `from_approach`: on a still surface, so the transient is fitted.
@@ -174,8 +177,14 @@ impl Identifier {
             self.onset.add(x, f, v, dt);
         }
         let fit = match self.refit_from {
-            // A contact onset: the fit so far, every step.
-            None if onset => self.onset.fit(noise_var),
+            // A contact onset: the fit so far, every step, once its slope is significant (a contact
+            // declared on noise has no force rising with the position to fit).
+            None if onset => {
+                let gate = self.p.pivot_gate;
+                self.onset
+                    .fit(noise_var)
+                    .filter(|f| f.b > gate * f.var_b.sqrt())
+            }
             None => None,
             Some(_) if self.onset.active() => None,
             // A re-fit: once, at the window's end, if significant.

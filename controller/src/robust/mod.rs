@@ -196,7 +196,7 @@ impl ForceLaw for RobustLaw {
             self.contact.state(),
             ContactState::Approach | ContactState::Reacquire
         ) {
-            self.identify.remember(x, f, s.v_raw);
+            self.identify.remember(x, f, s.v_raw, cycle);
         }
         let receding = self.observer.receding();
         let th = self.thresholds(cycle);

@@ -1,7 +1,10 @@
 //! The sensor noise, measured online: the mean square of the raw force's second difference over six
 //! (white noise of variance σ² gives σ²; ramps give nothing, smooth motion little), averaged over a
-//! window. Each difference is clipped at three of its own standard deviations (plus a floor), so impacts
-//! and steps — rare, large — cannot pass for noise; true noise still builds the estimate up.
+//! window — over every sample so far while there is less than a window of them, so the estimate is the
+//! noise's from the first samples on (the approach's contact detector scales with it: an estimate still
+//! rising from zero would let a noise spike pass for contact). Each difference is clipped at three of
+//! its own standard deviations (plus a floor), so impacts and steps — rare, large — cannot pass for
+//! noise; true noise still builds the estimate up.
 
 use serde::{Deserialize, Serialize};
 
@@ -38,9 +41,11 @@ impl NoiseParams {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NoiseMeter {
     p: NoiseParams,
-    /// The two previous raw forces, N.
-    prev: Option<(f64, f64)>,
+    /// The previous raw force and the one before it, N.
+    prev: Option<(f64, Option<f64>)>,
     var: f64,
+    /// Time measured since the reset, s.
+    age: f64,
 }
 
 impl NoiseMeter {
@@ -50,6 +55,7 @@ impl NoiseMeter {
             p,
             prev: None,
             var: 0.0,
+            age: 0.0,
         }
     }
 
@@ -62,22 +68,34 @@ impl NoiseMeter {
     pub fn reset(&mut self) {
         self.prev = None;
         self.var = 0.0;
+        self.age = 0.0;
     }
 
     /// Count one raw force sample `f` after a step of `dt`.
     pub fn step(&mut self, f: f64, dt: f64) {
-        if let Some((p1, p2)) = self.prev {
-            let a = (dt / self.p.window).min(1.0);
-            let clip = 3.0 * (6.0 * self.var).sqrt() + self.p.clip_floor;
+        if let Some((p1, Some(p2))) = self.prev {
+            // The first second difference is taken whole: there is no estimate yet to clip it at.
+            let clip = if self.age == 0.0 {
+                f64::INFINITY
+            } else {
+                3.0 * (6.0 * self.var).sqrt() + self.p.clip_floor
+            };
+            self.age += dt;
+            let a = (dt / self.age.min(self.p.window)).min(1.0);
             let d2 = (f - 2.0 * p1 + p2).clamp(-clip, clip);
             self.var += a * (d2 * d2 / 6.0 - self.var);
         }
-        self.prev = Some((f, self.prev.map_or(f, |p| p.0)));
+        self.prev = Some((f, self.prev.map(|p| p.0)));
     }
 
     /// The noise variance, N².
     pub fn var(&self) -> f64 {
         self.var
+    }
+
+    /// How long the noise has been measured since the reset, s.
+    pub fn age(&self) -> f64 {
+        self.age
     }
 
     /// The noise standard deviation, N.
@@ -112,5 +130,18 @@ mod tests {
         );
         m.reset();
         assert_eq!(m.var(), 0.0);
+    }
+
+    /// A sensor noisy from the start is measured within the first fifth of a window (the approach's
+    /// contact detector scales with it from there on).
+    #[test]
+    fn the_noise_is_measured_from_the_first_samples() {
+        let mut m = NoiseMeter::new(NoiseParams::default());
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let n = Normal::new(0.0, 0.9).unwrap();
+        for _ in 0..50 {
+            m.step(n.sample(&mut rng), 4e-3);
+        }
+        assert!((m.std() - 0.9).abs() < 0.25, "{} N after 0.2 s", m.std());
     }
 }

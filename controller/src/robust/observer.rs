@@ -150,7 +150,8 @@ impl SurfaceObserver {
         self.motion.hold(&self.p, moving && in_contact, dt) || moving
     }
 
-    /// Track the conditioned surface with natural frequency `bandwidth` (Hz).
+    /// Track the conditioned surface with natural frequency `bandwidth` (Hz) and the damping ratio
+    /// `observer.damping`.
     pub fn track(&mut self, s: &View, bandwidth: f64, dt: f64) {
         let w = (core::f64::consts::TAU * bandwidth).min(0.5 / dt);
         let z = s.xf - s.ff / s.k;
@@ -165,7 +166,7 @@ impl SurfaceObserver {
             self.zc = z;
         } else {
             self.vc += dt * w * w * e;
-            self.zc += dt * (self.vc + 2.0 * 0.8 * w * e);
+            self.zc += dt * (self.vc + 2.0 * self.p.damping * w * e);
         }
     }
 

@@ -3,7 +3,8 @@
 //! `strong_contact` times that → `Reacquire` when the raw force stays below `lift_force` for `lift_time`
 //! (fast for `reacquire_distance`, optionally bounded by what the cell can stop near where contact was
 //! lost, then at approach speed: [`search`]) → `Contact` … and from anywhere `Retract` when the
-//! conditioned force exceeds the force limit.
+//! conditioned force exceeds the force limit. A touch-down from the approach lost within a bounce,
+//! before its stiffness was identified, goes back to `Approach`.
 
 use super::signals::Signals;
 use crate::law::ContactState;
@@ -14,12 +15,17 @@ use crate::law::ContactState;
 pub struct Thresholds {
     /// Conditioned force that means contact, N.
     pub contact: f64,
+    /// One raw sample at or above this is contact on its own, N.
+    pub strong: f64,
     /// Raw force below which a sample counts towards a lift-off, N.
     pub lift: f64,
     /// Consecutive samples below `lift` a lift-off needs (never one: a single bad or zero sample, or
     /// the first sample after a dropout, is not a lift-off; more under noise).
     pub samples: u32,
 }
+
+/// Standard deviations of a signal's noise that a contact must stand out by.
+pub const SIGNIFICANCE: f64 = 4.0;
 
 /// What a step of the state machine did.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -105,15 +111,19 @@ impl ContactMachine {
     /// The thresholds for set-point `f_r` (N) and the conditioned force's noise `sigma_ff` (N) and the
     /// raw force's `sigma` (N): `contact_force` and `lift_force` as configured for a set-point of at
     /// least twice `contact_force`, scaled down with a smaller set-point (contact at half of it), and
-    /// raised to four standard deviations of the conditioned force's noise; a lift-off needs two
-    /// samples, and one more per `lift_force` of raw noise.
+    /// raised to [`SIGNIFICANCE`] standard deviations of the conditioned force's noise; a single raw
+    /// sample is contact at `strong_contact` times that, or times as many of the raw force's standard
+    /// deviations (the raw noise is wider than the conditioned: over an approach of hundreds of
+    /// samples a few noise spikes reach `strong_contact · contact`); a lift-off needs two samples, and
+    /// one more per `lift_force` of raw noise.
     pub fn thresholds(&self, f_r: f64, sigma: f64, sigma_ff: f64) -> Thresholds {
         let c = &self.p;
-        let contact = c.contact_force.min(0.5 * f_r).max(4.0 * sigma_ff);
+        let contact = c.contact_force.min(0.5 * f_r).max(SIGNIFICANCE * sigma_ff);
         let lift = c.lift_force * contact / c.contact_force;
         let extra = (sigma / lift.max(1e-9)).ceil().min(64.0);
         Thresholds {
             contact,
+            strong: c.strong_contact * contact.max(SIGNIFICANCE * sigma),
             lift,
             samples: 2 + extra as u32,
         }
@@ -140,7 +150,7 @@ impl ContactMachine {
             ContactState::Approach | ContactState::Reacquire => {
                 // The conditioned force, confirmed by the raw one (the filter still remembers a
                 // contact just lost), or one strong raw sample.
-                if (s.ff >= th.contact && s.f >= th.lift) || s.f >= c.strong_contact * th.contact {
+                if (s.ff >= th.contact && s.f >= th.lift) || s.f >= th.strong {
                     let from_approach = self.state == ContactState::Approach;
                     self.landing = from_approach;
                     self.state = ContactState::Contact;
@@ -156,6 +166,15 @@ impl ContactMachine {
                     self.below += dt;
                     self.below_samples += 1;
                     if self.below >= c.lift_time && self.below_samples >= th.samples {
+                        if self.landing && self.in_contact < c.bounce_time {
+                            // A touch-down lost before its stiffness was identified, within a
+                            // bounce: nothing was learnt of a surface (a noise spike in free air
+                            // looks like this). The approach goes on, and the next contact is a
+                            // touch-down again, fitted.
+                            self.state = ContactState::Approach;
+                            self.landing = false;
+                            return Transition::LiftOff;
+                        }
                         self.state = ContactState::Reacquire;
                         // The fast search is for a surface that went away. A contact lost while the
                         // tool itself was moving away (the law's own answer to a force jump), or lost

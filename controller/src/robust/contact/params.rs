@@ -28,7 +28,9 @@ pub struct ContactParams {
     /// it is at approach speed (advanced).
     #[serde(default = "default_bounce_time")]
     pub bounce_time: f64,
-    /// One raw sample this many times `contact_force` is contact on its own (advanced).
+    /// One raw sample this many times the contact threshold (`contact_force`, scaled), or this many
+    /// times the significance in the raw force's own noise, is contact on its own (advanced; see
+    /// [`ContactMachine::thresholds`](super::ContactMachine::thresholds)).
     #[serde(default = "default_strong_contact")]
     pub strong_contact: f64,
     /// How far beyond the position where contact was lost the search stays at the speed the cell can
@@ -40,6 +42,11 @@ pub struct ContactParams {
     /// 48 ms to 88 ms (target 50 ms).
     #[serde(default)]
     pub reacquire_margin: f64,
+    /// Once the search is past `reacquire_distance`, it moves faster than the approach by this many
+    /// times the surface's speed away from the tool seen at lift-off (advanced; above 1 a surface that
+    /// keeps receding is caught up with, at `(reacquire_outrun − 1)` times its speed, bounded by the fast search).
+    #[serde(default = "default_reacquire_outrun")]
+    pub reacquire_outrun: f64,
 }
 
 fn default_bounce_time() -> f64 {
@@ -48,6 +55,10 @@ fn default_bounce_time() -> f64 {
 
 fn default_strong_contact() -> f64 {
     3.0
+}
+
+fn default_reacquire_outrun() -> f64 {
+    1.5
 }
 
 impl ContactParams {
@@ -64,6 +75,7 @@ impl ContactParams {
         non_negative("contact.bounce_time", self.bounce_time)?;
         positive("contact.strong_contact", self.strong_contact)?;
         non_negative("contact.reacquire_margin", self.reacquire_margin)?;
+        non_negative("contact.reacquire_outrun", self.reacquire_outrun)?;
         if self.lift_force >= self.contact_force {
             return Err(format!(
                 "contact.lift_force {} N must be below contact.contact_force {} N",

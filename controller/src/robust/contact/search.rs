@@ -80,7 +80,7 @@ impl ContactMachine {
                 // when the surface was seen receding at lift-off (a receding surface outruns a slow
                 // search).
                 let speed = if self.travelled >= c.reacquire_distance {
-                    (sp.approach + 1.5 * self.v_lost).min(sp.reacquire)
+                    (sp.approach + c.reacquire_outrun * self.v_lost).min(sp.reacquire)
                 } else if sp.margin > 0.0 && u < self.x_lost + sp.margin {
                     sp.near
                 } else {

@@ -15,11 +15,13 @@ fn params() -> ContactParams {
         bounce_time: 0.5,
         strong_contact: 3.0,
         reacquire_margin: 1.0,
+        reacquire_outrun: 1.5,
     }
 }
 
 const TH: Thresholds = Thresholds {
     contact: 1.0,
+    strong: 3.0,
     lift: 0.3,
     samples: 2,
 };
@@ -54,6 +56,7 @@ fn contact_lift_off_after_lift_time_and_force_limit() {
             from_approach: true
         }
     );
+    m.identified();
     // One low sample is not a lift-off; `lift_time` of them is.
     assert_eq!(
         m.step(&sig(0.0, 1.0), &TH, 60.0, 0.0, 1e-3),
@@ -92,6 +95,8 @@ fn thresholds_scale_with_set_point_and_noise_and_speeds_with_stiffness() {
         (noisy.contact - 1.6).abs() < 1e-12 && noisy.samples > 3,
         "{noisy:?}"
     );
+    // One raw sample is contact beyond four of the raw noise's deviations, times `strong_contact`.
+    assert!((noisy.strong - 12.0).abs() < 1e-12, "{noisy:?}");
     // 70 kN/m, 16 ms to stop: 2·5 N is 8.9 mm/s, 60 N is 54 mm/s; 5 N is 71 µm in.
     let sp = m.speeds(70_000.0, 5.0, 60.0, 0.016);
     assert_eq!((sp.approach, sp.reacquire), (0.002, 0.05));
@@ -168,4 +173,24 @@ fn a_touch_down_goes_on_at_approach_speed_until_the_stiffness_is_identified() {
     m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
     m.identified();
     assert_eq!(m.land(0.011, 0.010, &SP, 0.1, 1e-3), 0.011);
+}
+
+#[test]
+fn a_touch_down_lost_before_it_is_identified_is_no_contact() {
+    let mut m = ContactMachine::new(params());
+    m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
+    assert_eq!(m.state(), ContactState::Contact);
+    m.step(&sig(0.0, 0.5), &TH, 60.0, 0.0, 1e-3);
+    assert_eq!(
+        m.step(&sig(0.0, 0.5), &TH, 60.0, 0.0, 1e-3),
+        Transition::LiftOff
+    );
+    // Back to the approach: the next contact is a touch-down, fitted.
+    assert_eq!(m.state(), ContactState::Approach);
+    assert_eq!(
+        m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3),
+        Transition::Contact {
+            from_approach: true
+        }
+    );
 }

@@ -3,18 +3,24 @@
 use serde::{Deserialize, Serialize};
 
 use super::super::positive;
+use crate::onset::MAX_MEMORY;
 
 /// Identification's advanced parameters (the defaults suit any cell).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct IdentifyParams {
+    /// How long the onset fit remembers of the approach before contact is declared, s: the force's
+    /// rise the conditioning delays the detection by, and the free air before it (at most
+    /// [`MAX_MEMORY`]; a cycle faster than [`FASTEST_CYCLE`](crate::onset::FASTEST_CYCLE) remembers less).
+    pub approach_memory: f64,
     /// How long after contact is declared the contact transient is fitted, s.
     pub onset_window: f64,
     /// How long the transient after a jump in a steady contact on a still surface (a stiffness
     /// change, a surface step) is fitted to re-identify `k̂_c`, s.
     pub refit_window: f64,
     /// Significance, in standard deviations of the residual, at which a re-fit's line through the
-    /// surface before the jump (a stiffness change alone) gives way to a free line (the surface moved).
+    /// surface before the jump (a stiffness change alone) gives way to a free line (the surface moved),
+    /// and that a fitted slope must have to be taken (onset and re-fit: a fit of noise is not).
     pub pivot_gate: f64,
     /// Forgetting time of the steady-contact estimator, s.
     pub steady_memory: f64,
@@ -31,6 +37,7 @@ pub struct IdentifyParams {
 impl Default for IdentifyParams {
     fn default() -> Self {
         Self {
+            approach_memory: 0.2,
             onset_window: 0.1,
             refit_window: 0.3,
             pivot_gate: 3.0,
@@ -46,6 +53,13 @@ impl Default for IdentifyParams {
 impl IdentifyParams {
     /// Checks the values.
     pub fn validate(&self) -> Result<(), String> {
+        positive("identify.approach_memory", self.approach_memory)?;
+        if self.approach_memory > MAX_MEMORY {
+            return Err(format!(
+                "identify.approach_memory {} s is more than the {MAX_MEMORY} s remembered at most",
+                self.approach_memory
+            ));
+        }
         positive("identify.onset_window", self.onset_window)?;
         positive("identify.refit_window", self.refit_window)?;
         positive("identify.pivot_gate", self.pivot_gate)?;

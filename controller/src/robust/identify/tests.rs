@@ -27,7 +27,7 @@ fn the_onset_of_a_contact_from_the_approach_is_fitted() {
         let mut first = false;
         if !contact {
             if f < 1.0 {
-                id.remember(x, f, 2e-3);
+                id.remember(x, f, 2e-3, 1e-3);
                 x += 2e-6;
                 continue;
             }
@@ -105,4 +105,29 @@ fn a_surface_step_is_no_stiffness_change() {
             "k̂ {k} after a {step} m step"
         );
     }
+}
+
+#[test]
+fn a_contact_declared_on_noise_is_not_fitted() {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let noise = Normal::new(0.0, 0.9).unwrap();
+    let mut id = Identifier::new(IdentifyParams::default(), est(), 20.0 / 50_000.0);
+    // Free air at 2 mm/s on a 4 ms cycle, 0.9 N of noise: no force rises with the position.
+    let mut x = 0.0095;
+    for _ in 0..60 {
+        id.remember(x, noise.sample(&mut rng), 2e-3, 4e-3);
+        x += 8e-6;
+    }
+    id.begin_contact(x, 1.5, true);
+    let mut seeded = false;
+    for i in 0..25 {
+        x += 8e-6;
+        let f = noise.sample(&mut rng);
+        let out = id.step(x, f, 2e-3, 0.0, 4e-3, false, i == 0, false, 0.81, 0.02);
+        seeded |= out.seeded;
+    }
+    assert!(!seeded, "a fit of noise set k̂ to {}", id.kc());
+    assert_eq!(id.kc(), 50_000.0);
 }

@@ -33,6 +33,9 @@ pub struct ObserverParams {
     pub motion_significance: f64,
     /// Smallest dead-band on the fallback feed-forward velocity, m/s.
     pub deadband_floor: f64,
+    /// Damping ratio of the second-order surface tracker behind the reported `x̂_c` and the motion
+    /// test, whose natural frequency is `response.surface_bandwidth`.
+    pub damping: f64,
 }
 
 impl Default for ObserverParams {
@@ -46,6 +49,7 @@ impl Default for ObserverParams {
             opposed_confirm: 0.01,
             motion_significance: 3.0,
             deadband_floor: 0.0001,
+            damping: 0.8,
         }
     }
 }
@@ -60,6 +64,7 @@ impl ObserverParams {
         positive("observer.motion_confirm", self.motion_confirm)?;
         positive("observer.opposed_confirm", self.opposed_confirm)?;
         positive("observer.motion_significance", self.motion_significance)?;
-        positive("observer.deadband_floor", self.deadband_floor)
+        positive("observer.deadband_floor", self.deadband_floor)?;
+        positive("observer.damping", self.damping)
     }
 }
