@@ -63,8 +63,7 @@ pub struct SurfaceObserver {
     /// Time left for a jump the raw predictor saw to pass the conditioning, s: the conditioned
     /// surface moves meanwhile, and that is no motion.
     passing: f64,
-    /// The same for a jump below the observer's own floor (which the observer would take for
-    /// motion): it moves the observed surface there, without a velocity, until it has passed, s.
+    /// The same for a jump below the observer's floor: it moves the surface there, no velocity, s.
     passing_small: f64,
     /// The observer's velocity before its last step (undone when that step was a small jump), m/s.
     vc_before: f64,
@@ -189,10 +188,9 @@ impl SurfaceObserver {
         let k = s.k;
         let floor = r.noise_floor;
         let var = (s.noise_var + floor * floor) / (k * k);
-        // A jump: beyond the floor of a set-point's share of the penetration, or far beyond what a
-        // cycle of motion makes and beyond the robot's own displacement in the cycle (a stale k̂_c
-        // within a factor of two of k_c makes the surface appear to move by at most that much). A
-        // jump that goes on for longer than the conditioning takes to pass one is motion.
+        // A jump: beyond a share of the set-point's penetration, or far beyond a cycle of motion and
+        // the robot's own displacement (a stale k̂_c within ×2 of k_c shows at most that). A jump
+        // that lasts longer than the conditioning takes to pass one is motion.
         let test = if self.pred_jump_time <= s.step_time {
             JumpTest {
                 gate: p.jump_gate,
