@@ -87,7 +87,10 @@ impl RobustLaw {
             self.contact.steady() && !moving && !self.identify.fitting() && self.observer.still();
         let excursion = self.identify.excursion(off, calm, persist, dt);
         if excursion || (calm && self.observer.jump_on_still_surface()) {
-            self.identify.refit(s.x, s.f);
+            // The loop answers the jump within its lead time and the conditioning's step time.
+            let c = &self.p.cell;
+            let early = c.lag + c.delay + self.signals.delay(cycle) + self.signals.step_time(cycle);
+            self.identify.refit(s.x, s.f, early);
         }
         let disturbed = self.observer.disturbed();
         let id = self.identify.step(

@@ -47,6 +47,9 @@ pub struct Identifier {
     /// only, and only if the surface stayed still (a surface that starts moving makes a transient too).
     /// With the surface before the jump, m: the pivot of a stiffness change.
     refit_from: Option<(f64, f64, f64)>,
+    /// How long the re-fit has run, and how long it must run before it may be taken early, s.
+    refit_age: f64,
+    refit_early: f64,
     /// The surface `x − f/k̂_c` of the calm steps since `k̂_c` last moved, averaged over `refit_window`, m.
     calm_surface: f64,
     /// Surface damping identified by the last fit, N·s/m.
@@ -65,6 +68,8 @@ impl Identifier {
             off_band: 0.0,
             calm_at_start: false,
             refit_from: None,
+            refit_age: 0.0,
+            refit_early: f64::INFINITY,
             calm_surface: f64::NAN,
             c_e: 0.0,
         }
@@ -129,11 +134,15 @@ impl Identifier {
 
     /// The force jumped in a steady contact on a still surface at `(x, f)`: the environment changed
     /// (a stiffness change, a surface step). Fit the transient that follows, as at a contact onset: the
-    /// samples lie on the new spring line whatever moved. The recursion restarts there, agile.
-    pub fn refit(&mut self, x: f64, f: f64) {
+    /// samples lie on the new spring line whatever moved. The recursion restarts there, agile. The fit
+    /// may be taken before the window's end once `early` s have passed (the loop's answer to the jump)
+    /// and it is conclusive.
+    pub fn refit(&mut self, x: f64, f: f64, early: f64) {
         self.onset.clear();
         self.onset.begin(x, self.est.scale(), self.p.refit_window);
         self.refit_from = Some((x, f, self.calm_surface));
+        self.refit_age = 0.0;
+        self.refit_early = early;
         self.steady.stop();
         self.steady_var0 = f64::INFINITY;
     }
@@ -172,29 +181,14 @@ impl Identifier {
         let onset = self.onset.active();
         if onset && !first {
             self.onset.add(x, f, v, dt);
+            self.refit_age += dt;
         }
         let fit = match self.refit_from {
             // A contact onset: the fit so far, every step.
             None if onset => self.onset.fit(noise_var),
             None => None,
-            Some(_) if self.onset.active() => None,
-            // A re-fit: once, at the window's end, if significant.
-            Some((x0, f0, pivot)) => {
-                self.refit_from = None;
-                let (scale, rel) = (self.est.scale(), self.p.steady_confidence);
-                let r = noise_var.max(noise_floor * noise_floor);
-                refit::choose(&self.onset, pivot, noise_var, r, self.p.pivot_gate)
-                    .filter(|fit| {
-                        // Significant, different, and one still spring: what the plane leaves beyond
-                        // the noise is at most `rel` of the transient's variance (a surface that started
-                        // to move leaves the force unexplained by the position).
-                        fit.b > 0.0
-                            && fit.var_b.sqrt() <= rel * fit.b
-                            && (fit.b / scale - self.est.kc()).abs() > rel * self.est.kc()
-                            && fit.residual_var - r <= rel * fit.force_var
-                    })
-                    .inspect(|_| self.est.begin_contact(x0, f0))
-            }
+            // A re-fit: as soon as it is conclusive, at the latest at the window's end.
+            Some(_) => self.judge_refit(noise_var, noise_floor),
         };
         match fit {
             Some(fit) => {

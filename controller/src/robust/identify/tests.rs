@@ -60,6 +60,11 @@ fn validation_names_the_field() {
 /// environment changes to stiffness `k2` and surface `xc2` at the same position; the tool moves to the
 /// new equilibrium with a 20 ms time constant and `c_e` of damping, and the re-fit runs. Returns k̂_c.
 fn change(k: f64, k2: f64, xc2: f64, c_e: f64) -> f64 {
+    change_judged(k, k2, xc2, c_e, f64::INFINITY)
+}
+
+/// [`change`] with the re-fit judged from `early` s on.
+fn change_judged(k: f64, k2: f64, xc2: f64, c_e: f64, early: f64) -> f64 {
     let (xc, f_r, dt) = (0.010, 5.0, 1e-3);
     let mut id = Identifier::new(IdentifyParams::default(), est(), f_r / 50_000.0);
     let mut x = xc + f_r / k;
@@ -73,7 +78,7 @@ fn change(k: f64, k2: f64, xc2: f64, c_e: f64) -> f64 {
         id.kc()
     );
     let x_end = xc2 + f_r / k2;
-    id.refit(x, k2 * (x - xc2));
+    id.refit(x, k2 * (x - xc2), early);
     for _ in 0..1000 {
         let v = (x_end - x) / 0.020;
         x += v * dt;
@@ -93,6 +98,22 @@ fn a_stiffness_change_on_a_still_surface_is_re_learnt_through_the_surface() {
     ] {
         let k = change(50_000.0, k2, 0.010, c_e);
         assert!((k - k2).abs() < 0.02 * k2, "k̂ {k} for {k2} at {c_e} N·s/m");
+    }
+}
+
+#[test]
+fn a_conclusive_re_fit_is_taken_before_its_window_ends() {
+    // 60 ms in: the 20 ms settling has shown; the judgement takes the fit there.
+    for (k2, c_e) in [(100_000.0, 0.0), (25_000.0, 200.0)] {
+        let k = change_judged(50_000.0, k2, 0.010, c_e, 0.06);
+        assert!((k - k2).abs() < 0.02 * k2, "k̂ {k} for {k2} at {c_e} N·s/m");
+    }
+    for step in [-3e-4, 3e-4] {
+        let k = change_judged(50_000.0, 50_000.0, 0.010 + step, 0.0, 0.06);
+        assert!(
+            (k - 50_000.0).abs() < 0.02 * 50_000.0,
+            "k̂ {k} after a {step} m step"
+        );
     }
 }
 
