@@ -128,6 +128,10 @@ pub struct LineFit {
     pub cov_ab: f64,
     /// Damping, N per unit of `w` (`c_e = c·s` for the position scale `s`).
     pub c: f64,
+    /// Variance of `c` per N² of force noise, 1/unit² (0 when the damping is not fitted): with few
+    /// samples at a nearly constant velocity the damping trades off against the intercept, and `c`
+    /// means nothing.
+    pub c_unit_var: f64,
     /// Residual variance per degree of freedom, N².
     pub residual_var: f64,
     /// Residual sum of squares, N².
@@ -265,6 +269,7 @@ impl OnsetFit {
             var_b,
             cov_ab: -var * (ub * m.i_uu + wb * m.i_uw),
             c: m.c,
+            c_unit_var: m.i_ww,
             residual_var,
             sse: m.sse,
             force_var: s.centred()[5] / (s.n - 1.0),
@@ -293,12 +298,12 @@ impl OnsetFit {
             return None;
         }
         let det = pp * ww - pw * pw;
-        let (mut b, mut c, mut i_pp) = (pf / pp, 0.0, 1.0 / pp);
+        let (mut b, mut c, mut i_pp, mut i_cc) = (pf / pp, 0.0, 1.0 / pp, 0.0);
         let mut sse = ff - pf * pf / pp;
         if det > COLLINEAR * pp * ww {
             let (bb, cc) = ((ww * pf - pw * wf) / det, (pp * wf - pw * pf) / det);
             if cc >= 0.0 {
-                (b, c, i_pp) = (bb, cc, ww / det);
+                (b, c, i_pp, i_cc) = (bb, cc, ww / det, pp / det);
                 sse = ff - b * pf - c * wf;
             }
         }
@@ -313,6 +318,7 @@ impl OnsetFit {
             var_b,
             cov_ab: d * var_b,
             c,
+            c_unit_var: i_cc,
             residual_var,
             sse,
             force_var: s.centred()[5] / (s.n - 1.0),

@@ -8,27 +8,28 @@
 
 mod common;
 
-use common::{CELLS, cell, floor, mean_error, stiffness, tuning};
+use common::{CELLS, cell, change_bound, floor, mean_error, stiffness, tuning};
 use controller::LawConfig;
 use proptest::prelude::*;
 use scenario::run::run;
 
-/// Known limits, measured, not hidden (flip to see them fail):
-/// * `k̂_c` within 10 % after a change holds without sensor noise, damped or not (asserted); with noise
-///   it fails at small set-points on the 12 ms cell (f_r 2 N, 20 → 10 kN/m, σ 0.43 N: 17 % off after
-///   2 s), where the few samples of the transient under noise do not carry the stiffness to 10 %;
-/// * a change on a damped surface can lose contact at small set-points (f_r 2 N, 20 → 10 kN/m,
-///   118 N·s/m, P2: 3 losses);
-/// * with 64 cases instead of 24 two more show: σ 0.82 N at f_r 2 N on 10 kN/m (P1) loses contact
-///   once in the hold; a doubling on a 178 N·s/m surface at f_r 2 N (P1) ends 12 N off;
-/// * with 200 cases the impact criterion fails under noise at the smallest set-point (σ 0.82 N, f_r
-///   2 N, 10 kN/m, P1: 4.46 N against 4.1 N);
-/// * near the top of the noise range a noise spike can be taken for contact short of the surface, the
-///   onset fit of noise sets `k̂_c` to its floor, and the law drives in (σ 0.9 N, f_r 20 N, 500 kN/m,
-///   P2, seed 7: 547 N; 100 kN/m: 109 N; the 24 cases drawn here do not hit it). (The touch-down goes on at approach speed until `k̂_c`
-///   is identified; before that, f_r 36.6 N on 354 kN/m on P2 hit 115 N against 84.5 N, now 37 N.)
-const DAMPED_CHANGE: bool = false;
-const REIDENTIFY: bool = false;
+// Known limits, measured, not hidden:
+// * `k̂_c` within 10 % 2 s after a change is asserted where the information the change brings allows
+//   it with a margin of four standard deviations ([`common::change_bound`]): noise-free always; under
+//   noise not at small set-points on slow cells (f_r 2 N, 20 → 10 kN/m, σ 0.43 N, 12 ms: the bound is
+//   22 %, the law was 17 % off). Within a margin of three deviations a doubling with noise on the 12 ms
+//   cell misses: f_r 6.9 N, 245 → 490 kN/m, σ 0.43 N, 11.3 % off against a bound of 3.2 % (the
+//   re-fit through the surface before the change inherits that surface's error);
+// * with 64 cases instead of 24 a noise spike on the 12 ms cell is taken for contact (σ 0.94 N, f_r
+//   39.6 N, 340 kN/m, seed 72: 190 N, fault 2; as before the re-fit changes); measured earlier, σ
+//   0.82 N at f_r 2 N on 10 kN/m (P1) lost contact once in the hold;
+// * with 200 cases the impact criterion fails under noise at the smallest set-point (σ 0.82 N, f_r
+//   2 N, 10 kN/m, P1: 4.46 N against 4.1 N);
+// * near the top of the noise range a noise spike can be taken for contact short of the surface, the
+//   onset fit of noise sets `k̂_c` to its floor, and the law drives in (σ 0.9 N, f_r 20 N, 500 kN/m,
+//   P2, seed 7: 547 N; 100 kN/m: 109 N; the 24 cases drawn here do not hit it). (The touch-down goes
+//   on at approach speed until `k̂_c` is identified; before that, f_r 36.6 N on 354 kN/m on P2 hit
+//   115 N against 84.5 N, now 37 N.)
 
 fn config(cases: u32) -> ProptestConfig {
     ProptestConfig {
@@ -92,15 +93,13 @@ proptest! {
         let s = cell(at + 2.0, k_c, c_e, Some((at, factor)), None, noise, seed);
         let r = run(&s, &plant, &tuning(f_r)).unwrap();
         let after = r.metrics(at, f64::INFINITY);
-        if c_e == 0.0 || DAMPED_CHANGE {
-            prop_assert!(after.contact_losses == 0.0, "{} contact losses", after.contact_losses);
-        }
+        prop_assert!(after.contact_losses == 0.0, "{} contact losses", after.contact_losses);
         let mean_err = mean_error(&r.rows, at + 1.5);
         prop_assert!(mean_err <= 0.02 * f_r + 0.1 * noise, "mean error {mean_err} N at the end");
         if noise == 0.0 && c_e == 0.0 {
             prop_assert!(after.settle_time <= 0.5, "back in ±2 % after {} s", after.settle_time);
         }
-        if noise == 0.0 || REIDENTIFY {
+        if 4.0 * change_bound(f_r, factor, noise, &plant) <= 0.1 {
             prop_assert!(after.kc_rel_error <= 0.1, "k̂ off by {}", after.kc_rel_error);
         }
     }

@@ -194,7 +194,17 @@ impl Identifier {
             Some(fit) => {
                 let projected = self.est.seed(&fit, x, ff);
                 self.calm_surface = f64::NAN;
-                self.c_e = fit.c / self.est.scale();
+                // The damping only where the fit determines it (`pivot_gate` deviations from none).
+                let r = noise_var
+                    .max(fit.residual_var)
+                    .max(noise_floor * noise_floor);
+                let gate = self.p.pivot_gate;
+                let significant = fit.c * fit.c > gate * gate * r * fit.c_unit_var;
+                self.c_e = if significant {
+                    fit.c / self.est.scale()
+                } else {
+                    0.0
+                };
                 self.steady.stop();
                 self.steady_var0 = self.est.seed_variance();
                 Identified {

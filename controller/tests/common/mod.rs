@@ -61,6 +61,27 @@ pub fn floor(k: f64, v: f64, plant: &InnerLoopModel) -> f64 {
     k * v * (plant.delay() + plant.period)
 }
 
+/// The relative standard deviation below which nothing can know the new stiffness after a change by
+/// `factor` in an `f_r` hold under sensor noise `sigma` (N) on `plant`, from the information the
+/// change brings. At the jump the position stands: the force goes to `factor·f_r`, and the samples
+/// taken before the loop has moved the tool (its delay, lag and the conditioning's delay,
+/// `n = lead/period`, at least one) measure the ratio `ρ = k₂/k₁` to `σ/(f_r·√n)`; the tool then
+/// travels `Δx = f_r/k₂ − f_r/k₁` (measured exactly), so `k₂ = f_r·(1 − ρ)/Δx` carries that error
+/// divided by `|1 − ρ|`. A steady hold adds next to nothing (the loop's answer to noise moves the
+/// tool by a fraction of `σ/k`), nor does the touch-down's fit at a small set-point (a handful of
+/// samples over the rise). Two seconds after the change the bound is the same: what follows the
+/// transient is a hold.
+pub fn change_bound(f_r: f64, factor: f64, sigma: f64, plant: &InnerLoopModel) -> f64 {
+    let LawConfig::Robust(p) = tuning(f_r).law else {
+        panic!("robust")
+    };
+    let cutoff = p.conditioning.cutoff.min(0.45 / plant.period);
+    let conditioning = core::f64::consts::SQRT_2 / (core::f64::consts::TAU * cutoff);
+    let lead = plant.delay() + plant.tau + conditioning;
+    let n = (lead / plant.period).max(1.0);
+    sigma / (f_r * (1.0 - factor).abs() * n.sqrt())
+}
+
 /// A log-uniform stiffness in [lo, hi], N/m.
 pub fn stiffness(lo: f64, hi: f64) -> impl Strategy<Value = f64> {
     (lo.ln()..hi.ln()).prop_map(f64::exp)

@@ -14,7 +14,8 @@ pub struct IdentifyParams {
     /// change, a surface step) is fitted to re-identify `k̂_c`, s.
     pub refit_window: f64,
     /// Significance, in standard deviations of the residual, at which a re-fit's line through the
-    /// surface before the jump (a stiffness change alone) gives way to a free line (the surface moved).
+    /// surface before the jump (a stiffness change alone) gives way to a free line (the surface moved);
+    /// also the significance a fit's surface damping needs to be taken.
     pub pivot_gate: f64,
     /// Forgetting time of the steady-contact estimator, s.
     pub steady_memory: f64,

@@ -54,10 +54,13 @@ impl Identifier {
             return None;
         }
         let (scale, rel) = (self.est.scale(), self.p.steady_confidence);
+        // Early, only a fit as precise as a learnt one (`steady_done`): what the rest of the window
+        // would add is then not worth the wait.
+        let precision = if open { self.p.steady_done } else { rel };
         let r = noise_var.max(noise_floor * noise_floor);
         let fit = choose(&self.onset, pivot, noise_var, r, self.p.pivot_gate).filter(|fit| {
             fit.b > 0.0
-                && fit.var_b.sqrt() <= rel * fit.b
+                && fit.var_b.sqrt() <= precision * fit.b
                 && (fit.b / scale - self.est.kc()).abs() > rel * self.est.kc()
                 && fit.residual_var - r <= rel * fit.force_var
         });
