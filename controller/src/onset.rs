@@ -282,8 +282,9 @@ impl OnsetFit {
 
     /// The fit through the surface `x_c` (m) left where it was: `f = b·(x − x_c)/s + c·w`, no
     /// intercept of its own (a change of stiffness alone pivots the spring line about the surface). The
-    /// intercept at `x₀` follows the slope; variances from the residuals, at least `noise_var` (N²).
-    pub fn fit_through(&self, x_c: f64, noise_var: f64) -> Option<LineFit> {
+    /// intercept at `x₀` follows the slope; variances from the residuals, at least `noise_var` (N²),
+    /// and from the surface's own uncertainty, variance `x_c_var` (m²), to first order.
+    pub fn fit_through(&self, x_c: f64, noise_var: f64, x_c_var: f64) -> Option<LineFit> {
         let s = &self.sums;
         let d = (self.x0 - x_c) / self.scale;
         if s.n < 4.0 || !d.is_finite() {
@@ -310,7 +311,10 @@ impl OnsetFit {
         let sse = sse.max(0.0);
         let dof = if c > 0.0 { 2.0 } else { 1.0 };
         let residual_var = sse / (s.n - dof);
-        let var_b = residual_var.max(noise_var) * i_pp;
+        // ∂b/∂d = −b·Σu_p/Σu_p² for samples on the line.
+        let db = b * (s.u + s.n * d) / pp;
+        let var_b =
+            residual_var.max(noise_var) * i_pp + db * db * x_c_var / (self.scale * self.scale);
         let fit = LineFit {
             a: b * d,
             b,
@@ -376,11 +380,11 @@ mod tests {
         let fit = o.fit(0.0).unwrap();
         assert!((fit.b / s - k).abs() < 1e-3 * k, "k {}", fit.b / s);
         assert!((fit.c / s - c_e).abs() < 1e-3 * c_e, "c_e {}", fit.c / s);
-        let through = o.fit_through(xc, 0.0).unwrap();
+        let through = o.fit_through(xc, 0.0, 0.0).unwrap();
         assert!((through.b / s - k).abs() < 1e-3 * k, "k {}", through.b / s);
         assert!(through.sse < 1e-9, "{}", through.sse);
         // Through a surface 10 µm off the line leaves a residual.
-        let off = o.fit_through(xc + 1e-5, 0.0).unwrap().sse;
+        let off = o.fit_through(xc + 1e-5, 0.0, 0.0).unwrap().sse;
         assert!(off > 1e-3, "{off}");
     }
 }

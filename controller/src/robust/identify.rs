@@ -47,6 +47,8 @@ pub struct Identifier {
     /// only, and only if the surface stayed still (a surface that starts moving makes a transient too).
     /// With the surface before the jump, m: the pivot of a stiffness change.
     refit_from: Option<(f64, f64, f64)>,
+    /// The variance of that surface, m².
+    pivot_var: f64,
     /// How long the re-fit has run, and how long it must run before it may be taken early, s.
     refit_age: f64,
     refit_early: f64,
@@ -68,6 +70,7 @@ impl Identifier {
             off_band: 0.0,
             calm_at_start: false,
             refit_from: None,
+            pivot_var: f64::INFINITY,
             refit_age: 0.0,
             refit_early: f64::INFINITY,
             calm_surface: f64::NAN,
@@ -141,6 +144,7 @@ impl Identifier {
         self.onset.clear();
         self.onset.begin(x, self.est.scale(), self.p.refit_window);
         self.refit_from = Some((x, f, self.calm_surface));
+        self.pivot_var = self.pivot_variance(x);
         self.refit_age = 0.0;
         self.refit_early = early;
         self.steady.stop();

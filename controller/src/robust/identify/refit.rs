@@ -15,27 +15,38 @@
 use super::Identifier;
 use crate::onset::{LineFit, OnsetFit};
 
-/// The fit of the window in `onset`: through the surface `pivot` (m) unless that costs more than
-/// `gate` standard deviations of residual over the free line's; none when the free line's slope is not
-/// `gate` deviations above zero. `noise_var` (N²) the measured noise, `r` (N²) the same with its floor.
+/// The fit of the window in `onset`: through the surface `pivot` (m, known to variance `pivot_var`,
+/// m²) unless that costs more than `gate` standard deviations of residual over the free line's or the
+/// surface's uncertainty makes it less precise than the free line; none when the free line's slope is
+/// not `gate` deviations above zero. `noise_var` (N²) the measured noise, `r` (N²) the same with its
+/// floor.
 pub(super) fn choose(
     onset: &OnsetFit,
     pivot: f64,
+    pivot_var: f64,
     noise_var: f64,
     r: f64,
     gate: f64,
 ) -> Option<LineFit> {
     let free = onset.fit(noise_var);
     let through = if pivot.is_finite() {
-        onset.fit_through(pivot, noise_var)
+        onset.fit_through(pivot, noise_var, 0.0)
     } else {
         None
     };
+    // What the surface's uncertainty costs the line through it in slope variance (the line keeps its
+    // own: a surface known from a fit that is itself in doubt only weighs the choice).
+    let pivot_cost = through
+        .and_then(|t| Some(onset.fit_through(pivot, noise_var, pivot_var)?.var_b - t.var_b))
+        .unwrap_or(0.0);
     // Without a spring transient of its own (the free slope within `gate` deviations of none: noise
     // in a hold) the window says nothing the pivot did not.
     let free = free.filter(|f| f.b > gate * f.var_b.sqrt())?;
     match through {
-        Some(through) if through.sse - free.sse <= gate * gate * free.residual_var.max(r) => {
+        Some(through)
+            if through.sse - free.sse <= gate * gate * free.residual_var.max(r)
+                && pivot_cost <= free.var_b =>
+        {
             Some(through)
         }
         _ => Some(free),
@@ -58,7 +69,15 @@ impl Identifier {
         // would add is then not worth the wait.
         let precision = if open { self.p.steady_done } else { rel };
         let r = noise_var.max(noise_floor * noise_floor);
-        let fit = choose(&self.onset, pivot, noise_var, r, self.p.pivot_gate).filter(|fit| {
+        let fit = choose(
+            &self.onset,
+            pivot,
+            self.pivot_var,
+            noise_var,
+            r,
+            self.p.pivot_gate,
+        )
+        .filter(|fit| {
             fit.b > 0.0
                 && fit.var_b.sqrt() <= precision * fit.b
                 && (fit.b / scale - self.est.kc()).abs() > rel * self.est.kc()
@@ -72,5 +91,21 @@ impl Identifier {
             self.est.begin_contact(x0, f0);
         }
         fit
+    }
+}
+
+impl Identifier {
+    /// How well the surface before a jump at `x` (m) is known, m²: its distance from `x` is `f/k̂_c`,
+    /// as uncertain as `k̂_c` (its last fit's variance, or the steady-contact estimator's once used).
+    pub(super) fn pivot_variance(&self, x: f64) -> f64 {
+        let theta = self.est.kc() * self.est.scale();
+        let mut rel_var = self.est.seed_variance() / (theta * theta);
+        if let Some((_, rel)) = self.steady.estimate()
+            && self.steady.age() >= self.p.steady_min_age
+        {
+            rel_var = rel_var.min(rel * rel);
+        }
+        let d = x - self.calm_surface;
+        d * d * rel_var
     }
 }

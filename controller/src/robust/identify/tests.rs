@@ -127,3 +127,26 @@ fn a_surface_step_is_no_stiffness_change() {
         );
     }
 }
+
+#[test]
+fn a_surface_in_doubt_gives_the_line_through_it_no_preference() {
+    // A transient on 100 kN/m with a ±0.05 N wobble, through the surface: known, or in doubt by 10 µm.
+    let (k, xc, s) = (100_000.0, 0.010, 1e-4);
+    let mut o = crate::onset::OnsetFit::new();
+    o.begin(0.010_05, s, 1.0);
+    for i in 0..60 {
+        let x = 0.010_05 - 2.5e-5 * (1.0 - (-(i as f64) / 10.0).exp());
+        let wobble = if i % 2 == 0 { 0.05 } else { -0.05 };
+        o.add(x, k * (x - xc) + wobble, 0.0, 1e-3);
+    }
+    let (pivot, r) = (xc, 0.05 * 0.05);
+    let sure = refit::choose(&o, pivot, 0.0, r, r, 3.0).unwrap();
+    let doubt = refit::choose(&o, pivot, 1e-10, r, r, 3.0).unwrap();
+    let free = o.fit(r).unwrap();
+    assert!(
+        sure.var_b < free.var_b,
+        "through the surface when it is known"
+    );
+    assert_eq!(doubt, free, "the free line when the surface is in doubt");
+    assert!((doubt.b / s - k).abs() < 0.02 * k, "k̂ {}", doubt.b / s);
+}
