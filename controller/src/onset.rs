@@ -136,6 +136,10 @@ pub struct LineFit {
     pub cov_ab: f64,
     /// Damping, N per unit of `w` (`c_e = c·s` for the position scale `s`).
     pub c: f64,
+    /// Variance of `c` per N² of force noise, 1/unit² (0 when the damping is not fitted): with few
+    /// samples at a nearly constant velocity the damping trades off against the intercept, and `c`
+    /// means nothing.
+    pub c_unit_var: f64,
     /// Residual variance per degree of freedom, N².
     pub residual_var: f64,
     /// Residual sum of squares, N².
@@ -284,6 +288,7 @@ impl OnsetFit {
             var_b,
             cov_ab: -var * (ub * m.i_uu + wb * m.i_uw),
             c: m.c,
+            c_unit_var: m.i_ww,
             residual_var,
             sse: m.sse,
             force_var: s.centred()[5] / (s.n - 1.0),
@@ -296,8 +301,9 @@ impl OnsetFit {
 
     /// The fit through the surface `x_c` (m) left where it was: `f = b·(x − x_c)/s + c·w`, no
     /// intercept of its own (a change of stiffness alone pivots the spring line about the surface). The
-    /// intercept at `x₀` follows the slope; variances from the residuals, at least `noise_var` (N²).
-    pub fn fit_through(&self, x_c: f64, noise_var: f64) -> Option<LineFit> {
+    /// intercept at `x₀` follows the slope; variances from the residuals, at least `noise_var` (N²),
+    /// and from the surface's own uncertainty, variance `x_c_var` (m²), to first order.
+    pub fn fit_through(&self, x_c: f64, noise_var: f64, x_c_var: f64) -> Option<LineFit> {
         let s = &self.sums;
         let d = (self.x0 - x_c) / self.scale;
         if s.n < 4.0 || !d.is_finite() {
@@ -312,19 +318,22 @@ impl OnsetFit {
             return None;
         }
         let det = pp * ww - pw * pw;
-        let (mut b, mut c, mut i_pp) = (pf / pp, 0.0, 1.0 / pp);
+        let (mut b, mut c, mut i_pp, mut i_cc) = (pf / pp, 0.0, 1.0 / pp, 0.0);
         let mut sse = ff - pf * pf / pp;
         if det > COLLINEAR * pp * ww {
             let (bb, cc) = ((ww * pf - pw * wf) / det, (pp * wf - pw * pf) / det);
             if cc >= 0.0 {
-                (b, c, i_pp) = (bb, cc, ww / det);
+                (b, c, i_pp, i_cc) = (bb, cc, ww / det, pp / det);
                 sse = ff - b * pf - c * wf;
             }
         }
         let sse = sse.max(0.0);
         let dof = if c > 0.0 { 2.0 } else { 1.0 };
         let residual_var = sse / (s.n - dof);
-        let var_b = residual_var.max(noise_var) * i_pp;
+        // ∂b/∂d = −b·Σu_p/Σu_p² for samples on the line.
+        let db = b * (s.u + s.n * d) / pp;
+        let var_b =
+            residual_var.max(noise_var) * i_pp + db * db * x_c_var / (self.scale * self.scale);
         let fit = LineFit {
             a: b * d,
             b,
@@ -332,6 +341,7 @@ impl OnsetFit {
             var_b,
             cov_ab: d * var_b,
             c,
+            c_unit_var: i_cc,
             residual_var,
             sse,
             force_var: s.centred()[5] / (s.n - 1.0),
@@ -389,11 +399,11 @@ mod tests {
         let fit = o.fit(0.0).unwrap();
         assert!((fit.b / s - k).abs() < 1e-3 * k, "k {}", fit.b / s);
         assert!((fit.c / s - c_e).abs() < 1e-3 * c_e, "c_e {}", fit.c / s);
-        let through = o.fit_through(xc, 0.0).unwrap();
+        let through = o.fit_through(xc, 0.0, 0.0).unwrap();
         assert!((through.b / s - k).abs() < 1e-3 * k, "k {}", through.b / s);
         assert!(through.sse < 1e-9, "{}", through.sse);
         // Through a surface 10 µm off the line leaves a residual.
-        let off = o.fit_through(xc + 1e-5, 0.0).unwrap().sse;
+        let off = o.fit_through(xc + 1e-5, 0.0, 0.0).unwrap().sse;
         assert!(off > 1e-3, "{off}");
     }
 }

@@ -6,97 +6,34 @@
 //! loop's — follows the set-point: a 60 N limit means nothing at 50 N), simulated time only, seeded
 //! cases.
 
-use controller::{LawConfig, Tuning};
+mod common;
+
+use common::{CELLS, cell, change_bound, floor, mean_error, stiffness, tuning};
+use controller::LawConfig;
 use proptest::prelude::*;
 use scenario::run::run;
-use scenario::scenario::{Scenario, load_tuning};
 use sim::InnerLoopModel;
 
-/// The cells: KUKA RSI at 1 kHz (P1), an RSI-like 4 ms cycle (P2), RSI's 12 ms `#IPO` cycle with two
-/// cycles of delay.
-const CELLS: [InnerLoopModel; 3] = [
-    InnerLoopModel::P1,
-    InnerLoopModel::P2,
-    InnerLoopModel {
-        period: 0.012,
-        tau: 0.010,
-        delay_cycles: 2,
-    },
-];
-
-fn tuning(f_r: f64) -> Tuning {
-    let mut t = load_tuning("robust").expect("shipped tuning");
-    let LawConfig::Robust(p) = &mut t.law else {
-        panic!("robust")
-    };
-    p.f_r = f_r;
-    p.limits.max_force = p.limits.max_force.max(3.0 * f_r);
-    t.loop_cfg.process.max_force = p.limits.max_force;
-    t
-}
-
-/// A scenario: start 1 mm short of a surface at 10 mm.
-#[allow(clippy::too_many_arguments)]
-fn cell(
-    duration: f64,
-    k_c: f64,
-    c_e: f64,
-    k_event: Option<(f64, f64)>,
-    x_step: Option<(f64, f64)>,
-    noise: f64,
-    seed: u64,
-) -> Scenario {
-    let mut text = format!(
-        "name = \"range\"\nduration = {duration}\nx0 = 0.009\n[environment]\nk_c = {k_c}\nx_c = 0.010\nc_e = {c_e}\n"
-    );
-    if let Some((at, factor)) = k_event {
-        text += &format!("k_c_events = [{{ kind = \"scale\", at = {at}, factor = {factor} }}]\n");
-    }
-    if let Some((at, delta)) = x_step {
-        text += &format!("x_c_events = [{{ kind = \"step\", at = {at}, delta = {delta} }}]\n");
-    }
-    text += &format!("[sensor]\nnoise = {noise}\nseed = {seed}\n");
-    Scenario::from_toml(&text, "range").expect("a valid range scenario")
-}
-
-/// The physical floor of an impact: after a stop command the tool still travels `v·(delay + one
-/// cycle)` into a surface of stiffness `k`, N.
-fn floor(k: f64, v: f64, plant: &InnerLoopModel) -> f64 {
-    k * v * (plant.delay() + plant.period)
-}
-
-/// A log-uniform stiffness in [lo, hi], N/m.
-fn stiffness(lo: f64, hi: f64) -> impl Strategy<Value = f64> {
-    (lo.ln()..hi.ln()).prop_map(f64::exp)
-}
-
-/// Known limits, measured, not hidden (flip to see them fail):
-/// * `k̂_c` within 10 % after a change holds without sensor noise, damped or not (asserted); with noise
-///   it fails at small set-points on the 12 ms cell (f_r 2 N, 20 → 10 kN/m, σ 0.43 N: 17 % off after
-///   2 s), where the few samples of the transient under noise do not carry the stiffness to 10 %;
-/// * back within ±2 % in 0.5 s after a change fails at small set-points (f_r 2 N, 20 → 40 kN/m, P2:
-///   1.4 s at 2 s, 1.3 s at 2.3 s; the 24 cases drawn here pass);
-/// * the same doubling later in the contact (f_r 2 N, 20 → 40 kN/m, no damping, P2, at 2.7 s and 3 s)
-///   loses contact 3 and 2 times, which the contact assertion would catch if drawn;
-/// * a change on a damped surface can lose contact at small set-points (f_r 2 N, 20 → 10 kN/m,
-///   118 N·s/m, P2: 3 losses);
-/// * the touch-down under noise still fails at its corners, where the noise is a large part of a small
-///   set-point or the cycle is slow: `noise_corners` (ignored; `--ignored` runs it) counts the seeds
-///   1–199 that fail the touch-down criteria — f_r 2 N on 10 kN/m, P1: 21 at σ 0.82 N, 46 at 1 N
-///   (the impact within 0.7 of its bound; the mean error at the end, e.g. 0.13–0.25 N against
-///   0.12 N); on the 12 ms cell at σ 1 N: f_r 5 N on 50 kN/m 90, f_r 2 N on 10 kN/m 181 (impacts up
-///   to 4.7 times the bound, contact losses, mean errors). Before
-///   the noise was measured from the first samples and a single raw sample had to stand out of the raw
-///   noise, they were 94, 158, 183 and 198, and f_r 20 N on 500 kN/m, P2, σ 1 N failed 106 (now 0).
-///   The 24 cases drawn here, and 64 or 200, pass;
-/// * (fixed, `a_noise_spike_in_free_air_is_no_touch_down`: a noise spike taken for contact short of
-///   the surface — σ 0.9 N, f_r 20 N, 500 kN/m, P2, seed 7 — ended the run on fault 2 at 65.9 N; the
-///   touch-down now peaks at 23.9 N, 21.0 N on 100 kN/m. The touch-down goes on at approach speed
-///   until `k̂_c` is identified; before that, f_r 36.6 N on 354 kN/m on P2 hit 115 N against 84.5 N,
-///   now 37 N.)
-const DAMPED_CHANGE: bool = false;
-const SETTLE_AFTER_CHANGE: bool = false;
-const REIDENTIFY: bool = false;
+// Known limits, measured, not hidden:
+// * `k̂_c` within 10 % 2 s after a change is asserted where the information the change brings allows
+//   it with a margin of four standard deviations ([`common::change_bound`]): noise-free always; under
+//   noise not at small set-points on slow cells (f_r 2 N, 20 → 10 kN/m, σ 0.43 N, 12 ms: the bound is
+//   22 %, the law was 17 % off). Within a margin of three deviations a doubling with noise on the 12 ms
+//   cell misses: f_r 6.9 N, 245 → 490 kN/m, σ 0.43 N, 11.3 % off against a bound of 3.2 % (the
+//   re-fit through the surface before the change inherits that surface's error);
+// * the touch-down under noise still fails at its corners, where the noise is a large part of a small
+//   set-point or the cycle is slow: `noise_corners` (ignored; `--ignored` runs it) counts the seeds
+//   1–199 that fail the touch-down criteria — f_r 2 N on 10 kN/m, P1: 21 at σ 0.82 N, 46 at 1 N (the
+//   impact within 0.7 of its bound; the mean error at the end, e.g. 0.13–0.25 N against 0.12 N); on
+//   the 12 ms cell at σ 1 N: f_r 5 N on 50 kN/m 90, f_r 2 N on 10 kN/m 181 (impacts up to 4.7 times
+//   the bound, contact losses, mean errors). Before the noise was measured from the first samples and
+//   a single raw sample had to stand out of the raw noise, they were 94, 158, 183 and 198, and f_r
+//   20 N on 500 kN/m, P2, σ 1 N failed 106 (now 0). The 24 cases drawn here pass;
+// * (fixed, `a_noise_spike_in_free_air_is_no_touch_down`: a noise spike taken for contact short of the
+//   surface — σ 0.9 N, f_r 20 N, 500 kN/m, P2, seed 7 — ended the run on fault 2 at 65.9 N; the
+//   touch-down now peaks at 23.9 N, 21.0 N on 100 kN/m. The touch-down goes on at approach speed until
+//   `k̂_c` is identified; before that, f_r 36.6 N on 354 kN/m on P2 hit 115 N against 84.5 N, now
+//   37 N.)
 
 fn config(cases: u32) -> ProptestConfig {
     ProptestConfig {
@@ -125,8 +62,8 @@ proptest! {
     }
 
     /// B2 carried over: the stiffness halves or doubles at any time in a steady contact; the force
-    /// comes back, the contact holds, and `k̂_c` ends within 10 % of the new stiffness within 2 s, with
-    /// surface damping or without.
+    /// comes back (noise-free and undamped: within ±2 % in 0.5 s), the contact holds, and `k̂_c` ends
+    /// within 10 % of the new stiffness within 2 s, with surface damping or without.
     #[test]
     fn stiffness_changes(
         f_r in 2.0f64..50.0,
@@ -143,15 +80,13 @@ proptest! {
         let s = cell(at + 2.0, k_c, c_e, Some((at, factor)), None, noise, seed);
         let r = run(&s, &plant, &tuning(f_r)).unwrap();
         let after = r.metrics(at, f64::INFINITY);
-        if c_e == 0.0 || DAMPED_CHANGE {
-            prop_assert!(after.contact_losses == 0.0, "{} contact losses", after.contact_losses);
-        }
+        prop_assert!(after.contact_losses == 0.0, "{} contact losses", after.contact_losses);
         let mean_err = mean_error(&r.rows, at + 1.5);
         prop_assert!(mean_err <= 0.02 * f_r + 0.1 * noise, "mean error {mean_err} N at the end");
-        if SETTLE_AFTER_CHANGE && noise == 0.0 && c_e == 0.0 {
+        if noise == 0.0 && c_e == 0.0 {
             prop_assert!(after.settle_time <= 0.5, "back in ±2 % after {} s", after.settle_time);
         }
-        if noise == 0.0 || REIDENTIFY {
+        if 4.0 * change_bound(f_r, factor, noise, &plant) <= 0.1 {
             prop_assert!(after.kc_rel_error <= 0.1, "k̂ off by {}", after.kc_rel_error);
         }
     }
@@ -275,14 +210,4 @@ fn noise_corners() {
         println!("f_r {f_r} N, {k_c} N/m, cell {cell_i}, σ {noise} N: {failing} of 199 fail");
         assert!(failing <= measured, "{failing} > {measured}");
     }
-}
-
-/// `|mean(f − f_r)|` of the true force from `from` on, N.
-fn mean_error(rows: &[scenario::record::Row], from: f64) -> f64 {
-    let e: Vec<f64> = rows
-        .iter()
-        .filter(|r| r.t >= from)
-        .map(|r| r.f_true - r.f_r)
-        .collect();
-    (e.iter().sum::<f64>() / e.len() as f64).abs()
 }

@@ -36,11 +36,14 @@ impl RobustLaw {
     /// The command in contact before limits.
     pub(super) fn in_contact(&mut self, s: &Signals, cycle: f64, dt: f64) -> f64 {
         let k = self.identify.kc();
+        // The surface is `x − f/k̂_c` of the spring's force: the identified damping's share taken out,
+        // or a damped surface looks as if it moved with the tool and the feed-forward chases it.
+        let c_e = self.identify.damping();
         let view = observer::View {
             x: s.x,
-            f: s.f,
+            f: s.f - c_e * s.v_raw,
             xf: s.xf,
-            ff: s.ff,
+            ff: s.ff - c_e * s.v_x,
             v_raw: s.v_raw,
             k,
             force_scale: self.force_scale(),
@@ -95,7 +98,10 @@ impl RobustLaw {
             self.contact.steady() && !moving && !self.identify.fitting() && self.observer.still();
         let excursion = self.identify.excursion(off, calm, persist, dt);
         if excursion || (calm && self.observer.jump_on_still_surface()) {
-            self.identify.refit(s.x, s.f);
+            // The loop answers the jump within its lead time and the conditioning's step time.
+            let c = &self.p.cell;
+            let early = c.lag + c.delay + self.signals.delay(cycle) + self.signals.step_time(cycle);
+            self.identify.refit(s.x, s.f, early);
         }
         let disturbed = self.observer.disturbed();
         let id = self.identify.step(

@@ -48,6 +48,11 @@ pub struct Identifier {
     /// only, and only if the surface stayed still (a surface that starts moving makes a transient too).
     /// With the surface before the jump, m: the pivot of a stiffness change.
     refit_from: Option<(f64, f64, f64)>,
+    /// The variance of that surface, m².
+    pivot_var: f64,
+    /// How long the re-fit has run, and how long it must run before it may be taken early, s.
+    refit_age: f64,
+    refit_early: f64,
     /// The surface `x − f/k̂_c` of the calm steps since `k̂_c` last moved, averaged over `refit_window`, m.
     calm_surface: f64,
     /// Surface damping identified by the last fit, N·s/m.
@@ -66,6 +71,9 @@ impl Identifier {
             off_band: 0.0,
             calm_at_start: false,
             refit_from: None,
+            pivot_var: f64::INFINITY,
+            refit_age: 0.0,
+            refit_early: f64::INFINITY,
             calm_surface: f64::NAN,
             c_e: 0.0,
         }
@@ -132,11 +140,16 @@ impl Identifier {
 
     /// The force jumped in a steady contact on a still surface at `(x, f)`: the environment changed
     /// (a stiffness change, a surface step). Fit the transient that follows, as at a contact onset: the
-    /// samples lie on the new spring line whatever moved. The recursion restarts there, agile.
-    pub fn refit(&mut self, x: f64, f: f64) {
+    /// samples lie on the new spring line whatever moved. The recursion restarts there, agile. The fit
+    /// may be taken before the window's end once `early` s have passed (the loop's answer to the jump)
+    /// and it is conclusive.
+    pub fn refit(&mut self, x: f64, f: f64, early: f64) {
         self.onset.clear();
         self.onset.begin(x, self.est.scale(), self.p.refit_window);
         self.refit_from = Some((x, f, self.calm_surface));
+        self.pivot_var = self.pivot_variance(x);
+        self.refit_age = 0.0;
+        self.refit_early = early;
         self.steady.stop();
         self.steady_var0 = f64::INFINITY;
     }
@@ -175,6 +188,7 @@ impl Identifier {
         let onset = self.onset.active();
         if onset && !first {
             self.onset.add(x, f, v, dt);
+            self.refit_age += dt;
         }
         let fit = match self.refit_from {
             // A contact onset: the fit so far, every step, once its slope is significant (a contact
@@ -186,30 +200,16 @@ impl Identifier {
                     .filter(|f| f.b > gate * f.var_b.sqrt())
             }
             None => None,
-            Some(_) if self.onset.active() => None,
-            // A re-fit: once, at the window's end, if significant.
-            Some((x0, f0, pivot)) => {
-                self.refit_from = None;
-                let (scale, rel) = (self.est.scale(), self.p.steady_confidence);
-                let r = noise_var.max(noise_floor * noise_floor);
-                refit::choose(&self.onset, pivot, noise_var, r, self.p.pivot_gate)
-                    .filter(|fit| {
-                        // Significant, different, and one still spring: what the plane leaves beyond
-                        // the noise is at most `rel` of the transient's variance (a surface that started
-                        // to move leaves the force unexplained by the position).
-                        fit.b > 0.0
-                            && fit.var_b.sqrt() <= rel * fit.b
-                            && (fit.b / scale - self.est.kc()).abs() > rel * self.est.kc()
-                            && fit.residual_var - r <= rel * fit.force_var
-                    })
-                    .inspect(|_| self.est.begin_contact(x0, f0))
-            }
+            // A re-fit: as soon as it is conclusive, at the latest at the window's end.
+            Some(_) => self.judge_refit(noise_var, noise_floor),
         };
         match fit {
             Some(fit) => {
                 let projected = self.est.seed(&fit, x, ff);
                 self.calm_surface = f64::NAN;
-                self.c_e = fit.c / self.est.scale();
+                let r = noise_var.max(fit.residual_var);
+                let r = r.max(noise_floor * noise_floor);
+                self.c_e = refit::damping(&fit, r, self.p.pivot_gate) / self.est.scale();
                 self.steady.stop();
                 self.steady_var0 = self.est.seed_variance();
                 Identified {

@@ -98,10 +98,12 @@ impl Conditioner {
         (2.0 * 1.11 * fc * cycle).sqrt().min(1.0)
     }
 
-    /// How long a step takes to pass the conditioning, s (about two of its low-pass time constants
-    /// beyond the group delay: 30 ms at 20 Hz). Innovations that last this long are no longer a jump.
+    /// How long a step takes to pass the conditioning, s: about two of its low-pass time constants
+    /// beyond the group delay, and the cycle the step arrives in (31 ms at 20 Hz on a 1 ms cycle; on
+    /// a 12 ms cycle a step still passes when 30 ms of steps have counted). Innovations that last this
+    /// long are no longer a jump.
     pub fn step_time(&self, cycle: f64) -> f64 {
-        0.6 / self.p.cutoff.min(0.45 / cycle)
+        0.6 / self.p.cutoff.min(0.45 / cycle) + cycle
     }
 }
 
@@ -133,7 +135,7 @@ mod tests {
             cutoff: 20.0,
             notch: None,
         });
-        assert!((c.step_time(1e-3) - 0.03).abs() < 1e-12);
+        assert!((c.step_time(1e-3) - 0.031).abs() < 1e-12);
         assert!((c.delay(1e-3) - 0.011_254).abs() < 1e-5);
         // Capped at a fraction of the sampling rate on a slow cell.
         assert!(c.step_time(0.05) > c.step_time(1e-3));

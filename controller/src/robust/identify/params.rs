@@ -20,7 +20,8 @@ pub struct IdentifyParams {
     pub refit_window: f64,
     /// Significance, in standard deviations of the residual, at which a re-fit's line through the
     /// surface before the jump (a stiffness change alone) gives way to a free line (the surface moved),
-    /// and that a fitted slope must have to be taken (onset and re-fit: a fit of noise is not).
+    /// that a fitted slope must have to be taken (onset and re-fit: a fit of noise is not), and that a
+    /// fit's surface damping needs to be taken.
     pub pivot_gate: f64,
     /// Forgetting time of the steady-contact estimator, s.
     pub steady_memory: f64,

@@ -60,6 +60,11 @@ fn validation_names_the_field() {
 /// environment changes to stiffness `k2` and surface `xc2` at the same position; the tool moves to the
 /// new equilibrium with a 20 ms time constant and `c_e` of damping, and the re-fit runs. Returns k̂_c.
 fn change(k: f64, k2: f64, xc2: f64, c_e: f64) -> f64 {
+    change_judged(k, k2, xc2, c_e, f64::INFINITY)
+}
+
+/// [`change`] with the re-fit judged from `early` s on.
+fn change_judged(k: f64, k2: f64, xc2: f64, c_e: f64, early: f64) -> f64 {
     let (xc, f_r, dt) = (0.010, 5.0, 1e-3);
     let mut id = Identifier::new(IdentifyParams::default(), est(), f_r / 50_000.0);
     let mut x = xc + f_r / k;
@@ -73,7 +78,7 @@ fn change(k: f64, k2: f64, xc2: f64, c_e: f64) -> f64 {
         id.kc()
     );
     let x_end = xc2 + f_r / k2;
-    id.refit(x, k2 * (x - xc2));
+    id.refit(x, k2 * (x - xc2), early);
     for _ in 0..1000 {
         let v = (x_end - x) / 0.020;
         x += v * dt;
@@ -93,6 +98,22 @@ fn a_stiffness_change_on_a_still_surface_is_re_learnt_through_the_surface() {
     ] {
         let k = change(50_000.0, k2, 0.010, c_e);
         assert!((k - k2).abs() < 0.02 * k2, "k̂ {k} for {k2} at {c_e} N·s/m");
+    }
+}
+
+#[test]
+fn a_conclusive_re_fit_is_taken_before_its_window_ends() {
+    // 60 ms in: the 20 ms settling has shown; the judgement takes the fit there.
+    for (k2, c_e) in [(100_000.0, 0.0), (25_000.0, 200.0)] {
+        let k = change_judged(50_000.0, k2, 0.010, c_e, 0.06);
+        assert!((k - k2).abs() < 0.02 * k2, "k̂ {k} for {k2} at {c_e} N·s/m");
+    }
+    for step in [-3e-4, 3e-4] {
+        let k = change_judged(50_000.0, 50_000.0, 0.010 + step, 0.0, 0.06);
+        assert!(
+            (k - 50_000.0).abs() < 0.02 * 50_000.0,
+            "k̂ {k} after a {step} m step"
+        );
     }
 }
 
@@ -130,4 +151,27 @@ fn a_contact_declared_on_noise_is_not_fitted() {
     }
     assert!(!seeded, "a fit of noise set k̂ to {}", id.kc());
     assert_eq!(id.kc(), 50_000.0);
+}
+
+#[test]
+fn a_surface_in_doubt_gives_the_line_through_it_no_preference() {
+    // A transient on 100 kN/m with a ±0.05 N wobble, through the surface: known, or in doubt by 10 µm.
+    let (k, xc, s) = (100_000.0, 0.010, 1e-4);
+    let mut o = crate::onset::OnsetFit::new();
+    o.begin(0.010_05, s, 1.0);
+    for i in 0..60 {
+        let x = 0.010_05 - 2.5e-5 * (1.0 - (-(i as f64) / 10.0).exp());
+        let wobble = if i % 2 == 0 { 0.05 } else { -0.05 };
+        o.add(x, k * (x - xc) + wobble, 0.0, 1e-3);
+    }
+    let (pivot, r) = (xc, 0.05 * 0.05);
+    let sure = refit::choose(&o, pivot, 0.0, r, r, 3.0).unwrap();
+    let doubt = refit::choose(&o, pivot, 1e-10, r, r, 3.0).unwrap();
+    let free = o.fit(r).unwrap();
+    assert!(
+        sure.var_b < free.var_b,
+        "through the surface when it is known"
+    );
+    assert_eq!(doubt, free, "the free line when the surface is in doubt");
+    assert!((doubt.b / s - k).abs() < 0.02 * k, "k̂ {}", doubt.b / s);
 }

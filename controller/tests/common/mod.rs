@@ -1,0 +1,98 @@
+//! What the closed-loop range tests share: the cells, the shipped robust tuning at a set-point, a
+//! scenario from its parameters, and the metrics the metric set lacks.
+
+#![allow(dead_code)]
+
+use controller::{LawConfig, Tuning};
+use proptest::prelude::*;
+use scenario::scenario::{Scenario, load_tuning};
+use sim::InnerLoopModel;
+
+/// The cells: KUKA RSI at 1 kHz (P1), an RSI-like 4 ms cycle (P2), RSI's 12 ms `#IPO` cycle with two
+/// cycles of delay.
+pub const CELLS: [InnerLoopModel; 3] = [
+    InnerLoopModel::P1,
+    InnerLoopModel::P2,
+    InnerLoopModel {
+        period: 0.012,
+        tau: 0.010,
+        delay_cycles: 2,
+    },
+];
+
+pub fn tuning(f_r: f64) -> Tuning {
+    let mut t = load_tuning("robust").expect("shipped tuning");
+    let LawConfig::Robust(p) = &mut t.law else {
+        panic!("robust")
+    };
+    p.f_r = f_r;
+    p.limits.max_force = p.limits.max_force.max(3.0 * f_r);
+    t.loop_cfg.process.max_force = p.limits.max_force;
+    t
+}
+
+/// A scenario: start 1 mm short of a surface at 10 mm.
+#[allow(clippy::too_many_arguments)]
+pub fn cell(
+    duration: f64,
+    k_c: f64,
+    c_e: f64,
+    k_event: Option<(f64, f64)>,
+    x_step: Option<(f64, f64)>,
+    noise: f64,
+    seed: u64,
+) -> Scenario {
+    let mut text = format!(
+        "name = \"range\"\nduration = {duration}\nx0 = 0.009\n[environment]\nk_c = {k_c}\nx_c = 0.010\nc_e = {c_e}\n"
+    );
+    if let Some((at, factor)) = k_event {
+        text += &format!("k_c_events = [{{ kind = \"scale\", at = {at}, factor = {factor} }}]\n");
+    }
+    if let Some((at, delta)) = x_step {
+        text += &format!("x_c_events = [{{ kind = \"step\", at = {at}, delta = {delta} }}]\n");
+    }
+    text += &format!("[sensor]\nnoise = {noise}\nseed = {seed}\n");
+    Scenario::from_toml(&text, "range").expect("a valid range scenario")
+}
+
+/// The physical floor of an impact: after a stop command the tool still travels `v·(delay + one
+/// cycle)` into a surface of stiffness `k`, N.
+pub fn floor(k: f64, v: f64, plant: &InnerLoopModel) -> f64 {
+    k * v * (plant.delay() + plant.period)
+}
+
+/// The relative standard deviation below which nothing can know the new stiffness after a change by
+/// `factor` in an `f_r` hold under sensor noise `sigma` (N) on `plant`, from the information the
+/// change brings. At the jump the position stands: the force goes to `factor·f_r`, and the samples
+/// taken before the loop has moved the tool (its delay, lag and the conditioning's delay,
+/// `n = lead/period`, at least one) measure the ratio `ρ = k₂/k₁` to `σ/(f_r·√n)`; the tool then
+/// travels `Δx = f_r/k₂ − f_r/k₁` (measured exactly), so `k₂ = f_r·(1 − ρ)/Δx` carries that error
+/// divided by `|1 − ρ|`. A steady hold adds next to nothing (the loop's answer to noise moves the
+/// tool by a fraction of `σ/k`), nor does the touch-down's fit at a small set-point (a handful of
+/// samples over the rise). Two seconds after the change the bound is the same: what follows the
+/// transient is a hold.
+pub fn change_bound(f_r: f64, factor: f64, sigma: f64, plant: &InnerLoopModel) -> f64 {
+    let LawConfig::Robust(p) = tuning(f_r).law else {
+        panic!("robust")
+    };
+    let cutoff = p.conditioning.cutoff.min(0.45 / plant.period);
+    let conditioning = core::f64::consts::SQRT_2 / (core::f64::consts::TAU * cutoff);
+    let lead = plant.delay() + plant.tau + conditioning;
+    let n = (lead / plant.period).max(1.0);
+    sigma / (f_r * (1.0 - factor).abs() * n.sqrt())
+}
+
+/// A log-uniform stiffness in [lo, hi], N/m.
+pub fn stiffness(lo: f64, hi: f64) -> impl Strategy<Value = f64> {
+    (lo.ln()..hi.ln()).prop_map(f64::exp)
+}
+
+/// `|mean(f − f_r)|` of the true force from `from` on, N.
+pub fn mean_error(rows: &[scenario::record::Row], from: f64) -> f64 {
+    let e: Vec<f64> = rows
+        .iter()
+        .filter(|r| r.t >= from)
+        .map(|r| r.f_true - r.f_r)
+        .collect();
+    (e.iter().sum::<f64>() / e.len() as f64).abs()
+}
