@@ -13,6 +13,7 @@
 
 use core::fmt;
 
+use crate::layout::Recorded;
 use crate::xml::{ParseError, Visitor, scan_message};
 
 /// How many numeric values one message can hold (six internal poses, `Delay`, `Tech` and 64 user
@@ -333,8 +334,17 @@ impl Schema {
 
     /// Parse one message into `frame`. On error the frame's contents are unspecified.
     pub fn parse(&self, bytes: &[u8], frame: &mut Frame) -> Result<(), ParseError> {
-        frame.present = 0;
-        frame.ipoc = Ipoc::default();
+        self.parse_recording(bytes, frame, None)
+    }
+
+    /// [`Schema::parse`], recording where each value lay in `bytes` into `rec` (for a [`Layout`]).
+    pub(crate) fn parse_recording(
+        &self,
+        bytes: &[u8],
+        frame: &mut Frame,
+        rec: Option<&mut Recorded>,
+    ) -> Result<(), ParseError> {
+        frame.clear_for_parse();
         let mut st = ParseState {
             schema: self,
             frame,
@@ -344,7 +354,11 @@ impl Schema {
             seen: 0,
             ipoc_seen: false,
             type_seen: false,
+            rec,
         };
+        if let Some(r) = st.rec.as_mut() {
+            r.clear();
+        }
         let root = scan_message(bytes, &mut st)?;
         if root != self.direction.root() {
             return Err(ParseError::WrongRoot);
@@ -560,6 +574,12 @@ impl fmt::Debug for Frame {
 }
 
 impl Frame {
+    /// No value present, IPOC 0: what a parse starts from.
+    pub(crate) fn clear_for_parse(&mut self) {
+        self.present = 0;
+        self.ipoc = Ipoc::default();
+    }
+
     /// All zeros, IPOC 0.
     pub fn new() -> Self {
         Self {
@@ -625,9 +645,11 @@ enum Cur {
     Unknown,
 }
 
-struct ParseState<'s, 'f> {
+struct ParseState<'s, 'f, 'r> {
     schema: &'s Schema,
     frame: &'f mut Frame,
+    /// Where each value lay, when a layout is being learnt.
+    rec: Option<&'r mut Recorded>,
     cur: Cur,
     /// Where the next element / field most likely is (messages come in config order).
     next_element: usize,
@@ -637,24 +659,34 @@ struct ParseState<'s, 'f> {
     type_seen: bool,
 }
 
-impl ParseState<'_, '_> {
+impl ParseState<'_, '_, '_> {
     fn store(&mut self, f: &Field, value: &[u8], at: usize) -> Result<(), ParseError> {
         let Some(slot) = f.slot else {
             return Ok(());
         };
-        let v = match f.ty {
-            ValueType::Double => parse_decimal(value),
-            ValueType::Long => parse_integer(value),
-            ValueType::Bool => parse_bool(value),
-            ValueType::String => return Ok(()),
+        if f.ty == ValueType::String {
+            return Ok(());
         }
-        .ok_or(ParseError::BadNumber { at })?;
+        let v = parse_value(f.ty, value).ok_or(ParseError::BadNumber { at })?;
         self.frame.set(slot, v);
+        if let Some(r) = self.rec.as_mut() {
+            r.push(at, value.len(), Some((slot, f.ty)));
+        }
         Ok(())
     }
 }
 
-impl<'a> Visitor<'a> for ParseState<'_, '_> {
+/// A value of type `ty` (not `String`) in wire units.
+pub(crate) fn parse_value(ty: ValueType, value: &[u8]) -> Option<f64> {
+    match ty {
+        ValueType::Double => parse_decimal(value),
+        ValueType::Long => parse_integer(value),
+        ValueType::Bool => parse_bool(value),
+        ValueType::String => None,
+    }
+}
+
+impl<'a> Visitor<'a> for ParseState<'_, '_, '_> {
     fn root_attr(&mut self, name: &'a [u8], value: &'a [u8], _at: usize) -> Result<(), ParseError> {
         if name.eq_ignore_ascii_case(b"type") {
             if self.schema.direction == Direction::Sen && value != self.schema.type_value.as_bytes()
@@ -721,6 +753,9 @@ impl<'a> Visitor<'a> for ParseState<'_, '_> {
             Cur::Ipoc => {
                 self.frame.ipoc = Ipoc::parse(text)?;
                 self.ipoc_seen = true;
+                if let Some(r) = self.rec.as_mut() {
+                    r.push(at, text.len(), None);
+                }
                 Ok(())
             }
             Cur::Element(i) => {
@@ -747,37 +782,55 @@ const POW10F: [f64; 23] = [
 /// exact integer divided by one exact power of ten — correctly rounded, like `str::parse`, which
 /// handles everything else.
 pub(crate) fn parse_decimal(s: &[u8]) -> Option<f64> {
-    let (neg, body) = match s.first()? {
-        b'-' => (true, &s[1..]),
-        b'+' => (false, &s[1..]),
-        _ => (false, s),
+    let (v, n) = decimal_prefix(s);
+    if n == s.len() { v } else { None }
+}
+
+/// The plain decimal at the start of `s` (see [`parse_decimal`]), read up to the first byte that
+/// cannot continue it: its value (`None`: no digit, or not finite) and the bytes it took.
+pub(crate) fn decimal_prefix(s: &[u8]) -> (Option<f64>, usize) {
+    let (neg, sign) = match s.first() {
+        Some(b'-') => (true, 1),
+        Some(b'+') => (false, 1),
+        _ => (false, 0),
     };
+    let body = &s[sign..];
+    // The digits before and after the point, accumulated as one integer (wrapping: only read when
+    // there are at most 19 digits, which cannot overflow).
     let mut mant: u64 = 0;
-    let mut digits = 0u32;
-    let mut frac = 0usize;
-    let mut dot = false;
-    for &c in body {
-        match c {
-            b'0'..=b'9' => {
-                if digits < 19 {
-                    mant = mant * 10 + u64::from(c - b'0');
-                }
-                digits += 1;
-                frac += usize::from(dot);
-            }
-            b'.' if !dot => dot = true,
-            _ => return None,
+    let mut i = 0;
+    let digits_from = |i: &mut usize, mant: &mut u64| {
+        while let Some(d) = body
+            .get(*i)
+            .map(|c| c.wrapping_sub(b'0'))
+            .filter(|&d| d <= 9)
+        {
+            *mant = mant.wrapping_mul(10).wrapping_add(u64::from(d));
+            *i += 1;
         }
+    };
+    digits_from(&mut i, &mut mant);
+    let int_digits = i;
+    let mut frac = 0usize;
+    if body.get(i) == Some(&b'.') {
+        i += 1;
+        digits_from(&mut i, &mut mant);
+        frac = i - int_digits - 1;
     }
+    let digits = int_digits + frac;
+    let len = sign + i;
     if digits == 0 {
-        return None;
+        return (None, len);
     }
     if digits <= 19 && mant < (1u64 << 53) && frac < POW10F.len() {
         let v = mant as f64 / POW10F[frac];
-        return Some(if neg { -v } else { v });
+        return (Some(if neg { -v } else { v }), len);
     }
-    let v: f64 = core::str::from_utf8(s).ok()?.parse().ok()?;
-    v.is_finite().then_some(v)
+    let v = core::str::from_utf8(&s[..len])
+        .ok()
+        .and_then(|t| t.parse::<f64>().ok())
+        .filter(|v| v.is_finite());
+    (v, len)
 }
 
 /// `[+-]digits` within i64.
@@ -934,6 +987,19 @@ mod tests {
         }
         let huge = [b'9'; 400];
         assert_eq!(parse_decimal(&huge), None, "overflow to inf is rejected");
+    }
+
+    proptest::proptest! {
+        /// Plain decimals read as `str::parse` reads them (correctly rounded), any digit counts.
+        #[test]
+        fn decimals_read_as_the_standard_parser_reads_them(
+            text in "[+-]?[0-9]{0,24}(\\.[0-9]{0,24})?",
+        ) {
+            let expected = text.parse::<f64>().ok().filter(|v| v.is_finite());
+            let has_digit = text.bytes().any(|c| c.is_ascii_digit());
+            let got = parse_decimal(text.as_bytes());
+            proptest::prop_assert_eq!(got.map(f64::to_bits), expected.filter(|_| has_digit).map(f64::to_bits));
+        }
     }
 
     #[test]

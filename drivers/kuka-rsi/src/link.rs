@@ -415,8 +415,8 @@ impl RobotLink for RsiLink {
         }
         let started = Instant::now();
         let first_contact = self.session.config().first_contact_timeout;
+        let mut now = started;
         loop {
-            let now = Instant::now();
             let remaining = match self.session.wait_budget(now)? {
                 Some(d) => Some(d),
                 None => match first_contact {
@@ -450,6 +450,7 @@ impl RobotLink for RsiLink {
             if let Some(c) = self.session.take_cycle() {
                 return Ok(c);
             }
+            now = Instant::now();
         }
     }
 

@@ -24,6 +24,7 @@ use hal::{Correction, Cycle, ErrorKind, Pose};
 
 use crate::codec::{Frame, Ipoc, Schema};
 use crate::diag::Diagnostics;
+use crate::layout::Layout;
 use crate::limits::{Shaper, split};
 use crate::link::{CorrectionMode, LinkConfig, LinkError, RobotFilter};
 use crate::process::{CommandSlots, StateSlots};
@@ -121,6 +122,8 @@ struct Accepted {
 pub struct RsiSession {
     cfg: LinkConfig,
     rob: Schema,
+    /// The robot's `<Rob>` layout, learnt from its last well-formed message (read faster).
+    rob_layout: Box<Layout>,
     sen: Schema,
     rob_slots: RobSlots,
     sen_slots: SenSlots,
@@ -184,6 +187,7 @@ impl RsiSession {
         let shaper = Shaper::new(cfg.limits, sen_slots.rkorr.map(|s| s.is_some()));
         Ok(Self {
             rob,
+            rob_layout: Box::new(Layout::new(cfg.max_datagram)),
             sen,
             rob_slots,
             sen_slots,
@@ -340,7 +344,10 @@ impl RsiSession {
             c.oversized += 1;
             return Err(Rejected::Oversized);
         }
-        if let Err(e) = self.rob.parse(datagram, &mut self.rx_frame) {
+        if let Err(e) = self
+            .rob_layout
+            .parse(&self.rob, datagram, &mut self.rx_frame)
+        {
             c.malformed += 1;
             self.diag.last_malformed = Some(e);
             return Err(Rejected::Malformed(e));

@@ -1,6 +1,6 @@
 //! Property tests: round trips through the codec in both directions, and a parser that never panics.
 
-use kuka_rsi::{ConfigElement, EthernetConfig, Frame, Ipoc, ValueType};
+use kuka_rsi::{ConfigElement, EthernetConfig, Frame, Ipoc, Layout, ValueType};
 use proptest::prelude::*;
 
 fn cfg() -> EthernetConfig {
@@ -168,6 +168,57 @@ proptest! {
         if cut < bytes.len() && full.is_ok() {
             // A strict prefix of a good document is never a good document.
             prop_assert!(truncated.is_err());
+        }
+    }
+
+    /// A learnt layout reads every message as the strict parser does — the same error, or the same
+    /// IPOC and values — whatever was learnt before: messages with new values (other lengths), and
+    /// mutated, truncated or stretched ones.
+    #[test]
+    fn the_learnt_layout_reads_as_the_strict_parser_does(
+        values in proptest::collection::vec(-1.0e6f64..1.0e6, 1..40),
+        ipoc in any::<u64>(),
+        edits in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>(), 0u8..3), 0..4),
+        cut in any::<prop::sample::Index>(),
+    ) {
+        let s = cfg().rob_schema(4).unwrap();
+        let mut layout = Layout::new(4096);
+        let mut fresh = golden_rob();
+        let mut f = Frame::new();
+        for slot in 0..s.slots() {
+            let v = values[slot % values.len()];
+            let is_long = s.field_of(slot).unwrap().ty == ValueType::Long;
+            f.set(slot, if is_long { v.round() } else { v });
+        }
+        f.set_ipoc(Ipoc::new(ipoc));
+        let mut buf = [0u8; 4096];
+        let n = s.write(&f, &mut buf).unwrap();
+        let mut mutated = buf[..n].to_vec();
+        for (at, b, op) in edits {
+            let i = at.index(mutated.len());
+            match op {
+                0 => mutated[i] = b,
+                1 => mutated.insert(i, b),
+                _ => { mutated.remove(i); }
+            }
+        }
+        let cut = cut.index(mutated.len() + 1).max(mutated.len() / 2);
+        mutated.truncate(cut);
+        let golden = std::mem::take(&mut fresh);
+        for msg in [&golden, &buf[..n].to_vec(), &mutated, &golden, &mutated] {
+            let (mut a, mut b) = (Frame::new(), Frame::new());
+            let strict = s.parse(msg, &mut a);
+            let learnt = layout.parse(&s, msg, &mut b);
+            prop_assert_eq!(strict, learnt);
+            if strict.is_ok() {
+                prop_assert_eq!(a.ipoc(), b.ipoc());
+                for slot in 0..s.slots() {
+                    prop_assert_eq!(a.is_present(slot), b.is_present(slot));
+                    if a.is_present(slot) {
+                        prop_assert_eq!(a.get(slot).to_bits(), b.get(slot).to_bits(), "slot {}", slot);
+                    }
+                }
+            }
         }
     }
 

@@ -1,0 +1,207 @@
+//! A robot's message layout, learnt from its last well-formed `<Rob>`: a controller sends the same
+//! bytes every cycle but for the values. A message whose every byte between the values is the learnt
+//! message's, and whose values parse, is that message with new values: it is read by comparing the
+//! bytes between the values and parsing the values, without the XML scanner. Anything else (another
+//! element order, whitespace, a missing or extra element, a value that does not parse) is read by the
+//! strict parser, which then learns the new layout if the message is well-formed; the result is the
+//! same either way (`tests/codec_props.rs` checks it against the strict parser).
+//!
+//! Why: the strict scanner is 70 % of the instructions an RSI cycle costs on the PC (`callgrind` of
+//! `examples/rsi_answer`), and the cycle's turnaround is what the robot waits for.
+
+use crate::codec::{Frame, Ipoc, MAX_SLOTS, Schema, ValueType, decimal_prefix, parse_value};
+use crate::xml::ParseError;
+
+/// Where one value lay in a message: its start, length and what it is (`None`: the IPOC).
+type Spot = (u32, u32, Option<(u8, ValueType)>);
+
+/// The values of one strictly parsed message, in document order.
+#[derive(Clone, Debug)]
+pub(crate) struct Recorded {
+    spots: [Spot; MAX_SLOTS + 1],
+    n: usize,
+    /// More values than fit (never for a valid schema): no layout.
+    overflow: bool,
+}
+
+impl Recorded {
+    fn new() -> Self {
+        Self {
+            spots: [(0, 0, None); MAX_SLOTS + 1],
+            n: 0,
+            overflow: false,
+        }
+    }
+
+    pub(crate) fn clear(&mut self) {
+        self.n = 0;
+        self.overflow = false;
+    }
+
+    pub(crate) fn push(&mut self, at: usize, len: usize, what: Option<(usize, ValueType)>) {
+        let (Ok(at), Ok(len)) = (u32::try_from(at), u32::try_from(len)) else {
+            self.overflow = true;
+            return;
+        };
+        match self.spots.get_mut(self.n) {
+            Some(s) => {
+                *s = (at, len, what.map(|(slot, ty)| (slot as u8, ty)));
+                self.n += 1;
+            }
+            None => self.overflow = true,
+        }
+    }
+}
+
+/// The learnt layout of one direction's messages (allocated once, at the largest message accepted).
+#[derive(Clone, Debug)]
+pub struct Layout {
+    /// The message it was learnt from (`len` bytes of it; 0: nothing learnt).
+    text: Box<[u8]>,
+    len: usize,
+    learnt: Recorded,
+    scratch: Recorded,
+}
+
+impl Layout {
+    /// No layout yet, for messages of up to `max_len` bytes.
+    pub fn new(max_len: usize) -> Self {
+        Self {
+            text: vec![0; max_len].into_boxed_slice(),
+            len: 0,
+            learnt: Recorded::new(),
+            scratch: Recorded::new(),
+        }
+    }
+
+    /// Forget the layout.
+    pub fn clear(&mut self) {
+        self.len = 0;
+    }
+
+    /// Parse `bytes` into `frame` as [`Schema::parse`] does (same result, same error), through the
+    /// learnt layout when `bytes` has it; learn a well-formed message's layout.
+    pub fn parse(
+        &mut self,
+        schema: &Schema,
+        bytes: &[u8],
+        frame: &mut Frame,
+    ) -> Result<(), ParseError> {
+        if self.len > 0 && self.read(bytes, frame) {
+            return Ok(());
+        }
+        schema.parse_recording(bytes, frame, Some(&mut self.scratch))?;
+        if self.scratch.overflow || bytes.len() > self.text.len() {
+            self.len = 0;
+        } else {
+            self.text[..bytes.len()].copy_from_slice(bytes);
+            self.len = bytes.len();
+            core::mem::swap(&mut self.learnt, &mut self.scratch);
+        }
+        Ok(())
+    }
+
+    /// Read `bytes` through the layout; false (the frame then undefined) where it does not fit.
+    fn read(&self, bytes: &[u8], frame: &mut Frame) -> bool {
+        let text = &self.text[..self.len];
+        frame.clear_for_parse();
+        let (mut old, mut new) = (0usize, 0usize);
+        for &(at, len, what) in &self.learnt.spots[..self.learnt.n] {
+            let (at, end) = (at as usize, (at + len) as usize);
+            let between = &text[old..at];
+            if bytes.get(new..new + between.len()) != Some(between) {
+                return false;
+            }
+            new += between.len();
+            // The value runs to the byte that ended it in the learnt message (a quote, `<`); a value
+            // that parses holds neither.
+            let Some(&stop) = text.get(end) else {
+                return false;
+            };
+            let rest = &bytes[new..];
+            let n = match what {
+                // A decimal is read as it is scanned, and must end where the learnt one did.
+                Some((slot, ValueType::Double)) => match decimal_prefix(rest) {
+                    (Some(v), n) if rest.get(n) == Some(&stop) => {
+                        frame.set(usize::from(slot), v);
+                        n
+                    }
+                    _ => return false,
+                },
+                _ => {
+                    let Some(n) = rest.iter().position(|&c| c == stop) else {
+                        return false;
+                    };
+                    let value = &rest[..n];
+                    match what {
+                        Some((slot, ty)) => match parse_value(ty, value) {
+                            Some(v) => frame.set(usize::from(slot), v),
+                            None => return false,
+                        },
+                        None => match Ipoc::parse(value) {
+                            Ok(ipoc) => frame.set_ipoc(ipoc),
+                            Err(_) => return false,
+                        },
+                    }
+                    n
+                }
+            };
+            new += n;
+            old = end;
+        }
+        bytes.get(new..) == Some(&text[old..])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{EthernetConfig, ProcessChannels};
+
+    fn schema() -> Schema {
+        EthernetConfig::forcecell([127, 0, 0, 1].into(), 49152, false)
+            .with_process(ProcessChannels::default())
+            .rob_schema(4)
+            .unwrap()
+    }
+
+    fn message(s: &Schema, v: f64, ipoc: u64) -> Vec<u8> {
+        let mut f = Frame::new();
+        for slot in 0..s.slots() {
+            f.set(slot, (v * (slot as f64 + 1.0)).round());
+        }
+        f.set_ipoc(Ipoc::new(ipoc));
+        let mut buf = vec![0u8; 4096];
+        let n = s.write(&f, &mut buf).unwrap();
+        buf.truncate(n);
+        buf
+    }
+
+    #[test]
+    fn new_values_are_read_through_the_layout_and_a_new_shape_is_not() {
+        let s = schema();
+        let mut layout = Layout::new(4096);
+        let (mut f, mut strict) = (Frame::new(), Frame::new());
+        layout.parse(&s, &message(&s, 1.0, 7), &mut f).unwrap();
+        // Other values of other lengths, another IPOC: the layout reads it, as the strict parser does.
+        let next = message(&s, -123.0, 1_000_000_007);
+        assert!(layout.read(&next, &mut f));
+        s.parse(&next, &mut strict).unwrap();
+        assert_eq!(f.ipoc(), strict.ipoc());
+        for slot in 0..s.slots() {
+            assert_eq!(f.get(slot), strict.get(slot), "slot {slot}");
+        }
+        // A space before `/>`, a value that does not parse, a message cut short: not this layout.
+        let text = String::from_utf8(next.clone()).unwrap();
+        let spaced = text.replacen("/>", " />", 1);
+        assert!(!layout.read(spaced.as_bytes(), &mut f));
+        let exponent = text.replacen("=\"-123.0000\"", "=\"-1e2\"", 1);
+        assert_ne!(exponent, text);
+        assert!(!layout.read(exponent.as_bytes(), &mut f));
+        assert!(!layout.read(&next[..next.len() - 1], &mut f));
+        // The strict parser then reads the new shape and the layout follows it.
+        layout.parse(&s, spaced.as_bytes(), &mut f).unwrap();
+        assert!(layout.read(spaced.as_bytes(), &mut f));
+        assert!(!layout.read(&next, &mut f));
+    }
+}
