@@ -1,7 +1,7 @@
 //! Codec speed per message, both directions, with allocations counted (`cargo bench -p forcecell-kuka-rsi --bench codec`).
 
 use divan::{AllocProfiler, Bencher, black_box};
-use kuka_rsi::{EthernetConfig, Frame, Ipoc, Schema};
+use kuka_rsi::{EthernetConfig, Frame, Ipoc, Layout, Schema};
 
 #[global_allocator]
 static ALLOC: AllocProfiler = AllocProfiler::system();
@@ -39,6 +39,19 @@ fn parse_rob(b: Bencher) {
     let n = rob.write(&rob_frame(&rob), &mut buf).unwrap();
     let mut f = Frame::new();
     b.bench_local(|| rob.parse(black_box(&buf[..n]), &mut f).unwrap());
+}
+
+/// Driver side: the same `<Rob>` through the layout learnt from the previous one (what the session
+/// does every cycle once the robot's layout is known).
+#[divan::bench]
+fn parse_rob_learnt(b: Bencher) {
+    let (rob, _) = schemas();
+    let mut buf = [0u8; 2048];
+    let n = rob.write(&rob_frame(&rob), &mut buf).unwrap();
+    let mut f = Frame::new();
+    let mut layout = Layout::new(4096);
+    layout.parse(&rob, &buf[..n], &mut f).unwrap();
+    b.bench_local(|| layout.parse(&rob, black_box(&buf[..n]), &mut f).unwrap());
 }
 
 /// Driver side: write one `<Sen>` (RKorr X..C, Stop, IPOC).
