@@ -1,14 +1,35 @@
 //! Fuzz the `<Rob>` parser (the bytes a network peer controls) and, when it accepts, check that
 //! writing what it parsed and parsing that again gives the same frame. Two configs: without and with
-//! the process channels (`FcCmd`), whose decoding must never panic either.
+//! the process channels (`FcCmd`), whose decoding must never panic either. And a layout learnt from a
+//! well-formed message reads the bytes as the strict parser does (the same error, or the same values).
 #![no_main]
 
 use kuka_rsi::{
-    CommandSlots, ConfigElement, EthernetConfig, Frame, ProcessChannels, Schema, ValueType,
+    CommandSlots, ConfigElement, EthernetConfig, Frame, Layout, ProcessChannels, Schema, ValueType,
 };
 use libfuzzer_sys::fuzz_target;
 
 fn check(schema: &Schema, data: &[u8]) {
+    let mut learnt = vec![0u8; 65536];
+    let n = schema
+        .write(&Frame::new(), &mut learnt)
+        .expect("an all-zero frame writes");
+    let mut layout = Layout::new(65536);
+    layout
+        .parse(schema, &learnt[..n], &mut Frame::new())
+        .expect("the writer's output must parse");
+    let (mut strict, mut fast) = (Frame::new(), Frame::new());
+    let result = schema.parse(data, &mut strict);
+    assert_eq!(result, layout.parse(schema, data, &mut fast));
+    if result.is_ok() {
+        assert_eq!(strict.ipoc(), fast.ipoc());
+        for slot in 0..schema.slots() {
+            assert_eq!(strict.is_present(slot), fast.is_present(slot));
+            if strict.is_present(slot) {
+                assert_eq!(strict.get(slot).to_bits(), fast.get(slot).to_bits());
+            }
+        }
+    }
     let mut frame = Frame::new();
     if schema.parse(data, &mut frame).is_ok() {
         if let Some(slots) = CommandSlots::find(schema).expect("valid process channels") {
