@@ -31,6 +31,18 @@ fn golden_rob() -> Vec<u8> {
     buf
 }
 
+/// A frame of `s` with `values` in its slots (repeated as needed; integers rounded) and `ipoc`.
+fn frame_of(s: &kuka_rsi::Schema, values: &[f64], ipoc: u64) -> Frame {
+    let mut f = Frame::new();
+    for slot in 0..s.slots() {
+        let v = values[slot % values.len()];
+        let is_long = s.field_of(slot).unwrap().ty == ValueType::Long;
+        f.set(slot, if is_long { v.round() } else { v });
+    }
+    f.set_ipoc(Ipoc::new(ipoc));
+    f
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(512))]
 
@@ -41,13 +53,7 @@ proptest! {
         precision in 0u8..=6,
     ) {
         let s = cfg().rob_schema(precision).unwrap();
-        let mut f = Frame::new();
-        for slot in 0..s.slots() {
-            let v = values[slot % values.len()];
-            let is_long = s.field_of(slot).unwrap().ty == ValueType::Long;
-            f.set(slot, if is_long { v.round() } else { v });
-        }
-        f.set_ipoc(Ipoc::new(ipoc));
+        let f = frame_of(&s, &values, ipoc);
         let mut buf = [0u8; 4096];
         let n = s.write(&f, &mut buf).unwrap();
         let mut back = Frame::new();
@@ -183,14 +189,7 @@ proptest! {
     ) {
         let s = cfg().rob_schema(4).unwrap();
         let mut layout = Layout::new(4096);
-        let mut fresh = golden_rob();
-        let mut f = Frame::new();
-        for slot in 0..s.slots() {
-            let v = values[slot % values.len()];
-            let is_long = s.field_of(slot).unwrap().ty == ValueType::Long;
-            f.set(slot, if is_long { v.round() } else { v });
-        }
-        f.set_ipoc(Ipoc::new(ipoc));
+        let f = frame_of(&s, &values, ipoc);
         let mut buf = [0u8; 4096];
         let n = s.write(&f, &mut buf).unwrap();
         let mut mutated = buf[..n].to_vec();
@@ -204,7 +203,7 @@ proptest! {
         }
         let cut = cut.index(mutated.len() + 1).max(mutated.len() / 2);
         mutated.truncate(cut);
-        let golden = std::mem::take(&mut fresh);
+        let golden = golden_rob();
         for msg in [&golden, &buf[..n].to_vec(), &mutated, &golden, &mutated] {
             let (mut a, mut b) = (Frame::new(), Frame::new());
             let strict = s.parse(msg, &mut a);
