@@ -74,11 +74,6 @@ impl Layout {
         }
     }
 
-    /// Forget the layout.
-    pub fn clear(&mut self) {
-        self.len = 0;
-    }
-
     /// Parse `bytes` into `frame` as [`Schema::parse`] does (same result, same error), through the
     /// learnt layout when `bytes` has it; learn a well-formed message's layout.
     pub fn parse(

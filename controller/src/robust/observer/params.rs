@@ -16,9 +16,10 @@ pub struct ObserverParams {
     pub jump_gate: f64,
     /// Innovation, in the predictor's standard deviations, beyond which a measurement below the step
     /// floor is a jump too, where the robot's own displacement in the cycle cannot explain it: far
-    /// more than a cycle of motion makes (the most any shipped scenario's motion makes on P1 or P2:
-    /// 46, B5's curve starting at 6.3 mm/s with a clean sensor on P1), well below a step on a soft
-    /// pad (pass-tilt-step's 0.3 mm on 10 N/mm: 114 on P2, 138 on P1). Under sensor noise such a
+    /// more than a cycle of motion makes (measured with an instrumented build when this was chosen:
+    /// at most 46 in any shipped scenario on P1 or P2, B5's curve starting at 6.3 mm/s with a clean
+    /// sensor on P1), well below a step on a soft pad (pass-tilt-step's 0.3 mm on 10 N/mm: 114 on P2,
+    /// 138 on P1). Under sensor noise such a
     /// step is within it and is taken for motion, as it was before this test.
     pub step_gate: f64,
     /// How long the feed-forward stays on after real surface motion was last seen, s (it passes
