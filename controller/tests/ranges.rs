@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::{CELLS, cell, change_bound, floor, mean_error, stiffness, tuning};
+use common::{CELLS, cell, change_bound, floor, mean_error, reach_time, stiffness, tuning};
 use controller::LawConfig;
 use proptest::prelude::*;
 use scenario::run::run;
@@ -29,18 +29,27 @@ use sim::InnerLoopModel;
 //   the bound, contact losses, mean errors). Before the noise was measured from the first samples and
 //   a single raw sample had to stand out of the raw noise, they were 94, 158, 183 and 198, and f_r
 //   20 N on 500 kN/m, P2, σ 1 N failed 106 (now 0). The 24 cases drawn here pass, and 64;
-// * with 200 cases two more end on fault 5 (contact lost 500 ms): `surface_steps` at f_r 2 N, 10 kN/m,
-//   a 2.62 mm retreat on P1 (the search does not reach it in time), and `stiffness_changes` at f_r 2 N,
-//   49.6 kN/m doubling at 2 s on P2, σ 0.16 N, 112 N·s/m, seed 666;
+// * with 200 cases (`FORCECELL_RANGE_CASES=200`) two fail: `surface_steps` on the 12 ms cell at f_r
+//   15.3 N, 74.7 kN/m, a 0.48 mm retreat: the fast search's re-contact trips the force limit (61.1 N;
+//   the known limit of `surface_step_corners`), and `stiffness_changes` at f_r 2 N, 49.6 kN/m doubling
+//   at 2 s on P2, σ 0.16 N, 112 N·s/m, seed 666: 4 contact losses (the loop's answer to the doubling
+//   lifts off, the fast search re-contacts at 51 N, the answer to that retracts 2 mm; the law's
+//   re-contacts press to 50 N twice more before it holds). It used to end on fault 5: the search
+//   behind the lost contact was at approach speed. (The 2.62 mm retreat at f_r 2 N on 10 kN/m that
+//   ended on fault 5 is fixed: `surface_step_corners`.)
 // * (fixed, `a_noise_spike_in_free_air_is_no_touch_down`: a noise spike taken for contact short of the
 //   surface — σ 0.9 N, f_r 20 N, 500 kN/m, P2, seed 7 — ended the run on fault 2 at 65.9 N; the
 //   touch-down now peaks at 23.9 N, 21.0 N on 100 kN/m. The touch-down goes on at approach speed until
 //   `k̂_c` is identified; before that, f_r 36.6 N on 354 kN/m on P2 hit 115 N against 84.5 N, now
 //   37 N.)
 
+/// `cases` seeded cases, or as many as `FORCECELL_RANGE_CASES` says (a deeper search than CI's).
 fn config(cases: u32) -> ProptestConfig {
     ProptestConfig {
-        cases,
+        cases: std::env::var("FORCECELL_RANGE_CASES")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(cases),
         rng_seed: proptest::test_runner::RngSeed::Fixed(0x0011_2026),
         failure_persistence: None,
         ..ProptestConfig::default()
@@ -94,10 +103,7 @@ proptest! {
         }
     }
 
-    /// B3 carried over: the surface steps up to ±3 mm in a steady contact; the contact comes back and
-    /// the force settles at the set-point within 1 s — unless the step itself presses the tool past
-    /// the force limit (a surface that jumps `δ` towards the tool adds `k_c·δ` at once, before any
-    /// loop can act): then the loop must end on fault 2, backed off.
+    /// B3 carried over: the surface steps up to ±3 mm in a steady contact (see [`surface_step`]).
     #[test]
     fn surface_steps(
         f_r in 2.0f64..50.0,
@@ -105,23 +111,94 @@ proptest! {
         delta in -0.003f64..0.003,
         cell_i in 0usize..3,
     ) {
-        let plant = CELLS[cell_i];
-        let s = cell(4.0, k_c, 0.0, None, Some((2.0, delta)), 0.0, 1);
-        let t = tuning(f_r);
-        let LawConfig::Robust(p) = &t.law else { unreachable!() };
-        let jump = f_r + k_c * (-delta).max(0.0);
-        match run(&s, &plant, &t) {
-            Ok(r) => {
-                prop_assert!(jump <= p.limits.max_force, "a {jump} N step did not trip the limit");
-                let after = r.metrics(2.0, f64::INFINITY);
-                prop_assert!(after.settle_time <= 1.0, "back in ±2 % after {} s", after.settle_time);
-            }
-            Err(e) => {
-                let e = e.to_string();
-                prop_assert!(
-                    jump > p.limits.max_force && e.contains("fault 2 (force limit)"),
-                    "{jump} N: {e}"
-                );
+        surface_step(f_r, k_c, delta, &CELLS[cell_i])?;
+    }
+}
+
+/// B3's criteria for a surface step of `delta` (m, positive away from the tool) in an `f_r` hold on
+/// `k_c`: the contact comes back and the force settles at the set-point within 1 s of the time the
+/// search can first reach the surface ([`common::reach_time`]) — unless the step
+/// itself presses the tool past the force limit (a surface that jumps `δ` towards the tool adds
+/// `k_c·δ` at once, before any loop can act): then the loop must end on fault 2, backed off; or the
+/// surface went farther than the search can reach at the speeds the cell can stop
+/// ([`common::reach_time`]) within 80 % of the loop's contact-loss time (the rest is the search's
+/// acceleration, the delay and the detection): then the loop may end on fault 5, backed off.
+fn surface_step(
+    f_r: f64,
+    k_c: f64,
+    delta: f64,
+    plant: &InnerLoopModel,
+) -> Result<(), TestCaseError> {
+    let s = cell(4.0, k_c, 0.0, None, Some((2.0, delta)), 0.0, 1);
+    let t = tuning(f_r);
+    let LawConfig::Robust(p) = &t.law else {
+        unreachable!()
+    };
+    let jump = f_r + k_c * (-delta).max(0.0);
+    let reach = reach_time(&t, k_c, delta - f_r / k_c, plant);
+    let loss_time = t.loop_cfg.process.contact_loss_time;
+    match run(&s, plant, &t) {
+        Ok(r) => {
+            prop_assert!(
+                jump <= p.limits.max_force,
+                "a {jump} N step did not trip the limit"
+            );
+            // 1 s from when the search can first reach the surface.
+            let after = r.metrics(2.0, f64::INFINITY);
+            prop_assert!(
+                after.settle_time <= 1.0 + reach,
+                "back in ±2 % after {} s",
+                after.settle_time
+            );
+        }
+        Err(e) => {
+            let e = e.to_string();
+            prop_assert!(
+                (jump > p.limits.max_force && e.contains("fault 2 (force limit)"))
+                    || (reach > 0.8 * loss_time && e.contains("fault 5 (contact lost)")),
+                "{jump} N, the surface {reach} s away: {e}"
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The surface steps' corners: every cell, soft to stiff, small to large set-points, the largest
+/// steps both ways (issue #11: a 2.62 mm retreat on 10 kN/m at f_r 2 N ended on fault 5 — the search
+/// counted its fast distance at the speed it asked for, not the one the limits let through, and went
+/// on at approach speed where a surface that stops within 2·f_r allows far more; 14 of these 135
+/// corners ended on fault 5 before).
+///
+/// Known limit, measured: the fast search is bounded by what stops below the force limit with a
+/// stopping time of the delay and one cycle, and on a stiff surface that bound is the limit itself.
+/// Where the tool's true stopping time is longer — on P1 and the 12 ms cell it is ≈ 1.5 ms longer
+/// (the command's lead over the lagging tool is taken back at the limiter's acceleration, and the
+/// force takes time to reach the detection threshold) — the re-contact trips the force limit and the
+/// loop ends on fault 2, backed off. A margin that removes it costs B3 on P2 its 50 ms (B3's
+/// re-contact there is 54 N of the 60 N limit). These corners are asserted to end exactly so.
+#[test]
+fn surface_step_corners() {
+    // (cell, k_c, f_r, step): a 1 mm retreat re-contacted at the force limit.
+    const TRIPS: [(usize, f64, f64, f64); 2] = [(0, 500e3, 2.0, 0.001), (0, 500e3, 20.0, 0.001)];
+    for (i, plant) in CELLS.iter().enumerate() {
+        for k_c in [10e3, 70e3, 500e3] {
+            for f_r in [2.0, 20.0, 50.0] {
+                for delta in [-0.003, -0.0005, 0.001, 0.00262, 0.003] {
+                    let known = TRIPS.contains(&(i, k_c, f_r, delta));
+                    match surface_step(f_r, k_c, delta, plant) {
+                        Ok(()) => assert!(
+                            !known,
+                            "{plant:?}, {k_c} N/m, f_r {f_r} N, {delta} m: the known trip is gone"
+                        ),
+                        Err(e) => {
+                            let e = e.to_string();
+                            assert!(
+                                known && e.contains("fault 2 (force limit)"),
+                                "{plant:?}, {k_c} N/m, f_r {f_r} N, step {delta} m: {e}"
+                            );
+                        }
+                    }
+                }
             }
         }
     }

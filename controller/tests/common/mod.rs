@@ -61,6 +61,24 @@ pub fn floor(k: f64, v: f64, plant: &InnerLoopModel) -> f64 {
     k * v * (plant.delay() + plant.period)
 }
 
+/// The least time the search after a lost contact takes to a surface `gap` (m) away at stiffness `k`
+/// (N/m) on `plant` under `tuning`, s: no faster than stops below the force limit for the search's
+/// fast distance, then no faster than stops within `2·f_r`, never faster than the configured search
+/// speed; the stopping time is the delay and one cycle.
+pub fn reach_time(t: &Tuning, k: f64, gap: f64, plant: &InnerLoopModel) -> f64 {
+    let LawConfig::Robust(p) = &t.law else {
+        panic!("robust")
+    };
+    let c = &p.contact;
+    let per_newton = 1.0 / (k * (plant.delay() + plant.period));
+    let fast = c.reacquire_speed.min(p.limits.max_force * per_newton);
+    let gentle = c
+        .reacquire_speed
+        .min(2.0 * p.f_r.max(c.contact_force) * per_newton);
+    let near = gap.clamp(0.0, c.reacquire_distance);
+    near / fast + (gap - near).max(0.0) / gentle
+}
+
 /// The relative standard deviation below which nothing can know the new stiffness after a change by
 /// `factor` in an `f_r` hold under sensor noise `sigma` (N) on `plant`, from the information the
 /// change brings. At the jump the position stands: the force goes to `factor·f_r`, and the samples

@@ -51,8 +51,11 @@ pub struct ContactMachine {
     /// Time the raw force has been below the lift force, s, and for how many samples.
     below: f64,
     below_samples: u32,
-    /// Distance travelled in the current re-acquire or retract, m.
+    /// Distance the command travelled in the current re-acquire or retract, m: what the limits let
+    /// through, not what was asked for (near a stop the limiter brakes the command).
     travelled: f64,
+    /// The last command seen in that re-acquire or retract, m (NaN: none yet).
+    last_u: f64,
     /// Time since contact was last detected, s.
     in_contact: f64,
     /// The observed surface velocity away from the tool when contact was last lost, m/s.
@@ -72,6 +75,7 @@ impl ContactMachine {
             below: 0.0,
             below_samples: 0,
             travelled: 0.0,
+            last_u: f64::NAN,
             in_contact: f64::INFINITY,
             v_lost: 0.0,
             x_lost: 0.0,
@@ -92,6 +96,7 @@ impl ContactMachine {
         self.below = 0.0;
         self.below_samples = 0;
         self.travelled = 0.0;
+        self.last_u = f64::NAN;
         self.in_contact = f64::INFINITY;
         self.v_lost = 0.0;
         self.x_lost = 0.0;
@@ -144,6 +149,7 @@ impl ContactMachine {
             self.state = ContactState::Retract;
             self.landing = false;
             self.travelled = 0.0;
+            self.last_u = f64::NAN;
             return Transition::ForceLimit;
         }
         match self.state {
@@ -186,6 +192,7 @@ impl ContactMachine {
                         } else {
                             c.reacquire_distance
                         };
+                        self.last_u = f64::NAN;
                         self.v_lost = receding;
                         self.landing = false;
                         self.x_lost = s.x;

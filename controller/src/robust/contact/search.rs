@@ -3,7 +3,8 @@
 //! Every speed towards a surface is bounded by what the cell can stop: after a stop command the tool
 //! still travels `v·T_s` (`T_s` the delay and one cycle) into a surface of stiffness `k̂_c`. The
 //! approach stops within `2·f_r` (`v ≤ 2·f_r/(k̂_c·T_s)`), the fast search after a lost contact below
-//! the force limit; after `reacquire_distance` the search is at approach speed.
+//! the force limit; after `reacquire_distance` the search is at the speed that stops within `2·f_r`.
+//! Behind the position where contact was lost the search is fast: the tool was there.
 //!
 //! The fast search cannot also stop within `2·f_r` where a lost surface is found again close by (a
 //! transient, B8): the commands that catch up with a retreating surface in time (B3: 1 mm in 50 ms on
@@ -27,6 +28,8 @@ pub struct Speeds {
     pub reacquire: f64,
     /// How far beyond the position where contact was lost the search is `near`, m.
     pub margin: f64,
+    /// One set-point penetration `f_r/k̂_c`, m.
+    pub penetration: f64,
 }
 
 impl ContactMachine {
@@ -45,6 +48,7 @@ impl ContactMachine {
             near,
             reacquire: c.reacquire_speed.min(max_force * per_newton).max(near),
             margin: c.reacquire_margin * f_r.max(c.contact_force) / k.max(1e-12),
+            penetration: f_r.max(c.contact_force) / k.max(1e-12),
         }
     }
 
@@ -70,28 +74,40 @@ impl ContactMachine {
     /// position `x`, never more than `anchor` (s at approach speed) ahead of the robot.
     pub fn command(&mut self, x: f64, u: f64, sp: &Speeds, anchor: f64, dt: f64) -> Option<f64> {
         let c = self.p;
+        // The travel counts the command the limits let through (the last one, `u`).
+        let moved = if self.last_u.is_nan() {
+            0.0
+        } else {
+            u - self.last_u
+        };
+        self.last_u = u;
         match self.state {
             ContactState::Approach => {
                 let gap = sp.approach * anchor;
                 Some((u + sp.approach * dt).min(x + gap))
             }
             ContactState::Reacquire => {
-                // Bounded near the lost contact, fast beyond it; then at approach speed, or faster
-                // when the surface was seen receding at lift-off (a receding surface outruns a slow
-                // search).
-                let speed = if self.travelled >= c.reacquire_distance {
-                    (sp.approach + c.reacquire_outrun * self.v_lost).min(sp.reacquire)
+                self.travelled += moved.max(0.0);
+                // Fast back to where contact was lost (less one set-point penetration): the tool
+                // was there, the surface is not nearer (a loss of contact the loop's own answer
+                // made, or a bounce, can leave the tool millimetres behind). Beyond it bounded near
+                // the lost contact, fast farther on; after the fast distance at what stops within
+                // 2·f_r, or faster when the surface was seen receding at lift-off (a receding
+                // surface outruns a slow search).
+                let speed = if u < self.x_lost - sp.penetration {
+                    sp.reacquire
+                } else if self.travelled >= c.reacquire_distance {
+                    (sp.near.max(sp.approach + c.reacquire_outrun * self.v_lost)).min(sp.reacquire)
                 } else if sp.margin > 0.0 && u < self.x_lost + sp.margin {
                     sp.near
                 } else {
                     sp.reacquire
                 };
-                self.travelled += speed * dt;
                 let gap = c.reacquire_distance + sp.approach * anchor;
                 Some((u + speed * dt).min(x + gap))
             }
             ContactState::Retract => {
-                self.travelled += c.retract_speed * dt;
+                self.travelled += (-moved).max(0.0);
                 Some(u - c.retract_speed * dt)
             }
             ContactState::Contact => None,

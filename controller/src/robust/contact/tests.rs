@@ -30,6 +30,7 @@ const SP: Speeds = Speeds {
     near: 0.0089,
     reacquire: 0.05,
     margin: 0.0001,
+    penetration: 0.0001,
 };
 
 fn sig(f: f64, ff: f64) -> Signals {
@@ -72,9 +73,9 @@ fn contact_lift_off_after_lift_time_and_force_limit() {
         Transition::LiftOff
     );
     assert_eq!(m.state(), ContactState::Reacquire);
-    // A bounce: the search goes on at approach speed.
+    // A bounce: the search goes on at the speed that stops within 2·f_r.
     let u = m.command(0.0, 0.0, &SP, 0.1, 1e-3).unwrap();
-    assert!((u - 0.002e-3).abs() < 1e-15, "{u}");
+    assert!((u - SP.near * 1e-3).abs() < 1e-15, "{u}");
     assert_eq!(
         m.step(&sig(70.0, 61.0), &TH, 60.0, 0.0, 1e-3),
         Transition::ForceLimit
@@ -129,15 +130,15 @@ fn the_search_is_bounded_near_the_lost_contact_and_fast_beyond_it() {
         speeds.push(((u - 0.01) * 1e6, (next - u) / 1e-3));
         u = next;
     }
-    // Within 100 µm of the lost contact at the speed that stops within 2·f_r, then fast, and slow
-    // after `reacquire_distance`.
+    // Within 100 µm of the lost contact at the speed that stops within 2·f_r, then fast, and after
+    // `reacquire_distance` at the speed that stops within 2·f_r again.
     for &(at_um, v) in &speeds {
         let want = if at_um < 100.0 - 1e-6 {
             SP.near
         } else if at_um < 2000.0 - 1e-6 {
             SP.reacquire
         } else {
-            SP.approach
+            SP.near
         };
         assert!(
             (v - want).abs() < 1e-9,
@@ -145,6 +146,57 @@ fn the_search_is_bounded_near_the_lost_contact_and_fast_beyond_it() {
         );
     }
     assert!(speeds.iter().any(|&(_, v)| (v - SP.reacquire).abs() < 1e-9));
+}
+
+#[test]
+fn the_fast_distance_counts_what_the_limits_let_through() {
+    // The limits let half of each step through: the fast part lasts 2 mm of the command's travel,
+    // not 2 mm of what was asked for.
+    let mut m = lost_at(0.01);
+    let mut u = 0.01;
+    let mut fast_until = u;
+    while u < 0.0135 {
+        let next = m.command(u, u, &SP, 0.1, 1e-3).unwrap();
+        if (next - u) / 1e-3 > SP.near + 1e-9 {
+            fast_until = u;
+        }
+        u += 0.5 * (next - u);
+    }
+    assert!(
+        (fast_until - 0.012).abs() < 30e-6,
+        "fast until {} mm",
+        fast_until * 1e3
+    );
+}
+
+#[test]
+fn the_search_is_fast_back_to_where_contact_was_lost() {
+    // Contact lost at 10 mm while the tool moved away (the loop's own answer): the search would be
+    // at the speed that stops within 2·f_r from the start; behind the lost contact it is fast.
+    let mut m = ContactMachine::new(params());
+    let at = |f: f64, v_x: f64| Signals {
+        x: 0.01,
+        v_x,
+        ..sig(f, f)
+    };
+    m.step(&at(5.0, 0.0), &TH, 60.0, 0.0, 1e-3);
+    for _ in 0..600 {
+        m.step(&at(5.0, 0.0), &TH, 60.0, 0.0, 1e-3);
+    }
+    while m.step(&at(0.0, -0.01), &TH, 60.0, 0.0, 1e-3) != Transition::LiftOff {}
+    // The delay line took the tool 2 mm back.
+    let mut u = 0.008;
+    while u < 0.0101 {
+        let next = m.command(u, u, &SP, 0.1, 1e-3).unwrap();
+        let v = (next - u) / 1e-3;
+        let want = if u < 0.01 - SP.penetration {
+            SP.reacquire
+        } else {
+            SP.near
+        };
+        assert!((v - want).abs() < 1e-9, "{v} m/s at {u} m, want {want}");
+        u = next;
+    }
 }
 
 #[test]
