@@ -205,10 +205,11 @@ fn a_client_without_fc_cmd_gets_the_scenarios_program_and_then_stop() {
     assert_eq!(robot.z_corr, 0.0, "the correction is back at zero");
 }
 
-/// A scenario whose surface drops 5 mm away in a steady contact: the re-acquire search takes longer
-/// than the loop's `contact_loss_time`.
+/// A scenario whose surface drops 10 mm away in a steady contact: the re-acquire search takes longer
+/// than the loop's `contact_loss_time` (2 mm fast, then at what stops within 2·f_r on 70 kN/m: about
+/// 6 mm in 0.5 s).
 const SURFACE_DROPS: &str = r#"name = "surface-drops"
-description = "the surface drops 5 mm away at 1.5 s"
+description = "the surface drops 10 mm away at 1.5 s"
 duration = 4.0
 plant = "p2"
 tuning = "robust"
@@ -217,7 +218,7 @@ x0 = 0.009
 [environment]
 k_c = 70000.0
 x_c = 0.010
-x_c_events = [{ kind = "step", at = 1.5, delta = 0.005 }]
+x_c_events = [{ kind = "step", at = 1.5, delta = 0.010 }]
 "#;
 
 #[test]
@@ -244,7 +245,7 @@ fn a_client_without_fc_cmd_sees_a_lost_contact_end_in_a_retract_and_stop() {
         out.contains("fault 5 (contact lost): contact lost for 500 ms"),
         "{out}"
     );
-    // The part is 1 mm beyond the start and drops 5 mm away at 1.5 s (375 cycles): before that the
+    // The part is 1 mm beyond the start and drops 10 mm away at 1.5 s (375 cycles): before that the
     // tool presses (5 N on 70 kN/m is 0.07 mm more); then it searches towards where the part went
     // and, 0.5 s after contact was lost, backs off 2 mm (the tuning's retract distance) and stops.
     assert!((1.0..1.2).contains(&z[370]), "pressing at {} mm", z[370]);

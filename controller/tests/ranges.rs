@@ -43,17 +43,24 @@ use sim::InnerLoopModel;
 //   `k̂_c` is identified; before that, f_r 36.6 N on 354 kN/m on P2 hit 115 N against 84.5 N, now
 //   37 N.)
 
-/// `cases` seeded cases, or as many as `FORCECELL_RANGE_CASES` says (a deeper search than CI's).
+/// `cases` seeded cases, or as many as `FORCECELL_RANGE_CASES` says (a deeper search than CI's);
+/// `FORCECELL_RANGE_SHRINK=0` reports a failing case as drawn, not shrunk.
 fn config(cases: u32) -> ProptestConfig {
     ProptestConfig {
-        cases: std::env::var("FORCECELL_RANGE_CASES")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(cases),
+        cases: env_or("FORCECELL_RANGE_CASES", cases),
         rng_seed: proptest::test_runner::RngSeed::Fixed(0x0011_2026),
         failure_persistence: None,
+        max_shrink_iters: env_or("FORCECELL_RANGE_SHRINK", 1024),
         ..ProptestConfig::default()
     }
+}
+
+/// The variable `name` parsed, or `default`.
+fn env_or(name: &str, default: u32) -> u32 {
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
 }
 
 proptest! {

@@ -102,6 +102,13 @@ impl Motion {
     }
 }
 
+/// The speed above which the surface counts as moving, m/s: `max_surface_speed`, and never within
+/// `motion_significance` standard deviations `v_std` (m/s) of what the sensor's noise makes of a still
+/// surface's velocity (on a slow cell on a soft surface the noise alone shows a millimetre a second).
+pub fn threshold(max_surface_speed: f64, p: &ObserverParams, v_std: f64) -> f64 {
+    max_surface_speed.max(p.motion_significance * v_std)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

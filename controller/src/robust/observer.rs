@@ -12,7 +12,7 @@
 mod params;
 pub use params::ObserverParams;
 
-use super::motion::Motion;
+use super::motion::{Motion, threshold};
 use crate::estimator::surface_moving;
 use crate::predictor::{JumpTest, SurfacePredictor};
 
@@ -145,7 +145,8 @@ impl SurfaceObserver {
     /// Run the motion holds for a step; `v_x` is the conditioned position's velocity. Returns whether
     /// the estimator is to take the surface for a moving one.
     pub fn hold(&mut self, v_x: f64, max_surface_speed: f64, in_contact: bool, dt: f64) -> bool {
-        let moving = surface_moving(self.vc, v_x, max_surface_speed) && self.passing <= 0.0;
+        let thr = threshold(max_surface_speed, &self.p, self.pred.velocity_std());
+        let moving = surface_moving(self.vc, v_x, thr) && self.passing <= 0.0;
         self.motion.hold(&self.p, moving && in_contact, dt) || moving
     }
 
@@ -226,7 +227,8 @@ impl SurfaceObserver {
         let [_, v, a] = self.pred.state();
         if !jumped {
             // A jump says nothing about motion either way.
-            self.motion.observe(&p, v, s.v_raw, max_surface_speed, dt);
+            let thr = threshold(max_surface_speed, &p, self.pred.velocity_std());
+            self.motion.observe(&p, v, s.v_raw, thr, dt);
         }
         let sv = p.motion_significance * self.pred.velocity_std();
         let sa = p.motion_significance * self.pred.acceleration_std();

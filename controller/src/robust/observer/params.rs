@@ -30,7 +30,8 @@ pub struct ObserverParams {
     /// How long the robot must have moved both with and against one run of surface velocity for
     /// that run to count as real motion, s.
     pub opposed_confirm: f64,
-    /// Significance, in standard deviations, at which the fed-forward motion gets half its weight.
+    /// Significance, in standard deviations, at which the fed-forward motion gets half its weight, and
+    /// below which a surface velocity is no motion whatever `max_surface_speed` says (noise).
     pub motion_significance: f64,
     /// Smallest dead-band on the fallback feed-forward velocity, m/s.
     pub deadband_floor: f64,
