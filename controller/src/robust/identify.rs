@@ -6,9 +6,10 @@
 //!   declared on noise has none). A contact re-acquired after a loss is not
 //!   fitted: the surface may be the one moving away. The fit has the velocity as a regressor of its own,
 //!   so surface damping `c_e·ẋ` is identified beside `k̂_c` instead of biasing it.
-//! * A jump under a steady contact on a still surface opens a re-fit over `refit_window`, judged at its
-//!   end by its own consistency (the stale `k̂_c` makes the still surface look moving meanwhile), through
-//!   the calm surface before the jump unless a surface step shows.
+//! * A jump under a steady contact on a still surface opens a re-fit over `refit_window`, judged by its
+//!   own consistency (the stale `k̂_c` makes the still surface look moving meanwhile), through the calm
+//!   surface before the jump unless a surface step shows; taken early once conclusive, and refined by
+//!   the rest of its window when taken on the loose rule (`refit.rs`).
 //! * Afterwards the recursive estimator ([`StiffnessEstimator`]) goes on from the fitted values, with
 //!   its excitation, dead-zone and motion gates, on the force less the identified damping.
 //! * In a steady contact the slow least-squares fit ([`SteadyEstimator`]) learns from the loop's answer
@@ -18,6 +19,7 @@ mod params;
 mod refit;
 mod steady;
 pub use params::IdentifyParams;
+use refit::Refit;
 
 use crate::estimator::{EstimatorParams, SteadyEstimator, StiffnessEstimator};
 use crate::onset::OnsetFit;
@@ -44,15 +46,8 @@ pub struct Identifier {
     /// still surface, nothing being fitted) when it left.
     off_band: f64,
     calm_at_start: bool,
-    /// Where the transient being re-fitted started, `(x, f)`: its fit is taken at the window's end
-    /// only, and only if the surface stayed still (a surface that starts moving makes a transient too).
-    /// With the surface before the jump, m: the pivot of a stiffness change.
-    refit_from: Option<(f64, f64, f64)>,
-    /// The variance of that surface, m².
-    pivot_var: f64,
-    /// How long the re-fit has run, and how long it must run before it may be taken early, s.
-    refit_age: f64,
-    refit_early: f64,
+    /// The re-fit of a transient under a steady contact, while it runs.
+    refit: Option<Refit>,
     /// The surface `x − f/k̂_c` of the calm steps since `k̂_c` last moved, averaged over `refit_window`, m.
     calm_surface: f64,
     /// Surface damping identified by the last fit, N·s/m.
@@ -70,10 +65,7 @@ impl Identifier {
             steady_var0: f64::INFINITY,
             off_band: 0.0,
             calm_at_start: false,
-            refit_from: None,
-            pivot_var: f64::INFINITY,
-            refit_age: 0.0,
-            refit_early: f64::INFINITY,
+            refit: None,
             calm_surface: f64::NAN,
             c_e: 0.0,
         }
@@ -92,7 +84,7 @@ impl Identifier {
         self.steady.stop();
         self.steady_var0 = f64::INFINITY;
         self.off_band = 0.0;
-        self.refit_from = None;
+        self.refit = None;
         self.calm_surface = f64::NAN;
         self.c_e = 0.0;
     }
@@ -146,17 +138,22 @@ impl Identifier {
     pub fn refit(&mut self, x: f64, f: f64, early: f64) {
         self.onset.clear();
         self.onset.begin(x, self.est.scale(), self.p.refit_window);
-        self.refit_from = Some((x, f, self.calm_surface));
-        self.pivot_var = self.pivot_variance(x);
-        self.refit_age = 0.0;
-        self.refit_early = early;
+        self.refit = Some(Refit {
+            x0: x,
+            f0: f,
+            pivot: self.calm_surface,
+            pivot_var: self.pivot_variance(x),
+            age: 0.0,
+            early,
+            refine: false,
+        });
         self.steady.stop();
         self.steady_var0 = f64::INFINITY;
     }
 
     /// Whether a transient is being fitted.
     pub fn fitting(&self) -> bool {
-        self.onset.active() || self.refit_from.is_some()
+        self.onset.active() || self.refit.is_some()
     }
 
     /// Contact is lost: the transient is over.
@@ -182,15 +179,17 @@ impl Identifier {
         noise_var: f64,
         noise_floor: f64,
     ) -> Identified {
-        if moving && self.refit_from.is_none() {
+        if moving && self.refit.is_none() {
             self.onset.stop();
         }
         let onset = self.onset.active();
         if onset && !first {
             self.onset.add(x, f, v, dt);
-            self.refit_age += dt;
+            if let Some(refit) = &mut self.refit {
+                refit.age += dt;
+            }
         }
-        let fit = match self.refit_from {
+        let fit = match self.refit {
             // A contact onset: the fit so far, every step, once its slope is significant (a contact
             // declared on noise has no force rising with the position to fit).
             None if onset => {
@@ -217,6 +216,8 @@ impl Identifier {
                     projected,
                 }
             }
+            // A fit taken early is refined by the rest of its window: the recursion waits for it.
+            None if self.refit.is_some_and(|r| r.refine) => Identified::default(),
             None => {
                 // The spring's force: the identified damping's share taken out.
                 let f_spring = f - self.c_e * v;

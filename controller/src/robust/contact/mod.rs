@@ -1,8 +1,9 @@
 //! The contact state machine: `Approach` (bounded speed, anchored to the measured position) → `Contact`
 //! when the conditioned force reaches `contact_force` (confirmed by the raw one), or one raw sample
 //! `strong_contact` times that → `Reacquire` when the raw force stays below `lift_force` for `lift_time`
-//! (fast for `reacquire_distance`, optionally bounded by what the cell can stop near where contact was
-//! lost, then at approach speed: [`search`]) → `Contact` … and from anywhere `Retract` when the
+//! (fast back to where contact was lost and for `reacquire_distance` beyond, optionally bounded by what
+//! the cell can stop near it, then at what stops within `2·f_r`: `search.rs`) → `Contact` … and from
+//! anywhere `Retract` when the
 //! conditioned force exceeds the force limit. A touch-down from the approach lost within a bounce,
 //! before its stiffness was identified, goes back to `Approach`.
 

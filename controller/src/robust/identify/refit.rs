@@ -15,6 +15,23 @@
 use super::Identifier;
 use crate::onset::{LineFit, OnsetFit};
 
+/// A re-fit while it runs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Refit {
+    /// Where the transient started, `(x, f)` (m, N), and the surface before the jump (m): the pivot
+    /// of a stiffness change, and its variance (m²).
+    pub x0: f64,
+    pub f0: f64,
+    pub pivot: f64,
+    pub pivot_var: f64,
+    /// How long the re-fit has run, and how long it must run before it may be taken early, s.
+    pub age: f64,
+    pub early: f64,
+    /// A fit was taken early on the loose rule (see [`Identifier::judge_refit`]): the window runs on
+    /// and its end refines it.
+    pub refine: bool,
+}
+
 /// The fit of the window in `onset`: through the surface `pivot` (m, known to variance `pivot_var`,
 /// m²) unless that costs more than `gate` standard deviations of residual over the free line's or the
 /// surface's uncertainty makes it less precise than the free line; none when the free line's slope is
@@ -69,36 +86,42 @@ impl Identifier {
     /// transient's variance (a surface that started to move leaves the force unexplained by the
     /// position). The re-fit ends when taken or at the window's end.
     pub(super) fn judge_refit(&mut self, noise_var: f64, noise_floor: f64) -> Option<LineFit> {
-        let (x0, f0, pivot) = self.refit_from?;
+        let mut refit = self.refit?;
         let open = self.onset.active();
-        if open && self.refit_age < self.refit_early {
+        if open && (refit.age < refit.early || refit.refine) {
             return None;
         }
         let (scale, rel) = (self.est.scale(), self.p.steady_confidence);
-        // Early, only a fit as precise as a learnt one (`steady_done`): what the rest of the window
-        // would add is then not worth the wait.
+        // Early, a fit as precise as a learnt one (`steady_done`): what the rest of the window would
+        // add is then not worth the wait. Or, on the loose rule, one within `steady_confidence` that
+        // puts the stale `k̂_c` more than `pivot_gate` of its deviations off: the stale gain rings
+        // meanwhile (a doubling at a small set-point) and the fit is the better estimate by far; the
+        // window then runs on, the recursion waiting, and its end refines the fit.
         let precision = if open { self.p.steady_done } else { rel };
+        let (gate, stale) = (self.p.pivot_gate, self.est.kc() * scale);
         let r = noise_var.max(noise_floor * noise_floor);
-        let fit = choose(
-            &self.onset,
-            pivot,
-            self.pivot_var,
-            noise_var,
-            r,
-            self.p.pivot_gate,
-        )
-        .filter(|fit| {
+        let (pivot, pivot_var) = (refit.pivot, refit.pivot_var);
+        let mut loose = false;
+        let fit = choose(&self.onset, pivot, pivot_var, noise_var, r, gate).filter(|fit| {
+            let sd = fit.var_b.sqrt();
+            let precise = sd <= precision * fit.b;
+            loose = open && !precise;
+            let conclusive =
+                precise || (loose && sd <= rel * fit.b && (fit.b - stale).abs() > gate * sd);
             fit.b > 0.0
-                && fit.var_b.sqrt() <= precision * fit.b
-                && (fit.b / scale - self.est.kc()).abs() > rel * self.est.kc()
+                && conclusive
+                && (refit.refine || (fit.b / scale - self.est.kc()).abs() > rel * self.est.kc())
                 && fit.residual_var - r <= rel * fit.force_var
         });
-        if fit.is_some() || !open {
-            self.refit_from = None;
+        if fit.is_some() && loose {
+            refit.refine = true;
+            self.refit = Some(refit);
+        } else if fit.is_some() || !open {
+            self.refit = None;
             self.onset.stop();
         }
         if fit.is_some() {
-            self.est.begin_contact(x0, f0);
+            self.est.begin_contact(refit.x0, refit.f0);
         }
         fit
     }
