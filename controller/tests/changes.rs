@@ -125,3 +125,27 @@ fn a_fit_taken_early_is_refined_by_its_window() {
     assert_eq!(m.contact_losses, 0.0);
     assert!(m.kc_rel_error <= 0.1, "k̂ off by {}", m.kc_rel_error);
 }
+
+/// A doubling on a damped surface at a large set-point on P2 (f_r 20.3 N, 49.6 → 99.3 kN/m at 2.28 s,
+/// 112 N·s/m, σ 0.16 N, seed 533; found with 200 range cases): the recursion, fed the transient
+/// while the re-fit ran, moved `k̂_c` from 54 to 94 kN/m in 30 ms; the observed surface `x − f/k̂_c`
+/// moved 0.37 mm with it, the feed-forward took that for motion and pressed to 73 N: fault 2. The
+/// recursion waits while a re-fit runs.
+#[test]
+fn the_recursion_waits_while_a_re_fit_runs() {
+    let at = 2.281;
+    let s = cell(
+        at + 2.0,
+        49_637.0,
+        112.16,
+        Some((at, 2.0)),
+        None,
+        0.1565,
+        533,
+    );
+    let r = run(&s, &CELLS[1], &tuning(20.283)).expect("no fault");
+    let m = r.metrics(at, f64::INFINITY);
+    assert_eq!(m.contact_losses, 0.0);
+    assert!(m.peak_force <= 2.5 * 20.283, "peak {} N", m.peak_force);
+    assert!(m.kc_rel_error <= 0.1, "k̂ off by {}", m.kc_rel_error);
+}

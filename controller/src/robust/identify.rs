@@ -216,8 +216,9 @@ impl Identifier {
                     projected,
                 }
             }
-            // A fit taken early is refined by the rest of its window: the recursion waits for it.
-            None if self.refit.is_some_and(|r| r.refine) => Identified::default(),
+            // While a re-fit runs the recursion waits for it: fed the transient with a stale `k̂_c`
+            // it jumps, and the observed surface `x − f/k̂_c` jumps with it (taken for motion).
+            None if self.refit.is_some() => Identified::default(),
             None => {
                 // The spring's force: the identified damping's share taken out.
                 let f_spring = f - self.c_e * v;
