@@ -145,6 +145,8 @@ pub struct StiffnessEstimator {
 const INTERCEPT_UNCERTAINTY: f64 = 100.0;
 /// Multiple of `excitation` above which a force transient is informative on a moving surface too.
 const STRONG_EXCITATION: f64 = 10.0;
+/// Standard deviations of the force's noise the excitation must stand out by, whatever `excitation`.
+const EXCITATION_SIGNIFICANCE: f64 = 4.0;
 /// Largest relative rate of change of `k̂_c`, 1/s.
 const MAX_RATE: f64 = 30.0;
 /// Ceiling of any diagonal covariance entry.
@@ -285,7 +287,15 @@ impl StiffnessEstimator {
     ///
     /// `f_gate` is the force the excitation gate looks at — the robust law passes its conditioned force,
     /// so that sensor noise alone never opens the gate — while the regression itself uses the raw `f`.
-    pub fn update(&mut self, x: f64, f: f64, f_gate: f64, dt: f64, moving: bool) -> Update {
+    pub fn update(
+        &mut self,
+        x: f64,
+        f: f64,
+        f_gate: f64,
+        noise_sd: f64,
+        dt: f64,
+        moving: bool,
+    ) -> Update {
         self.t += dt;
         if self.t > self.p.memory {
             // Re-anchor the time origin so the regressor stays of order one.
@@ -301,8 +311,11 @@ impl StiffnessEstimator {
         // following a moving surface under a steady force.
         // The position criterion is taken at the stiffest expected surface: with k̂_c still too low it
         // would otherwise hide exactly the transients that correct it.
-        let excited = self.p.kc_max * (x - self.x_slow).abs() >= self.p.excitation
-            && (f_gate - self.f_slow).abs() >= self.p.excitation
+        // The thresholds stand out of the force's noise (`noise_sd`, N): the loop's answer to noise
+        // moves position and force together too.
+        let excitation = self.p.excitation.max(EXCITATION_SIGNIFICANCE * noise_sd);
+        let excited = self.p.kc_max * (x - self.x_slow).abs() >= excitation
+            && (f_gate - self.f_slow).abs() >= excitation
             // …and the same way, as a positive stiffness against a still surface makes them: a force
             // falling while the position advances is a surface moving away, not information on k_c.
             && (f_gate - self.f_slow) * (x - self.x_slow) > 0.0;
@@ -310,7 +323,7 @@ impl StiffnessEstimator {
         let err = f - self.predict(x);
         // A strong force transient (an impact, a stiffness change) is informative even when the observer,
         // misled by a wrong k̂_c itself, reports a moving surface.
-        let strong = (f_gate - self.f_slow).abs() >= STRONG_EXCITATION * self.p.excitation;
+        let strong = (f_gate - self.f_slow).abs() >= STRONG_EXCITATION * excitation;
         let still = !moving || strong;
         if !excited || !still || err.abs() <= self.p.dead_zone {
             return up;
@@ -535,7 +548,7 @@ mod tests {
         for i in 0..300 {
             let t = i as f64 * 1e-3;
             let x = 0.01001 + 0.00006 * (1.0 - (-t / 0.02).exp()) + 1e-5 * (t * 30.0).sin();
-            e.update(x, k * (x - xc), k * (x - xc), 1e-3, false);
+            e.update(x, k * (x - xc), k * (x - xc), 0.0, 1e-3, false);
         }
         assert!((e.kc() - k).abs() / k < 0.01, "k̂ {}", e.kc());
         assert!((e.xc() - xc).abs() < 1e-6, "x̂ {}", e.xc());
@@ -562,10 +575,29 @@ mod tests {
         for i in 0..1000 {
             // Drifting force at a still position: bias drift, no information about k_c.
             let f = 5.0 + i as f64 * 1e-3;
-            let up = e.update(0.0101, f, f, 1e-3, false);
+            let up = e.update(0.0101, f, f, 0.0, 1e-3, false);
             assert!(!up.adapted);
         }
         assert_eq!(e.kc(), 50_000.0);
+    }
+
+    #[test]
+    fn an_excursion_within_the_noise_is_no_excitation() {
+        // Position and force move together by 0.2 N-equivalent steps over a second: excitation for
+        // a clean sensor (`excitation` 0.1 N), none within four deviations of 0.5 N of noise.
+        let run = |noise_sd: f64| {
+            let mut e = StiffnessEstimator::new(params(), 1e-4);
+            e.begin_contact(0.0101, 5.0);
+            let mut adapted = false;
+            for i in 0..1000 {
+                let x = 0.0101 + 2e-6 * (i as f64 * 0.05).sin();
+                let f = 5.0 + 80_000.0 * (x - 0.0101);
+                adapted |= e.update(x, f, f, noise_sd, 1e-3, false).adapted;
+            }
+            adapted
+        };
+        assert!(run(0.0));
+        assert!(!run(0.5));
     }
 
     #[test]
@@ -576,7 +608,7 @@ mod tests {
         for i in 0..200 {
             let x = 1e-4 * (i as f64 * 0.1).sin();
             // A "stiffness" of 5 MN/m, far above kc_max.
-            let up = e.update(x, 5.0e6 * x, 5.0e6 * x, 1e-3, false);
+            let up = e.update(x, 5.0e6 * x, 5.0e6 * x, 0.0, 1e-3, false);
             projected |= up.projected;
             assert!(e.kc() <= 500_000.0 + 1e-6);
         }

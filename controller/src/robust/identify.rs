@@ -222,7 +222,9 @@ impl Identifier {
             None => {
                 // The spring's force: the identified damping's share taken out.
                 let f_spring = f - self.c_e * v;
-                let up = self.est.update(x, f_spring, ff, dt, moving);
+                let up = self
+                    .est
+                    .update(x, f_spring, ff, noise_var.sqrt(), dt, moving);
                 let r = noise_var.max(noise_floor * noise_floor);
                 let calm = !(moving || up.adapted || disturbed);
                 if up.adapted {
