@@ -9,7 +9,7 @@
 //! * A jump under a steady contact on a still surface opens a re-fit over `refit_window`, judged by its
 //!   own consistency (the stale `k̂_c` makes the still surface look moving meanwhile), through the calm
 //!   surface before the jump unless a surface step shows; taken early once conclusive, and refined by
-//!   the rest of its window when taken on the loose rule (`refit.rs`).
+//!   the rest of its window (`refit.rs`).
 //! * Afterwards the recursive estimator ([`StiffnessEstimator`]) goes on from the fitted values, with
 //!   its excitation, dead-zone and motion gates, on the force less the identified damping.
 //! * In a steady contact the slow least-squares fit ([`SteadyEstimator`]) learns from the loop's answer

@@ -27,8 +27,8 @@ pub(super) struct Refit {
     /// How long the re-fit has run, and how long it must run before it may be taken early, s.
     pub age: f64,
     pub early: f64,
-    /// A fit was taken early on the loose rule (see [`Identifier::judge_refit`]): the window runs on
-    /// and its end refines it.
+    /// A fit was taken early (see [`Identifier::judge_refit`]): the window runs on and its end
+    /// refines it.
     pub refine: bool,
 }
 
@@ -84,7 +84,7 @@ impl Identifier {
     /// The re-fit's fit if it is conclusive now: significant, different from `k̂_c`, and one still
     /// spring — what the plane leaves beyond the noise is at most `steady_confidence` of the
     /// transient's variance (a surface that started to move leaves the force unexplained by the
-    /// position). The re-fit ends when taken or at the window's end.
+    /// position). The re-fit ends at the window's end.
     pub(super) fn judge_refit(&mut self, noise_var: f64, noise_floor: f64) -> Option<LineFit> {
         let mut refit = self.refit?;
         let open = self.onset.active();
@@ -92,28 +92,25 @@ impl Identifier {
             return None;
         }
         let (scale, rel) = (self.est.scale(), self.p.steady_confidence);
-        // Early, a fit as precise as a learnt one (`steady_done`): what the rest of the window would
-        // add is then not worth the wait. Or, on the loose rule, one within `steady_confidence` that
-        // puts the stale `k̂_c` more than `pivot_gate` of its deviations off: the stale gain rings
-        // meanwhile (a doubling at a small set-point) and the fit is the better estimate by far; the
-        // window then runs on, the recursion waiting, and its end refines the fit.
+        // Early, a fit as precise as a learnt one (`steady_done`), or one within `steady_confidence`
+        // that puts the stale `k̂_c` more than `pivot_gate` of its deviations off: the stale gain
+        // rings meanwhile (a doubling at a small set-point), and the fit is the better estimate by
+        // far. Taken early, the window runs on, the recursion waiting (fed the transient's tail it
+        // wanders from a fit ten times more precise), and its end refines the fit.
         let precision = if open { self.p.steady_done } else { rel };
         let (gate, stale) = (self.p.pivot_gate, self.est.kc() * scale);
         let r = noise_var.max(noise_floor * noise_floor);
         let (pivot, pivot_var) = (refit.pivot, refit.pivot_var);
-        let mut loose = false;
         let fit = choose(&self.onset, pivot, pivot_var, noise_var, r, gate).filter(|fit| {
             let sd = fit.var_b.sqrt();
-            let precise = sd <= precision * fit.b;
-            loose = open && !precise;
-            let conclusive =
-                precise || (loose && sd <= rel * fit.b && (fit.b - stale).abs() > gate * sd);
+            let conclusive = sd <= precision * fit.b
+                || (open && sd <= rel * fit.b && (fit.b - stale).abs() > gate * sd);
             fit.b > 0.0
                 && conclusive
                 && (refit.refine || (fit.b / scale - self.est.kc()).abs() > rel * self.est.kc())
                 && fit.residual_var - r <= rel * fit.force_var
         });
-        if fit.is_some() && loose {
+        if fit.is_some() && open {
             refit.refine = true;
             self.refit = Some(refit);
         } else if fit.is_some() || !open {
