@@ -16,27 +16,34 @@ use sim::InnerLoopModel;
 
 // Known limits, measured, not hidden:
 // * `k̂_c` within 10 % 2 s after a change is asserted where the information the change brings allows
-//   it with a margin of four standard deviations ([`common::change_bound`]): noise-free always; under
+//   it with a margin of three standard deviations ([`common::change_bound`]): noise-free always; under
 //   noise not at small set-points on slow cells (f_r 2 N, 20 → 10 kN/m, σ 0.43 N, 12 ms: the bound is
-//   22 %, the law was 17 % off). Within a margin of three deviations a doubling with noise on the 12 ms
-//   cell misses: f_r 6.9 N, 245 → 490 kN/m, σ 0.43 N, 11.3 % off against a bound of 3.2 % (the
-//   re-fit through the surface before the change inherits that surface's error);
+//   22 %). (The margin was four: a noisy doubling on the 12 ms cell — f_r 6.9 N, 245 → 490 kN/m,
+//   σ 0.43 N — ended 11.3 % off against a bound of 3.2 %; the re-fit is refined by its whole window
+//   now, and all 200 cases pass at three);
 // * the touch-down under noise still fails at its corners, where the noise is a large part of a small
 //   set-point or the cycle is slow: `noise_corners` (ignored; `--ignored` runs it) counts the seeds
-//   1–199 that fail the touch-down criteria — f_r 2 N on 10 kN/m, P1: 21 at σ 0.82 N, 46 at 1 N (the
+//   1–199 that fail the touch-down criteria — f_r 2 N on 10 kN/m, P1: 22 at σ 0.82 N, 48 at 1 N (the
 //   impact within 0.7 of its bound; the mean error at the end, e.g. 0.13–0.25 N against 0.12 N); on
-//   the 12 ms cell at σ 1 N: f_r 5 N on 50 kN/m 90, f_r 2 N on 10 kN/m 181 (impacts up to 4.7 times
-//   the bound, contact losses, mean errors). Before the noise was measured from the first samples and
+//   the 12 ms cell at σ 1 N: f_r 5 N on 50 kN/m 68, f_r 2 N on 10 kN/m 174 (impacts up to 4.7 times
+//   the bound, contact losses, mean errors; last session 21, 46, 90 and 181). Before the noise was measured from the first samples and
 //   a single raw sample had to stand out of the raw noise, they were 94, 158, 183 and 198, and f_r
-//   20 N on 500 kN/m, P2, σ 1 N failed 106 (now 0). The 24 cases drawn here pass, and 64;
-// * with 200 cases (`FORCECELL_RANGE_CASES=200`) two fail: `surface_steps` on the 12 ms cell at f_r
-//   15.3 N, 74.7 kN/m, a 0.48 mm retreat: the fast search's re-contact trips the force limit (61.1 N;
-//   the known limit of `surface_step_corners`), and `stiffness_changes` at f_r 2 N, 49.6 kN/m doubling
-//   at 2 s on P2, σ 0.16 N, 112 N·s/m, seed 666: 4 contact losses (the loop's answer to the doubling
-//   lifts off, the fast search re-contacts at 51 N, the answer to that retracts 2 mm; the law's
-//   re-contacts press to 50 N twice more before it holds). It used to end on fault 5: the search
-//   behind the lost contact was at approach speed. (The 2.62 mm retreat at f_r 2 N on 10 kN/m that
-//   ended on fault 5 is fixed: `surface_step_corners`.)
+//   20 N on 500 kN/m, P2, σ 1 N failed 106 (now 0). The 200 cases drawn here pass;
+// * with 1000 cases (`FORCECELL_RANGE_CASES=1000`; `FORCECELL_RANGE_SHRINK=0` shows them as drawn):
+//   `stiffness_changes` loses contact once in a damped doubling on the 12 ms cell (f_r 7.2 N,
+//   41.4 kN/m, σ 0.19 N, 116 N·s/m, seed 479): on the slow cell the stale gain after a doubling
+//   (`kappa`·2) rings, and a touch-down `k̂_c` a few deviations low makes it ring into a lift-off
+//   (shrunk: f_r 2 N on 20 kN/m, σ 0.19 N, `k̂_c` 26 % low from the touch-down); `touch_down_and_hold`
+//   misses its mean error under σ 0.61 N at f_r 2.2 N on the 12 ms cell (0.167 N against 0.106 N, the
+//   corners below). `surface_steps` with 200 cases ends on fault 2 on the 12 ms cell (f_r 15.3 N,
+//   74.7 kN/m, a 0.48 mm retreat, 61.1 N): the fast search's re-contact at the force limit, the known
+//   limit of `surface_step_corners`. Found with 200 cases and fixed, each a named test (in
+//   `changes.rs`, the retreat in `surface_step_corners`): a 2.62 mm retreat on 10 kN/m that the search did not reach (fault 5); damped
+//   doublings that rang into lost contacts or fault 5 (f_r 2 N on 49.6 kN/m, P2), that the recursion
+//   pressed to 73 N (f_r 20.3 N, P2) or left 37 % off (f_r 10.2 N, 12 ms); a hold whose recursion
+//   took noise for excitation (f_r 46.8 N, 12 ms: 142 → 102 kN/m, then a lost contact); a halving
+//   whose precise re-fit the recursion undid (f_r 42.8 N, P2: 13 % off); a noisy hold on the 12 ms
+//   cell that looked moving, so no re-fit opened (32 % off).
 // * (fixed, `a_noise_spike_in_free_air_is_no_touch_down`: a noise spike taken for contact short of the
 //   surface — σ 0.9 N, f_r 20 N, 500 kN/m, P2, seed 7 — ended the run on fault 2 at 65.9 N; the
 //   touch-down now peaks at 23.9 N, 21.0 N on 100 kN/m. The touch-down goes on at approach speed until
@@ -63,8 +70,10 @@ fn env_or(name: &str, default: u32) -> u32 {
         .unwrap_or(default)
 }
 
+// 200 seeded cases each for the touch-down and the stiffness changes (a second of CPU); what more
+// cases find is listed above.
 proptest! {
-    #![proptest_config(config(24))]
+    #![proptest_config(config(200))]
 
     /// B1 carried over: first contact from an approach at 2 mm/s, whatever the set-point, stiffness,
     /// cycle and noise: the impact stays within 2·f_r above the physical floor, the contact holds, the
@@ -105,10 +114,16 @@ proptest! {
         if noise == 0.0 && c_e == 0.0 {
             prop_assert!(after.settle_time <= 0.5, "back in ±2 % after {} s", after.settle_time);
         }
-        if 4.0 * change_bound(f_r, factor, noise, &plant) <= 0.1 {
+        if 3.0 * change_bound(f_r, factor, noise, &plant) <= 0.1 {
             prop_assert!(after.kc_rel_error <= 0.1, "k̂ off by {}", after.kc_rel_error);
         }
     }
+}
+
+// 24 seeded cases for the surface steps: more find the fast search's known re-contact at the force
+// limit (see `surface_step_corners`), which the corners assert exactly.
+proptest! {
+    #![proptest_config(config(24))]
 
     /// B3 carried over: the surface steps up to ±3 mm in a steady contact (see [`surface_step`]).
     #[test]
@@ -284,11 +299,11 @@ fn a_noise_spike_in_free_air_is_no_touch_down() {
 fn noise_corners() {
     // (f_r, k_c, cell, σ, failing seeds measured)
     let corners = [
-        (2.0, 10e3, 0, 0.82, 21),
-        (2.0, 10e3, 0, 1.0, 46),
+        (2.0, 10e3, 0, 0.82, 22),
+        (2.0, 10e3, 0, 1.0, 48),
         (20.0, 500e3, 1, 1.0, 0),
-        (5.0, 50e3, 2, 1.0, 90),
-        (2.0, 10e3, 2, 1.0, 181),
+        (5.0, 50e3, 2, 1.0, 68),
+        (2.0, 10e3, 2, 1.0, 174),
     ];
     for (f_r, k_c, cell_i, noise, measured) in corners {
         let failing = (1..200u64)
