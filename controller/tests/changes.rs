@@ -4,6 +4,7 @@
 mod common;
 
 use common::{CELLS, cell, mean_error, tuning};
+use controller::LawConfig;
 use scenario::metrics::Metrics;
 use scenario::run::run;
 
@@ -181,4 +182,48 @@ fn a_precise_early_fit_is_not_undone_by_the_transients_tail() {
     let m = r.metrics(2.0, f64::INFINITY);
     assert_eq!(m.contact_losses, 0.0);
     assert!(m.kc_rel_error <= 0.05, "k̂ off by {}", m.kc_rel_error);
+}
+
+/// A doubling on the 12 ms cell at a small set-point after a touch-down that left `k̂_c` 26 % low
+/// (f_r 2 N, 20 → 40 kN/m at 2 s, σ 0.19 N, seed 232; found with 1000 range cases): under the stale
+/// gain (2.7 times too high) the loop rang off the surface. While the rise is unresolved the
+/// correction takes the stiffer hypothesis (`response.jump_caution`) and feeds no surface motion
+/// forward; with the caution off the same run loses contact.
+#[test]
+fn an_unresolved_rise_is_answered_as_a_stiffer_surface() {
+    let s = cell(4.0, 20e3, 0.0, Some((2.0, 2.0)), None, 0.19, 232);
+    let losses = |caution: f64| {
+        let mut t = tuning(2.0);
+        let LawConfig::Robust(p) = &mut t.law else {
+            panic!("robust")
+        };
+        p.response.jump_caution = caution;
+        let r = run(&s, &CELLS[2], &t).expect("the run ends well");
+        r.metrics(2.0, f64::INFINITY).contact_losses
+    };
+    assert!(losses(1.0) > 0.0, "the case no longer needs the caution");
+    assert_eq!(losses(2.0), 0.0);
+}
+
+/// The same caution on a damped doubling (f_r 7.2 N, 41.4 kN/m at 2.59 s, 116 N·s/m, σ 0.19 N, seed
+/// 479; 1000 range cases), and noise-free at a large set-point (f_r 28.9 N, 87.6 kN/m at 2.3 s), where
+/// a first version that still fed the observer's motion forward took the slower retreat for surface
+/// motion, threw the command 0.5 mm back and lost contact twice.
+#[test]
+fn the_cautious_answer_holds_the_contact_on_the_slow_cell() {
+    let cases = [
+        (7.18, 41_414.0, 116.0, 2.589, 0.19, 479),
+        (28.876, 87_556.0, 0.0, 2.302, 0.0, 1),
+    ];
+    for (f_r, k_c, c_e, at, noise, seed) in cases {
+        let s = cell(at + 2.0, k_c, c_e, Some((at, 2.0)), None, noise, seed);
+        let r = run(&s, &CELLS[2], &tuning(f_r)).expect("the run ends well");
+        let m = r.metrics(at, f64::INFINITY);
+        assert_eq!(m.contact_losses, 0.0, "f_r {f_r} N");
+        assert!(
+            m.kc_rel_error <= 0.1,
+            "f_r {f_r} N: k̂ off by {}",
+            m.kc_rel_error
+        );
+    }
 }

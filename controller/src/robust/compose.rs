@@ -52,9 +52,22 @@ impl RobustLaw {
         };
         self.observer
             .track(&view, self.p.response.surface_bandwidth, dt);
+        // A force that rose under a steady contact by what a stiffness up to `jump_caution` times
+        // higher explains (within the noise) is a surface that came nearer or a stiffer one, and
+        // until the re-fit tells, the correction takes the stiffer: the other retreats too far (a
+        // doubling under the stale gain rings into a lost contact). A larger rise is a surface step.
+        // The surface is the still one the re-fit opened on meanwhile: what the stale `k̂_c` makes of
+        // the slower retreat is no surface motion to feed forward.
+        let (caution, scale) = (self.p.response.jump_caution, view.force_scale);
+        let sig = contact::SIGNIFICANCE * view.noise_var.sqrt();
+        let rise = match self.identify.unresolved_jump() {
+            Some(f0) if f0 > scale && f0 - sig <= caution * scale => (f0 / scale).min(caution),
+            _ => 1.0,
+        };
+        let (k_gain, still) = (k * rise, if rise > 1.0 { 0.0 } else { 1.0 });
         let (proportional, integral) =
             self.response
-                .correction(s.ff, k, view.noise_var, view.force_scale, dt);
+                .correction(s.ff, k_gain, view.noise_var, view.force_scale, dt);
         let cell = self.p.cell;
         let lead = cell.lag + cell.delay + self.signals.delay(cycle);
         let ff = self.observer.feedforward(
@@ -71,8 +84,7 @@ impl RobustLaw {
         // chased (the force lags the command by the inner loop's lag and delay and the conditioning).
         let ramp = self.response.rate() / k * (cell.lag + cell.delay);
         s.xf + proportional
-            + ff.weight * ff.predicted
-            + (1.0 - ff.weight) * ff.fallback
+            + still * (ff.weight * ff.predicted + (1.0 - ff.weight) * ff.fallback)
             + integral
             + ramp
     }

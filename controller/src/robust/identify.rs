@@ -89,18 +89,6 @@ impl Identifier {
         self.c_e = 0.0;
     }
 
-    /// Count whether the force is out of its band this step (`calm`: the contact is steady, on a
-    /// still surface); true when it has just been out for `persist` s after leaving it in a calm
-    /// contact (noise leaves the band for a sample, a changed environment for a transient).
-    pub fn excursion(&mut self, off: bool, calm: bool, persist: f64, dt: f64) -> bool {
-        let before = self.off_band;
-        if off && before == 0.0 {
-            self.calm_at_start = calm;
-        }
-        self.off_band = if off { self.off_band + dt } else { 0.0 };
-        self.calm_at_start && before < persist && self.off_band >= persist && !self.fitting()
-    }
-
     /// `k̂_c`, N/m.
     pub fn kc(&self) -> f64 {
         self.est.kc()

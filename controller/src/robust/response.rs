@@ -38,6 +38,15 @@ pub struct ResponseParams {
     /// is a ramp's lag; a transient's error is the proportional path's business.
     #[serde(default = "default_integration_band")]
     pub integration_band: f64,
+    /// While a rise of the force under a steady contact that a stiffness up to this factor higher
+    /// explains is not resolved by the re-fit (a surface step or a stiffer surface), the correction
+    /// takes the stiffness as risen with the force; a larger rise is a surface step (advanced; 1: off).
+    #[serde(default = "default_jump_caution")]
+    pub jump_caution: f64,
+}
+
+fn default_jump_caution() -> f64 {
+    2.0
 }
 
 fn default_integration_band() -> f64 {
@@ -59,7 +68,14 @@ impl ResponseParams {
         non_negative("response.feedforward_deadband", self.feedforward_deadband)?;
         positive("response.set_point_rate", self.set_point_rate)?;
         non_negative("response.noise_gate", self.noise_gate)?;
-        positive("response.integration_band", self.integration_band)
+        positive("response.integration_band", self.integration_band)?;
+        if self.jump_caution.is_nan() || self.jump_caution < 1.0 {
+            return Err(format!(
+                "response.jump_caution {} must be at least 1",
+                self.jump_caution
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -161,6 +177,7 @@ mod tests {
         set_point_rate: 50.0,
         noise_gate: 1.0,
         integration_band: 0.3,
+        jump_caution: 2.0,
     };
 
     #[test]
@@ -187,5 +204,17 @@ mod tests {
     fn validation_names_the_field() {
         let p = ResponseParams { kappa: 1.5, ..P };
         assert!(p.validate().unwrap_err().contains("kappa"));
+        for jump_caution in [0.5, f64::NAN] {
+            let p = ResponseParams { jump_caution, ..P };
+            assert!(p.validate().unwrap_err().contains("jump_caution"));
+        }
+        assert!(
+            ResponseParams {
+                jump_caution: 1.0,
+                ..P
+            }
+            .validate()
+            .is_ok()
+        );
     }
 }

@@ -125,6 +125,23 @@ impl Identifier {
 }
 
 impl Identifier {
+    /// Count whether the force is out of its band this step (`calm`: the contact is steady, on a
+    /// still surface); true when it has just been out for `persist` s after leaving it in a calm
+    /// contact (noise leaves the band for a sample, a changed environment for a transient).
+    pub fn excursion(&mut self, off: bool, calm: bool, persist: f64, dt: f64) -> bool {
+        let before = self.off_band;
+        if off && before == 0.0 {
+            self.calm_at_start = calm;
+        }
+        self.off_band = if off { self.off_band + dt } else { 0.0 };
+        self.calm_at_start && before < persist && self.off_band >= persist && !self.fitting()
+    }
+
+    /// The raw force at a jump whose re-fit has not concluded yet, N.
+    pub fn unresolved_jump(&self) -> Option<f64> {
+        self.refit.filter(|r| !r.refine).map(|r| r.f0)
+    }
+
     /// How well the surface before a jump at `x` (m) is known, m²: its distance from `x` is `f/k̂_c`,
     /// as uncertain as `k̂_c` (its last fit's variance, or the steady-contact estimator's once used).
     pub(super) fn pivot_variance(&self, x: f64) -> f64 {

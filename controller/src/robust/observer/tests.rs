@@ -56,6 +56,7 @@ fn response() -> crate::robust::ResponseParams {
         set_point_rate: 50.0,
         noise_gate: 1.0,
         integration_band: 0.05,
+        jump_caution: 2.0,
     }
 }
 
