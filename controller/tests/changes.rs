@@ -17,6 +17,27 @@ fn change(c_e: f64, at: f64, factor: f64, cell_i: usize) -> (Metrics, f64) {
     (r.metrics(at, f64::INFINITY), mean_error(&r.rows, at + 1.5))
 }
 
+/// A change found by the range tests, `(f_r, k_c, c_e, at, factor, noise, seed, cell)`: stiffness
+/// ×`factor` at `at` s in an `f_r` (N) hold on `k_c` (N/m) with damping `c_e` (N·s/m), sensor noise
+/// `noise` (N, seeded `seed`), on `CELLS[cell]`.
+type Found = (f64, f64, f64, f64, f64, f64, u64, usize);
+
+/// The run of `case`, which must end well, and its metrics from the change on, asserted to hold the
+/// contact and end with `k̂_c` within `tol` of the new stiffness.
+fn held(case: Found, tol: f64) -> (scenario::run::Run, Metrics) {
+    let (f_r, k_c, c_e, at, factor, noise, seed, cell_i) = case;
+    let s = cell(at + 2.0, k_c, c_e, Some((at, factor)), None, noise, seed);
+    let r = run(&s, &CELLS[cell_i], &tuning(f_r)).expect("the run ends well");
+    let m = r.metrics(at, f64::INFINITY);
+    assert_eq!(m.contact_losses, 0.0, "f_r {f_r} N: contact lost");
+    assert!(
+        m.kc_rel_error <= tol,
+        "f_r {f_r} N: k̂ off by {}",
+        m.kc_rel_error
+    );
+    (r, m)
+}
+
 /// A doubling (20 → 40 kN/m) on P2 at any time of the hold: with the stale `k̂_c` the loop rings, so
 /// the re-fit is taken as soon as it is conclusive instead of at its window's end (was: 1.4 s at 2 s,
 /// 1.3 s at 2.3 s; 3 and 2 contact losses at 2.7 s and 3 s).
@@ -90,12 +111,7 @@ fn an_undetermined_damping_is_not_taken() {
 /// `motion_significance` deviations of the noise's is no motion now.
 #[test]
 fn a_noisy_hold_on_a_slow_cell_is_still_and_a_change_is_refitted() {
-    let at = 2.694;
-    let s = cell(at + 2.0, 20e3, 0.0, Some((at, 2.0)), None, 0.432, 461);
-    let r = run(&s, &CELLS[2], &tuning(6.922)).expect("the run ends well");
-    let m = r.metrics(at, f64::INFINITY);
-    assert!(m.kc_rel_error <= 0.1, "k̂ off by {}", m.kc_rel_error);
-    assert_eq!(m.contact_losses, 0.0);
+    held((6.922, 20e3, 0.0, 2.694, 2.0, 0.432, 461, 2), 0.1);
 }
 
 /// A doubling on a damped surface under noise at a small set-point on P2 (f_r 2 N, 49.6 → 99.3 kN/m
@@ -106,11 +122,7 @@ fn a_noisy_hold_on_a_slow_cell_is_still_and_a_change_is_refitted() {
 /// `pivot_gate` of its deviations is taken early now.
 #[test]
 fn a_damped_doubling_under_noise_is_refitted_before_the_loop_rings() {
-    let s = cell(4.0, 49.6e3, 112.0, Some((2.0, 2.0)), None, 0.16, 666);
-    let r = run(&s, &CELLS[1], &tuning(2.0)).expect("the run ends well");
-    let m = r.metrics(2.0, f64::INFINITY);
-    assert_eq!(m.contact_losses, 0.0);
-    assert!(m.kc_rel_error <= 0.1, "k̂ off by {}", m.kc_rel_error);
+    let (_, m) = held((2.0, 49.6e3, 112.0, 2.0, 2.0, 0.16, 666, 1), 0.1);
     assert!(m.peak_force <= 2.0 * 2.0 * 2.0, "peak {} N", m.peak_force);
 }
 
@@ -120,11 +132,7 @@ fn a_damped_doubling_under_noise_is_refitted_before_the_loop_rings() {
 /// The window now runs on after a fit taken early, the recursion waiting, and its end refines it.
 #[test]
 fn a_fit_taken_early_is_refined_by_its_window() {
-    let s = cell(4.0, 92_615.0, 166.0, Some((2.0, 2.0)), None, 0.439, 62);
-    let r = run(&s, &CELLS[2], &tuning(10.16)).expect("the run ends well");
-    let m = r.metrics(2.0, f64::INFINITY);
-    assert_eq!(m.contact_losses, 0.0);
-    assert!(m.kc_rel_error <= 0.1, "k̂ off by {}", m.kc_rel_error);
+    held((10.16, 92_615.0, 166.0, 2.0, 2.0, 0.439, 62, 2), 0.1);
 }
 
 /// A doubling on a damped surface at a large set-point on P2 (f_r 20.3 N, 49.6 → 99.3 kN/m at 2.28 s,
@@ -134,21 +142,8 @@ fn a_fit_taken_early_is_refined_by_its_window() {
 /// recursion waits while a re-fit runs.
 #[test]
 fn the_recursion_waits_while_a_re_fit_runs() {
-    let at = 2.281;
-    let s = cell(
-        at + 2.0,
-        49_637.0,
-        112.16,
-        Some((at, 2.0)),
-        None,
-        0.1565,
-        533,
-    );
-    let r = run(&s, &CELLS[1], &tuning(20.283)).expect("no fault");
-    let m = r.metrics(at, f64::INFINITY);
-    assert_eq!(m.contact_losses, 0.0);
+    let (_, m) = held((20.283, 49_637.0, 112.16, 2.281, 2.0, 0.1565, 533, 1), 0.1);
     assert!(m.peak_force <= 2.5 * 20.283, "peak {} N", m.peak_force);
-    assert!(m.kc_rel_error <= 0.1, "k̂ off by {}", m.kc_rel_error);
 }
 
 /// A noisy hold at a large set-point on the 12 ms cell (f_r 46.8 N on 142.6 kN/m, σ 0.47 N, seed 690;
@@ -158,17 +153,13 @@ fn the_recursion_waits_while_a_re_fit_runs() {
 /// 2.8 times too high and lost contact. The excitation stands out of the noise now.
 #[test]
 fn a_noisy_hold_keeps_its_stiffness_estimate() {
-    let s = cell(4.0, 142_579.0, 0.0, Some((2.0, 2.0)), None, 0.471, 690);
-    let r = run(&s, &CELLS[2], &tuning(46.77)).expect("the run ends well");
+    let (r, _) = held((46.77, 142_579.0, 0.0, 2.0, 2.0, 0.471, 690, 2), 0.1);
     let hold = r.metrics(1.0, 2.0);
     assert!(
         hold.kc_rel_error <= 0.1,
         "k̂ off by {} before the change",
         hold.kc_rel_error
     );
-    let m = r.metrics(2.0, f64::INFINITY);
-    assert_eq!(m.contact_losses, 0.0);
-    assert!(m.kc_rel_error <= 0.1, "k̂ off by {}", m.kc_rel_error);
 }
 
 /// A halving at a large set-point under noise on P2 (f_r 42.8 N, 59.7 → 29.8 kN/m at 2 s, σ 0.45 N,
@@ -177,11 +168,7 @@ fn a_noisy_hold_keeps_its_stiffness_estimate() {
 /// window runs on after any early fit now.
 #[test]
 fn a_precise_early_fit_is_not_undone_by_the_transients_tail() {
-    let s = cell(4.0, 59_659.0, 0.0, Some((2.0, 0.5)), None, 0.4506, 75);
-    let r = run(&s, &CELLS[1], &tuning(42.8)).expect("the run ends well");
-    let m = r.metrics(2.0, f64::INFINITY);
-    assert_eq!(m.contact_losses, 0.0);
-    assert!(m.kc_rel_error <= 0.05, "k̂ off by {}", m.kc_rel_error);
+    held((42.8, 59_659.0, 0.0, 2.0, 0.5, 0.4506, 75, 1), 0.05);
 }
 
 /// A doubling on the 12 ms cell at a small set-point after a touch-down that left `k̂_c` 26 % low
@@ -211,19 +198,10 @@ fn an_unresolved_rise_is_answered_as_a_stiffer_surface() {
 /// motion, threw the command 0.5 mm back and lost contact twice.
 #[test]
 fn the_cautious_answer_holds_the_contact_on_the_slow_cell() {
-    let cases = [
-        (7.18, 41_414.0, 116.0, 2.589, 0.19, 479),
-        (28.876, 87_556.0, 0.0, 2.302, 0.0, 1),
-    ];
-    for (f_r, k_c, c_e, at, noise, seed) in cases {
-        let s = cell(at + 2.0, k_c, c_e, Some((at, 2.0)), None, noise, seed);
-        let r = run(&s, &CELLS[2], &tuning(f_r)).expect("the run ends well");
-        let m = r.metrics(at, f64::INFINITY);
-        assert_eq!(m.contact_losses, 0.0, "f_r {f_r} N");
-        assert!(
-            m.kc_rel_error <= 0.1,
-            "f_r {f_r} N: k̂ off by {}",
-            m.kc_rel_error
-        );
+    for case in [
+        (7.18, 41_414.0, 116.0, 2.589, 2.0, 0.19, 479, 2),
+        (28.876, 87_556.0, 0.0, 2.302, 2.0, 0.0, 1, 2),
+    ] {
+        held(case, 0.1);
     }
 }
