@@ -270,6 +270,23 @@ fn a_noise_spike_in_free_air_is_no_touch_down() {
     }
 }
 
+/// A touch-down whose onset fit is not significant within `onset_window` waits for more samples
+/// (`identify.onset_patience`) instead of keeping the tuning's guess: f_r 2 N on 10 kN/m, P1, σ 1 N,
+/// where the whole rise is 0.2 mm. Seeds 6, 8 and 28 kept 50 kN/m (ending at 48.6, 48.6 and 50 kN/m
+/// after the steady-contact fit's bounded rate) and failed the mean error at the end.
+#[test]
+fn a_noisy_touch_down_on_a_soft_surface_is_identified() {
+    for seed in [6, 8, 28] {
+        let s = cell(3.0, 10e3, 0.0, None, None, 1.0, seed);
+        let r = run(&s, &CELLS[0], &tuning(2.0)).expect("no fault");
+        let k = r.rows.last().expect("rows").kc_hat;
+        assert!(k < 15e3, "seed {seed}: k̂_c {k} N/m on 10 kN/m");
+        if let Err(e) = touch_down(2.0, 10e3, &CELLS[0], 1.0, seed) {
+            panic!("seed {seed}: {e}");
+        }
+    }
+}
+
 /// The touch-down's known limits under noise (see above), as failing seeds out of 1–199 per corner:
 /// no more than measured when this was written.
 #[test]
@@ -277,11 +294,11 @@ fn a_noise_spike_in_free_air_is_no_touch_down() {
 fn noise_corners() {
     // (f_r, k_c, cell, σ, failing seeds measured)
     let corners = [
-        (2.0, 10e3, 0, 0.82, 21),
-        (2.0, 10e3, 0, 1.0, 46),
+        (2.0, 10e3, 0, 0.82, 9),
+        (2.0, 10e3, 0, 1.0, 15),
         (20.0, 500e3, 1, 1.0, 0),
-        (5.0, 50e3, 2, 1.0, 90),
-        (2.0, 10e3, 2, 1.0, 181),
+        (5.0, 50e3, 2, 1.0, 83),
+        (2.0, 10e3, 2, 1.0, 188),
     ];
     for (f_r, k_c, cell_i, noise, measured) in corners {
         let failing = (1..200u64)
