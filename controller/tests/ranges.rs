@@ -23,16 +23,32 @@ use sim::InnerLoopModel;
 //   re-fit through the surface before the change inherits that surface's error);
 // * the touch-down under noise still fails at its corners, where the noise is a large part of a small
 //   set-point or the cycle is slow: `noise_corners` (ignored; `--ignored` runs it) counts the seeds
-//   1–199 that fail the touch-down criteria — f_r 2 N on 10 kN/m, P1: 21 at σ 0.82 N, 46 at 1 N (the
-//   impact within 0.7 of its bound; the mean error at the end, e.g. 0.13–0.25 N against 0.12 N); on
-//   the 12 ms cell at σ 1 N: f_r 5 N on 50 kN/m 90, f_r 2 N on 10 kN/m 181 (impacts up to 4.7 times
-//   the bound, contact losses, mean errors). Before the noise was measured from the first samples and
-//   a single raw sample had to stand out of the raw noise, they were 94, 158, 183 and 198, and f_r
-//   20 N on 500 kN/m, P2, σ 1 N failed 106 (now 0). The 24 cases drawn here pass, and 64;
+//   1–199 that fail the touch-down criteria — f_r 2 N on 10 kN/m, P1: 9 at σ 0.82 N, 12 at 1 N (all on
+//   the mean error at the end, 0.13–0.21 N against 0.12–0.14 N); on the 12 ms cell at σ 1 N: f_r 5 N on
+//   50 kN/m 73 (57 on the mean error alone; impacts in 8, contact losses in 6, 3 faults), f_r 2 N on
+//   10 kN/m 116 (68 on the mean error alone; impacts in 40, 6 fault-5 endings). They were 21, 46, 84 and
+//   184 (the file said 90 and 181): the onset fit now waits for a significant slope
+//   (`a_noisy_touch_down_on_a_soft_surface_is_identified`: at f_r 2 N on 10 kN/m it kept the 50 kN/m
+//   guess, a loop five times too slow) and the fallback feed-forward no longer feeds the noise forward
+//   on soft surfaces on slow cells (`a_noisy_hold_on_a_soft_surface_on_a_slow_cell_holds`). On the 12 ms
+//   cell what is left of the mean error is mostly the noise's own: the last 0.5 s hold 42 samples, whose
+//   mean is known to σ/√42 = 0.154 N, and the loop answers within tens of milliseconds, so the force
+//   follows the measured noise's mean; against 0.02·f_r + 0.1·σ = 0.14 N (f_r 2 N) and 0.2 N (f_r 5 N)
+//   that alone fails P(|z| > 0.91) = 36 % and P(|z| > 1.30) = 19 % of the seeds, 72 and 39 of 199. Only
+//   a hold that averages the whole contact (≈ 190 samples, σ/√190 = 0.073 N) could pass most of them.
+//   On P1 the noise's own mean is σ/√500 = 0.045 N: what fails there is the loop's slow wander — the
+//   integral random-walks on the noise while the noise gate weights the proportional path down to a
+//   tenth; weighting the integral alike brought 9 and 15 to 5 and 7 (before the dead-band change), but slowed the settle after a
+//   noise-free 1 mm retreat on 500 kN/m on the 12 ms cell past its bound (`surface_step_corners`: the
+//   noise meter reads that transient as 0.1 N of noise), so it is not done. Before the
+//   noise was measured from the first samples and a single raw sample had to stand out of the raw
+//   noise, they were 94, 158, 183 and 198, and f_r 20 N on 500 kN/m, P2, σ 1 N failed 106 (now 0). The
+//   24 cases drawn here pass, and 64;
 // * with 200 cases (`FORCECELL_RANGE_CASES=200`) two fail: `surface_steps` on the 12 ms cell at f_r
 //   15.3 N, 74.7 kN/m, a 0.48 mm retreat: the fast search's re-contact trips the force limit (61.1 N;
 //   the known limit of `surface_step_corners`), and `stiffness_changes` at f_r 2 N, 49.6 kN/m doubling
-//   at 2 s on P2, σ 0.16 N, 112 N·s/m, seed 666: 4 contact losses (the loop's answer to the doubling
+//   at 2 s on P2, σ 0.16 N, 112 N·s/m, seed 666: 4 contact losses (3 since the fallback's dead-band
+//   follows the observer's velocity noise; the shrinking now ends on seed 552, 2 losses) (the loop's answer to the doubling
 //   lifts off, the fast search re-contacts at 51 N, the answer to that retracts 2 mm; the law's
 //   re-contacts press to 50 N twice more before it holds). It used to end on fault 5: the search
 //   behind the lost contact was at approach speed. (The 2.62 mm retreat at f_r 2 N on 10 kN/m that
@@ -287,6 +303,20 @@ fn a_noisy_touch_down_on_a_soft_surface_is_identified() {
     }
 }
 
+/// The fallback feed-forward does not feed the sensor's noise forward on a soft surface on a slow
+/// cell (`observer.deadband_significance`): f_r 2 N on 10 kN/m on the 12 ms cell under σ 1 N, where
+/// the observer's velocity under noise alone is about 1.7 mm/s per newton against a dead-band of
+/// 0.6 mm/s per newton. Seeds 3, 7 and 10 failed the touch-down criteria before — impacts of 19 N
+/// and more against a bound of 4.7 N after a loss of contact, mean errors of 1.1–2 N at the end.
+#[test]
+fn a_noisy_hold_on_a_soft_surface_on_a_slow_cell_holds() {
+    for seed in [3, 7, 10] {
+        if let Err(e) = touch_down(2.0, 10e3, &CELLS[2], 1.0, seed) {
+            panic!("seed {seed}: {e}");
+        }
+    }
+}
+
 /// The touch-down's known limits under noise (see above), as failing seeds out of 1–199 per corner:
 /// no more than measured when this was written.
 #[test]
@@ -295,10 +325,10 @@ fn noise_corners() {
     // (f_r, k_c, cell, σ, failing seeds measured)
     let corners = [
         (2.0, 10e3, 0, 0.82, 9),
-        (2.0, 10e3, 0, 1.0, 15),
+        (2.0, 10e3, 0, 1.0, 12),
         (20.0, 500e3, 1, 1.0, 0),
-        (5.0, 50e3, 2, 1.0, 83),
-        (2.0, 10e3, 2, 1.0, 188),
+        (5.0, 50e3, 2, 1.0, 73),
+        (2.0, 10e3, 2, 1.0, 116),
     ];
     for (f_r, k_c, cell_i, noise, measured) in corners {
         let failing = (1..200u64)

@@ -48,6 +48,7 @@ impl RobustLaw {
             k,
             force_scale: self.force_scale(),
             noise_var: self.noise.var(),
+            noise_gain: self.signals.noise_gain(cycle),
             step_time: self.signals.step_time(cycle),
         };
         self.observer
