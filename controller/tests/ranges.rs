@@ -26,33 +26,42 @@ use sim::InnerLoopModel;
 //   1–199 that fail the touch-down criteria — f_r 2 N on 10 kN/m, P1: 9 at σ 0.82 N, 12 at 1 N (all on
 //   the mean error at the end, 0.13–0.21 N against 0.12–0.14 N); on the 12 ms cell at σ 1 N: f_r 5 N on
 //   50 kN/m 73 (57 on the mean error alone; impacts in 8, contact losses in 6, 3 faults), f_r 2 N on
-//   10 kN/m 116 (68 on the mean error alone; impacts in 40, 6 fault-5 endings). They were 21, 46, 84 and
+//   10 kN/m 93 (75 on the mean error alone; impacts in 11, 6 fault-5 endings). They were 21, 46, 84 and
 //   184 (the file said 90 and 181): the onset fit now waits for a significant slope
 //   (`a_noisy_touch_down_on_a_soft_surface_is_identified`: at f_r 2 N on 10 kN/m it kept the 50 kN/m
-//   guess, a loop five times too slow) and the fallback feed-forward no longer feeds the noise forward
-//   on soft surfaces on slow cells (`a_noisy_hold_on_a_soft_surface_on_a_slow_cell_holds`). On the 12 ms
+//   guess, a loop five times too slow), the fallback feed-forward no longer feeds the noise forward
+//   on soft surfaces on slow cells (`a_noisy_hold_on_a_soft_surface_on_a_slow_cell_holds`), and a hold
+//   at a small set-point no longer lifts off on its own noise, after which the fast search pressed
+//   15–21 N into the surface (`a_noisy_hold_at_a_small_set_point_does_not_lift_off_on_its_noise`;
+//   116 → 93). The fault-5 endings (the loop's 0.5 s contact-loss limit, 0.77–1.8 s into the run) are
+//   not diagnosed; the earliest, at 0.77 s, began before the tool reached the surface (a contact
+//   declared on noise in free air, where the noise is measured on a few tens of samples). On the 12 ms
 //   cell what is left of the mean error is mostly the noise's own: the last 0.5 s hold 42 samples, whose
 //   mean is known to σ/√42 = 0.154 N, and the loop answers within tens of milliseconds, so the force
 //   follows the measured noise's mean; against 0.02·f_r + 0.1·σ = 0.14 N (f_r 2 N) and 0.2 N (f_r 5 N)
 //   that alone fails P(|z| > 0.91) = 36 % and P(|z| > 1.30) = 19 % of the seeds, 72 and 39 of 199. Only
 //   a hold that averages the whole contact (≈ 190 samples, σ/√190 = 0.073 N) could pass most of them.
-//   On P1 the noise's own mean is σ/√500 = 0.045 N: what fails there is the loop's slow wander — the
-//   integral random-walks on the noise while the noise gate weights the proportional path down to a
-//   tenth; weighting the integral alike brought 9 and 15 to 5 and 7 (before the dead-band change), but slowed the settle after a
-//   noise-free 1 mm retreat on 500 kN/m on the 12 ms cell past its bound (`surface_step_corners`: the
-//   noise meter reads that transient as 0.1 N of noise), so it is not done. Before the
-//   noise was measured from the first samples and a single raw sample had to stand out of the raw
-//   noise, they were 94, 158, 183 and 198, and f_r 20 N on 500 kN/m, P2, σ 1 N failed 106 (now 0). The
-//   24 cases drawn here pass, and 64;
+//   On P1 the noise's own mean is σ/√500 = 0.045 N: what fails there is the loop's slow wander —
+//   the integral random-walks on the noise while the noise gate weights the proportional path down
+//   to a tenth; weighting the integral alike brought 9 and 15 to 5 and 7 (before the dead-band
+//   change), but slowed the settle after a noise-free 1 mm retreat on 500 kN/m on the 12 ms cell
+//   past its bound (`surface_step_corners`: the noise meter reads that transient as 0.1 N of
+//   noise). Taking the spring's share `k̂_c·Δ²x` out of the meter's second difference in contact
+//   mends that (with the weighted integral: that settle 1.01 s, was 1.03; the corners 3, 3, 0, 69,
+//   102) but reads a surface's motion the tool follows as noise instead: B5b on P2 went from 0.22
+//   to 0.52 N rms (taking the smaller of the two differences: 6.9 N, failed). Neither is done.
+//   Before the noise was measured from the first samples and a single raw sample had to stand out of
+//   the raw noise, they were 94, 158, 183 and 198, and f_r 20 N on 500 kN/m, P2, σ 1 N failed 106
+//   (now 0). The 24 cases drawn here pass, and 64;
 // * with 200 cases (`FORCECELL_RANGE_CASES=200`) two fail: `surface_steps` on the 12 ms cell at f_r
 //   15.3 N, 74.7 kN/m, a 0.48 mm retreat: the fast search's re-contact trips the force limit (61.1 N;
 //   the known limit of `surface_step_corners`), and `stiffness_changes` at f_r 2 N, 49.6 kN/m doubling
-//   at 2 s on P2, σ 0.16 N, 112 N·s/m, seed 666: 4 contact losses (3 since the fallback's dead-band
-//   follows the observer's velocity noise; the shrinking now ends on seed 552, 2 losses) (the loop's answer to the doubling
-//   lifts off, the fast search re-contacts at 51 N, the answer to that retracts 2 mm; the law's
-//   re-contacts press to 50 N twice more before it holds). It used to end on fault 5: the search
-//   behind the lost contact was at approach speed. (The 2.62 mm retreat at f_r 2 N on 10 kN/m that
-//   ended on fault 5 is fixed: `surface_step_corners`.)
+//   at 2 s on P2, σ 0.16 N, 112 N·s/m, seed 666: 4 contact losses (3 since the fallback's
+//   dead-band follows the observer's velocity noise; the shrinking now ends on seed 552, 2 losses;
+//   the loop's answer to the doubling lifts off, the fast search re-contacts at 51 N, the answer to
+//   that retracts 2 mm; the law's re-contacts press to 50 N twice more before it holds). It used to
+//   end on fault 5: the search behind the lost contact was at approach speed. (The 2.62 mm retreat
+//   at f_r 2 N on 10 kN/m that ended on fault 5 is fixed: `surface_step_corners`.)
 // * (fixed, `a_noise_spike_in_free_air_is_no_touch_down`: a noise spike taken for contact short of the
 //   surface — σ 0.9 N, f_r 20 N, 500 kN/m, P2, seed 7 — ended the run on fault 2 at 65.9 N; the
 //   touch-down now peaks at 23.9 N, 21.0 N on 100 kN/m. The touch-down goes on at approach speed until
@@ -317,6 +326,20 @@ fn a_noisy_hold_on_a_soft_surface_on_a_slow_cell_holds() {
     }
 }
 
+/// A hold at a small set-point under noise does not lift off on its own noise (the lift-off's count
+/// of samples in a row below `lift`, [`controller::robust::ContactMachine::thresholds`]): f_r 2 N on
+/// 10 kN/m on the 12 ms cell under σ 1 N, where 13 % of the hold's samples are below the 0.88 N lift
+/// force. Seeds 46, 70 and 95 lifted off after 4 such samples in a row while the tool still pressed,
+/// and the fast search pressed 15.3, 15.6 and 21 N into the surface (the bound is 4.7 N).
+#[test]
+fn a_noisy_hold_at_a_small_set_point_does_not_lift_off_on_its_noise() {
+    for seed in [46, 70, 95] {
+        if let Err(e) = touch_down(2.0, 10e3, &CELLS[2], 1.0, seed) {
+            panic!("seed {seed}: {e}");
+        }
+    }
+}
+
 /// The touch-down's known limits under noise (see above), as failing seeds out of 1–199 per corner:
 /// no more than measured when this was written.
 #[test]
@@ -328,7 +351,7 @@ fn noise_corners() {
         (2.0, 10e3, 0, 1.0, 12),
         (20.0, 500e3, 1, 1.0, 0),
         (5.0, 50e3, 2, 1.0, 73),
-        (2.0, 10e3, 2, 1.0, 116),
+        (2.0, 10e3, 2, 1.0, 93),
     ];
     for (f_r, k_c, cell_i, noise, measured) in corners {
         let failing = (1..200u64)
