@@ -40,8 +40,8 @@ pub struct ObserverParams {
     /// of 0.47 of that scale (simulated for the 20 Hz conditioning and the 8 Hz observer at 1, 4 and
     /// 12 ms cycles): 2 is about four standard deviations. On a soft surface on a slow cell the
     /// per-newton dead-band (`response.feedforward_deadband`) is far inside that noise (10 kN/m, 12 ms:
-    /// 0.6 against 3.5 mm/s per newton of sensor noise), and the noise fed forward over the lead time
-    /// moved the tool by a newton and more.
+    /// 0.6 mm/s against a scale of 3.7 and a deviation of 1.7 mm/s per newton of sensor noise), and the
+    /// noise fed forward over the lead time moved the tool by a newton and more.
     pub deadband_significance: f64,
     /// Damping ratio of the second-order surface tracker behind the reported `x̂_c` and the motion
     /// test, whose natural frequency is `response.surface_bandwidth`.
