@@ -257,6 +257,11 @@ impl OnsetFit {
         self.left > 0.0
     }
 
+    /// Keep the window open for `dt` s more (a fit not conclusive yet waits for more samples).
+    pub fn extend(&mut self, dt: f64) {
+        self.left = self.left.max(0.0) + dt;
+    }
+
     /// Close the window early.
     pub fn stop(&mut self) {
         self.left = 0.0;

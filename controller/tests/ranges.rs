@@ -22,20 +22,46 @@ use sim::InnerLoopModel;
 //   490 kN/m, σ 0.43 N, 12.1 % off against a bound of 3.2 % (11.3 % before the re-fit ran its whole
 //   window; with the re-fit's refinement and without the cautious answer to a rise, all 200 cases
 //   passed at three, and 1000 cases found a contact loss — the caution was chosen);
-// * the touch-down under noise still fails at its corners, where the noise is a large part of a
-//   small set-point or the cycle is slow: `noise_corners` (ignored; `--ignored` runs it) counts the
-//   seeds 1–199 that fail the touch-down criteria — f_r 2 N on 10 kN/m, P1: 22 at σ 0.82 N, 48 at 1
-//   N (the impact within 0.7 of its bound; the mean error at the end, e.g. 0.13–0.25 N against 0.12
-//   N); on the 12 ms cell at σ 1 N: f_r 5 N on 50 kN/m 68, f_r 2 N on 10 kN/m 174 (impacts up to
-//   4.7 times the bound, contact losses, mean errors; last session 21, 46, 90 and 181). Before the
-//   noise was measured from the first samples and a single raw sample had to stand out of the raw
-//   noise, they were 94, 158, 183 and 198, and f_r 20 N on 500 kN/m, P2, σ 1 N failed 106 (now 0).
-//   The 200 cases drawn here pass;
+// * the touch-down under noise still fails at its corners, where the noise is a large part of a small
+//   set-point or the cycle is slow: `noise_corners` (ignored; `--ignored` runs it) counts the seeds
+//   1–199 that fail the touch-down criteria — f_r 2 N on 10 kN/m, P1: 8 at σ 0.82 N, 10 at 1 N (on
+//   the mean error at the end); on the 12 ms cell at σ 1 N: f_r 5 N on 50 kN/m 56, f_r 2 N on
+//   10 kN/m 88 (mostly the mean error; impacts, contact losses and fault-5 endings in a few). The
+//   helper branch alone measured 9, 12, 0, 67 and 89 (breakdown there: at f_r 5 N 58 on the mean
+//   error alone, at f_r 2 N 75 and 4 fault-5 endings); merged with the identification changes of
+//   this session (`changes.rs`) 8, 10, 0, 56, 88. They were 21, 46, 84 and 184 at the session's
+//   start (the file said 90 and 181): the onset fit now waits for a significant slope
+//   (`a_noisy_touch_down_on_a_soft_surface_is_identified`: at f_r 2 N on 10 kN/m it kept the 50 kN/m
+//   guess, a loop five times too slow), the fallback feed-forward no longer feeds the noise forward
+//   on soft surfaces on slow cells (`a_noisy_hold_on_a_soft_surface_on_a_slow_cell_holds`), and a hold
+//   at a small set-point no longer lifts off on its own noise, after which the fast search pressed
+//   15–21 N into the surface (`a_noisy_hold_at_a_small_set_point_does_not_lift_off_on_its_noise`;
+//   116 → 93), and no contact is declared before the noise is measured on 16 samples
+//   (`no_contact_is_declared_on_noise_measured_on_few_samples`: 93 → 89, 73 → 67; on the 12 ms cell
+//   the conditioning's step time was 4 samples). The fault-5 endings left (the loop's 0.5 s
+//   contact-loss limit, 0.9–1.8 s into the run) are not diagnosed. On the 12 ms
+//   cell what is left of the mean error is mostly the noise's own: the last 0.5 s hold 42 samples, whose
+//   mean is known to σ/√42 = 0.154 N, and the loop answers within tens of milliseconds, so the force
+//   follows the measured noise's mean; against 0.02·f_r + 0.1·σ = 0.14 N (f_r 2 N) and 0.2 N (f_r 5 N)
+//   that alone fails P(|z| > 0.91) = 36 % and P(|z| > 1.30) = 19 % of the seeds, 72 and 39 of 199. Only
+//   a hold that averages the whole contact (≈ 190 samples, σ/√190 = 0.073 N) could pass most of them.
+//   On P1 the noise's own mean is σ/√500 = 0.045 N: what fails there is the loop's slow wander —
+//   the integral random-walks on the noise while the noise gate weights the proportional path down
+//   to a tenth; weighting the integral alike brought 9 and 15 to 5 and 7 (before the dead-band
+//   change), but slowed the settle after a noise-free 1 mm retreat on 500 kN/m on the 12 ms cell
+//   past its bound (`surface_step_corners`: the noise meter reads that transient as 0.1 N of
+//   noise). Taking the spring's share `k̂_c·Δ²x` out of the meter's second difference in contact
+//   mends that (with the weighted integral: that settle 1.01 s, was 1.03; the corners 3, 3, 0, 69,
+//   102) but reads a surface's motion the tool follows as noise instead: B5b on P2 went from 0.22
+//   to 0.52 N rms (taking the smaller of the two differences: 6.9 N, failed). Neither is done.
+//   Before the noise was measured from the first samples and a single raw sample had to stand out of
+//   the raw noise, they were 94, 158, 183 and 198, and f_r 20 N on 500 kN/m, P2, σ 1 N failed 106
+//   (now 0). The 200 cases drawn here pass;
 // * with 3000 cases (`FORCECELL_RANGE_CASES=3000`; `FORCECELL_RANGE_SHRINK=0` shows them as drawn)
 //   `stiffness_changes` misses its mean error under noise at a small set-point on the 12 ms cell
 //   (f_r 2.9 N, 150 → 300 kN/m, σ 0.42 N: 0.127 N against 0.1 N); 1000 pass. With 1000 cases
 //   `touch_down_and_hold` misses its mean error under σ 0.61 N at f_r 2.2 N on the 12 ms cell
-//   (0.167 N against 0.106 N, the corners below). `surface_steps` with 200 cases ends on fault 2 on
+//   (0.145 N against 0.106 N, the corners below). `surface_steps` with 200 cases ends on fault 2 on
 //   the 12 ms cell (f_r 15.3 N, 74.7 kN/m, a 0.48 mm retreat, 61.1 N): the fast search's re-contact
 //   at the force limit, the known limit of `surface_step_corners`. Found with 200 cases and fixed,
 //   each a named test (in `changes.rs`, the retreat in `surface_step_corners`): a 2.62 mm retreat
@@ -293,6 +319,76 @@ fn a_noise_spike_in_free_air_is_no_touch_down() {
     }
 }
 
+/// A touch-down whose onset fit is not significant within `onset_window` waits for more samples
+/// (`identify.onset_patience`) instead of keeping the tuning's guess: f_r 2 N on 10 kN/m, P1, σ 1 N,
+/// where the whole rise is 0.2 mm. Seeds 6, 8 and 28 kept 50 kN/m (ending at 48.6, 48.6 and 50 kN/m
+/// after the steady-contact fit's bounded rate) and failed the mean error at the end.
+#[test]
+fn a_noisy_touch_down_on_a_soft_surface_is_identified() {
+    for seed in [6, 8, 28] {
+        let s = cell(3.0, 10e3, 0.0, None, None, 1.0, seed);
+        let r = run(&s, &CELLS[0], &tuning(2.0)).expect("no fault");
+        let k = r.rows.last().expect("rows").kc_hat;
+        assert!(k < 15e3, "seed {seed}: k̂_c {k} N/m on 10 kN/m");
+        if let Err(e) = touch_down(2.0, 10e3, &CELLS[0], 1.0, seed) {
+            panic!("seed {seed}: {e}");
+        }
+    }
+}
+
+/// The fallback feed-forward does not feed the sensor's noise forward on a soft surface on a slow
+/// cell (`observer.deadband_significance`): f_r 2 N on 10 kN/m on the 12 ms cell under σ 1 N, where
+/// the observer's velocity under noise alone is about 1.7 mm/s per newton against a dead-band of
+/// 0.6 mm/s per newton. Seeds 3, 7 and 10 failed the touch-down criteria before — impacts of 19 N
+/// and more against a bound of 4.7 N after a loss of contact, mean errors of 1.1–2 N at the end.
+#[test]
+fn a_noisy_hold_on_a_soft_surface_on_a_slow_cell_holds() {
+    for seed in [3, 7, 10] {
+        if let Err(e) = touch_down(2.0, 10e3, &CELLS[2], 1.0, seed) {
+            panic!("seed {seed}: {e}");
+        }
+    }
+}
+
+/// A hold at a small set-point under noise does not lift off on its own noise (the lift-off's count
+/// of samples in a row below `lift`, [`controller::robust::ContactMachine::thresholds`]): f_r 2 N on
+/// 10 kN/m on the 12 ms cell under σ 1 N, where 13 % of the hold's samples are below the 0.88 N lift
+/// force. Seeds 46, 70 and 95 lifted off after 4 such samples in a row while the tool still pressed,
+/// and the fast search pressed 15.3, 15.6 and 21 N into the surface (the bound is 4.7 N).
+#[test]
+fn a_noisy_hold_at_a_small_set_point_does_not_lift_off_on_its_noise() {
+    for seed in [46, 70, 95] {
+        if let Err(e) = touch_down(2.0, 10e3, &CELLS[2], 1.0, seed) {
+            panic!("seed {seed}: {e}");
+        }
+    }
+}
+
+/// Contact is not declared on noise while the noise is measured on few samples: f_r 2 N on 10 kN/m
+/// on the 12 ms cell under σ 1 N, where the conditioning's step time is 4 samples, a deviation
+/// known to about ±50 %. Seeds 27 and 154 declared contact in free air and ended on fault 5 (contact
+/// lost 0.5 s), seed 31 declared it at 0.17 s, 0.37 s before the surface, and pressed 4.8 N.
+#[test]
+fn no_contact_is_declared_on_noise_measured_on_few_samples() {
+    for seed in [27, 31, 154] {
+        let s = cell(3.0, 10e3, 0.0, None, None, 1.0, seed);
+        let r = run(&s, &CELLS[2], &tuning(2.0)).expect("no fault");
+        let touched = r.metrics(0.0, f64::INFINITY).first_contact;
+        let declared = r
+            .rows
+            .iter()
+            .find(|row| !row.xc_hat.is_nan())
+            .map(|row| row.t);
+        assert!(
+            declared.is_some_and(|t| t >= touched),
+            "seed {seed}: declared at {declared:?} s, touched at {touched} s"
+        );
+        if let Err(e) = touch_down(2.0, 10e3, &CELLS[2], 1.0, seed) {
+            panic!("seed {seed}: {e}");
+        }
+    }
+}
+
 /// The touch-down's known limits under noise (see above), as failing seeds out of 1–199 per corner:
 /// no more than measured when this was written.
 #[test]
@@ -300,11 +396,11 @@ fn a_noise_spike_in_free_air_is_no_touch_down() {
 fn noise_corners() {
     // (f_r, k_c, cell, σ, failing seeds measured)
     let corners = [
-        (2.0, 10e3, 0, 0.82, 22),
-        (2.0, 10e3, 0, 1.0, 48),
+        (2.0, 10e3, 0, 0.82, 8),
+        (2.0, 10e3, 0, 1.0, 10),
         (20.0, 500e3, 1, 1.0, 0),
-        (5.0, 50e3, 2, 1.0, 68),
-        (2.0, 10e3, 2, 1.0, 174),
+        (5.0, 50e3, 2, 1.0, 56),
+        (2.0, 10e3, 2, 1.0, 88),
     ];
     for (f_r, k_c, cell_i, noise, measured) in corners {
         let failing = (1..200u64)

@@ -14,14 +14,18 @@ impl RobustLaw {
     /// (the conditioned force's noise from the raw one through the conditioning's noise bandwidth).
     /// Until the noise has been measured for as long as a step takes to pass the conditioning, the
     /// conditioned force is still the first raw sample's, noise and all, and the noise unknown: only
-    /// a strong raw sample is contact.
+    /// a strong raw sample is contact. So too until the noise has been measured on
+    /// `SIGNIFICANCE²` samples: a threshold of that many deviations is only as good as the deviation,
+    /// whose estimate from `n` samples is uncertain by about `1/√n` (on the 12 ms cell the step time
+    /// is 4 samples: a deviation known to ±50 %, and contacts were declared on noise in free air).
     pub(super) fn thresholds(&self, cycle: f64) -> contact::Thresholds {
         let sigma = self.noise.std();
         let sigma_ff = sigma * self.signals.noise_gain(cycle);
         let mut th = self
             .contact
             .thresholds(self.response.set_point(), sigma, sigma_ff);
-        if self.noise.age() < self.signals.step_time(cycle) {
+        let samples = contact::SIGNIFICANCE * contact::SIGNIFICANCE * cycle;
+        if self.noise.age() < self.signals.step_time(cycle).max(samples) {
             th.contact = f64::INFINITY;
         }
         th
@@ -48,6 +52,7 @@ impl RobustLaw {
             k,
             force_scale: self.force_scale(),
             noise_var: self.noise.var(),
+            noise_gain: self.signals.noise_gain(cycle),
             step_time: self.signals.step_time(cycle),
         };
         self.observer

@@ -15,6 +15,7 @@
 //! * In a steady contact the slow least-squares fit ([`SteadyEstimator`]) learns from the loop's answer
 //!   to sensor noise, and once confident moves `k̂_c` to its estimate at a bounded rate.
 
+mod landing;
 mod params;
 mod refit;
 mod steady;
@@ -52,6 +53,10 @@ pub struct Identifier {
     calm_surface: f64,
     /// Surface damping identified by the last fit, N·s/m.
     c_e: f64,
+    /// The onset fit of this contact has been significant (it set `k̂_c`) at least once.
+    onset_seeded: bool,
+    /// How long the touch-down's onset window has run, s.
+    onset_age: f64,
 }
 
 impl Identifier {
@@ -68,6 +73,8 @@ impl Identifier {
             refit: None,
             calm_surface: f64::NAN,
             c_e: 0.0,
+            onset_seeded: false,
+            onset_age: 0.0,
         }
     }
 
@@ -109,6 +116,8 @@ impl Identifier {
     /// Contact is declared at `(x, f)`; `from_approach`: on a still surface, so the transient is fitted.
     pub fn begin_contact(&mut self, x: f64, f: f64, from_approach: bool) {
         self.est.begin_contact(x, f);
+        self.onset_seeded = false;
+        self.onset_age = 0.0;
         if from_approach {
             self.onset.begin(x, self.est.scale(), self.p.onset_window);
         } else {
@@ -173,6 +182,7 @@ impl Identifier {
         let onset = self.onset.active();
         if onset && !first {
             self.onset.add(x, f, v, dt);
+            self.onset_age += dt;
             if let Some(refit) = &mut self.refit {
                 refit.age += dt;
             }
@@ -180,12 +190,7 @@ impl Identifier {
         let fit = match self.refit {
             // A contact onset: the fit so far, every step, once its slope is significant (a contact
             // declared on noise has no force rising with the position to fit).
-            None if onset => {
-                let gate = self.p.pivot_gate;
-                self.onset
-                    .fit(noise_var)
-                    .filter(|f| f.b > gate * f.var_b.sqrt())
-            }
+            None if onset => self.onset_fit(noise_var, dt),
             None => None,
             // A re-fit: as soon as it is conclusive, at the latest at the window's end.
             Some(_) => self.judge_refit(noise_var, noise_floor),

@@ -35,6 +35,8 @@ pub struct View {
     pub force_scale: f64,
     /// Sensor noise variance, N².
     pub noise_var: f64,
+    /// The share of the noise's deviation that passes the conditioning.
+    pub noise_gain: f64,
     /// How long a step takes to pass the conditioning, s.
     pub step_time: f64,
 }
@@ -185,9 +187,7 @@ impl SurfaceObserver {
         lead: f64,
         dt: f64,
     ) -> FeedForward {
-        let p = self.p;
-        let k = s.k;
-        let floor = r.noise_floor;
+        let (p, k, floor) = (self.p, s.k, r.noise_floor);
         let var = (s.noise_var + floor * floor) / (k * k);
         // A jump: beyond a share of the set-point's penetration, or far beyond a cycle of motion and
         // the robot's own displacement (a stale k̂_c within ×2 of k_c shows at most that). A jump
@@ -238,7 +238,7 @@ impl SurfaceObserver {
         } else {
             0.0
         };
-        let deadband = (r.feedforward_deadband * s.noise_var.sqrt()).max(p.deadband_floor);
+        let deadband = p.deadband(r, s.noise_var.sqrt(), s.noise_gain, k);
         let v_ff = self.vc.signum() * (self.vc.abs() - deadband).max(0.0);
         FeedForward {
             weight,

@@ -27,7 +27,8 @@ pub struct ResponseParams {
     /// Dead-band of the fallback feed-forward per newton of sensor noise, (m/s)/N. While no real
     /// surface motion is established (see [`crate::estimator::surface_moving`]) the law feeds the
     /// conditioned observer's velocity forward over the loop's lead time instead of the prediction;
-    /// inside `σ·feedforward_deadband` that velocity is taken for differentiated noise.
+    /// inside `σ·feedforward_deadband` that velocity is taken for differentiated noise (and inside
+    /// the noise's velocity scale on the observer, see `observer.deadband_significance`).
     pub feedforward_deadband: f64,
     /// Largest rate of change of the set-point when it is changed, N/s (bumpless changes).
     pub set_point_rate: f64,

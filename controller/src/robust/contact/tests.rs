@@ -96,6 +96,8 @@ fn thresholds_scale_with_set_point_and_noise_and_speeds_with_stiffness() {
         (noisy.contact - 1.6).abs() < 1e-12 && noisy.samples > 3,
         "{noisy:?}"
     );
+    let s = [1.0, 0.0].map(|s| m.thresholds(2.0, s, 0.73 * s).samples);
+    assert_eq!(s, [7, 2], "f_r 2 N, σ 1 N: 7 in a row (was 4)");
     // One raw sample is contact beyond four of the raw noise's deviations, times `strong_contact`.
     assert!((noisy.strong - 12.0).abs() < 1e-12, "{noisy:?}");
     // 70 kN/m, 16 ms to stop: 2·5 N is 8.9 mm/s, 60 N is 54 mm/s; 5 N is 71 µm in.

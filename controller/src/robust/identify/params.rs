@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::super::positive;
+use super::super::{non_negative, positive};
 use crate::onset::MAX_MEMORY;
 
 /// Identification's advanced parameters (the defaults suit any cell).
@@ -15,6 +15,9 @@ pub struct IdentifyParams {
     pub approach_memory: f64,
     /// How long after contact is declared the contact transient is fitted, s.
     pub onset_window: f64,
+    /// How long after `onset_window` the onset fit may wait for more samples while its slope is not
+    /// significant yet, s (a small set-point on a soft surface under noise; 0: never).
+    pub onset_patience: f64,
     /// How long the transient after a jump in a steady contact on a still surface (a stiffness
     /// change, a surface step) is fitted to re-identify `k̂_c`, s.
     pub refit_window: f64,
@@ -40,6 +43,7 @@ impl Default for IdentifyParams {
         Self {
             approach_memory: 0.2,
             onset_window: 0.1,
+            onset_patience: 0.5,
             refit_window: 0.3,
             pivot_gate: 3.0,
             steady_memory: 3600.0,
@@ -62,6 +66,7 @@ impl IdentifyParams {
             ));
         }
         positive("identify.onset_window", self.onset_window)?;
+        non_negative("identify.onset_patience", self.onset_patience)?;
         positive("identify.refit_window", self.refit_window)?;
         positive("identify.pivot_gate", self.pivot_gate)?;
         positive("identify.steady_memory", self.steady_memory)?;

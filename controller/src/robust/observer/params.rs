@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::super::positive;
+use super::super::{ResponseParams, non_negative, positive};
 
 /// The observer's and predictor's advanced parameters (the defaults suit any cell).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -35,6 +35,15 @@ pub struct ObserverParams {
     pub motion_significance: f64,
     /// Smallest dead-band on the fallback feed-forward velocity, m/s.
     pub deadband_floor: f64,
+    /// The fallback feed-forward's dead-band is at least this many times the velocity scale of the
+    /// sensor's noise seen through the observer, `σ_f̃/k̂_c·2π·surface_bandwidth` (`σ_f̃` the
+    /// conditioned force's noise). The observer's velocity under noise alone has a standard deviation
+    /// of 0.47 of that scale (simulated for the 20 Hz conditioning and the 8 Hz observer at 1, 4 and
+    /// 12 ms cycles): 2 is about four standard deviations. On a soft surface on a slow cell the
+    /// per-newton dead-band (`response.feedforward_deadband`) is far inside that noise (10 kN/m, 12 ms:
+    /// 0.6 mm/s against a scale of 3.7 and a deviation of 1.7 mm/s per newton of sensor noise), and the
+    /// noise fed forward over the lead time moved the tool by a newton and more.
+    pub deadband_significance: f64,
     /// Damping ratio of the second-order surface tracker behind the reported `x̂_c` and the motion
     /// test, whose natural frequency is `response.surface_bandwidth`.
     pub damping: f64,
@@ -51,6 +60,7 @@ impl Default for ObserverParams {
             opposed_confirm: 0.01,
             motion_significance: 3.0,
             deadband_floor: 0.0001,
+            deadband_significance: 2.0,
             damping: 0.8,
         }
     }
@@ -67,6 +77,18 @@ impl ObserverParams {
         positive("observer.opposed_confirm", self.opposed_confirm)?;
         positive("observer.motion_significance", self.motion_significance)?;
         positive("observer.deadband_floor", self.deadband_floor)?;
+        non_negative("observer.deadband_significance", self.deadband_significance)?;
         positive("observer.damping", self.damping)
+    }
+}
+
+impl ObserverParams {
+    /// The fallback feed-forward's dead-band on the observer's velocity, m/s, under response `r` with
+    /// sensor noise `sigma` (N), of which `gain` passes the conditioning, at stiffness `k` (N/m).
+    pub fn deadband(&self, r: &ResponseParams, sigma: f64, gain: f64, k: f64) -> f64 {
+        let velocity_noise = sigma * gain / k * core::f64::consts::TAU * r.surface_bandwidth;
+        (r.feedforward_deadband * sigma)
+            .max(self.deadband_significance * velocity_noise)
+            .max(self.deadband_floor)
     }
 }

@@ -12,6 +12,7 @@ fn view(xf: f64, ff: f64) -> View {
         k: 70_000.0,
         force_scale: 5.0,
         noise_var: 0.0,
+        noise_gain: 1.0,
         step_time: 0.03,
     }
 }
@@ -147,4 +148,22 @@ fn a_step_below_the_floor_that_nothing_else_explains_is_no_motion() {
         established && fallback > 1e-5,
         "{established}, {fallback} m"
     );
+}
+
+/// The fallback's dead-band scales with the noise seen on the observer's velocity: with the sensor's
+/// noise over the stiffness, not with the noise alone.
+#[test]
+fn the_fallback_dead_band_is_outside_the_velocity_noise() {
+    let (p, r) = (ObserverParams::default(), response());
+    // Noise-free: the floor.
+    assert_eq!(p.deadband(&r, 0.0, 0.7, 10_000.0), p.deadband_floor);
+    // σ 1 N, 73 % through the conditioning (a 12 ms cycle), 10 kN/m: beyond the per-newton dead-band.
+    let soft = p.deadband(&r, 1.0, 0.73, 10_000.0);
+    let scale = 0.73 / 10_000.0 * core::f64::consts::TAU * r.surface_bandwidth;
+    assert!(
+        (soft - 2.0 * scale).abs() < 1e-12 && soft > r.feedforward_deadband,
+        "{soft}"
+    );
+    // Stiff and filtered (1 ms): the per-newton dead-band as before.
+    assert_eq!(p.deadband(&r, 1.0, 0.21, 500_000.0), r.feedforward_deadband);
 }

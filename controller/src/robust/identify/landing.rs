@@ -1,0 +1,33 @@
+//! The onset fit at a touch-down, and its patience under noise.
+//!
+//! The fit sets `k̂_c` once its slope is significant. On a soft surface at a small set-point under
+//! sensor noise the window's samples may not make it significant in `onset_window` (f_r 2 N on
+//! 10 kN/m under σ 1 N: the whole rise is 0.2 mm, and the slope's deviation is `σ/√Σ(x − x̄)²`):
+//! the window then stays open, one step at a time, for at most `onset_patience` more while the
+//! contact holds on a still surface, instead of leaving `k̂_c` at the tuning's guess (five times
+//! too stiff there: a loop five times too slow, whose integral cannot remove its error in seconds).
+//! Once the fit is significant the window closes on the next step.
+
+use super::Identifier;
+use crate::onset::LineFit;
+
+impl Identifier {
+    /// The onset fit after a step of `dt` in the window, if its slope is significant (`pivot_gate`
+    /// deviations above zero; a contact declared on noise has no force rising with the position).
+    pub(super) fn onset_fit(&mut self, noise_var: f64, dt: f64) -> Option<LineFit> {
+        let gate = self.p.pivot_gate;
+        let fit = self
+            .onset
+            .fit(noise_var)
+            .filter(|f| f.b > gate * f.var_b.sqrt());
+        if fit.is_some() {
+            self.onset_seeded = true;
+        } else if !self.onset_seeded
+            && !self.onset.active()
+            && self.onset_age < self.p.onset_window + self.p.onset_patience
+        {
+            self.onset.extend(dt);
+        }
+        fit
+    }
+}
