@@ -160,8 +160,9 @@ impl RobustLaw {
             None => {
                 let want = self.in_contact(s, cycle, dt);
                 let window = self.p.identify.onset_window;
+                let touching = s.ff >= self.thresholds(cycle).contact;
                 self.contact
-                    .land(want, self.limiter.command(), &speeds, window, dt)
+                    .land(want, self.limiter.command(), &speeds, window, touching, dt)
             }
         }
     }

@@ -63,6 +63,8 @@ pub struct ContactMachine {
     v_lost: f64,
     /// The measured position when contact was last lost, m.
     x_lost: f64,
+    /// That loss is searched for at approach speed (a bounce, or the tool moving away).
+    slow: bool,
     /// A touch-down from the approach whose stiffness is not identified yet.
     landing: bool,
 }
@@ -80,6 +82,7 @@ impl ContactMachine {
             in_contact: f64::INFINITY,
             v_lost: 0.0,
             x_lost: 0.0,
+            slow: false,
             landing: false,
         };
         m.reset();
@@ -101,6 +104,7 @@ impl ContactMachine {
         self.in_contact = f64::INFINITY;
         self.v_lost = 0.0;
         self.x_lost = 0.0;
+        self.slow = false;
         self.landing = false;
     }
 
@@ -195,11 +199,8 @@ impl ContactMachine {
                         // again soon after a re-acquisition (a bounce), is searched for at approach
                         // speed.
                         let retracting = s.v_x < -c.approach_speed;
-                        self.travelled = if !retracting && self.in_contact >= c.bounce_time {
-                            0.0
-                        } else {
-                            c.reacquire_distance
-                        };
+                        self.slow = retracting || self.in_contact < c.bounce_time;
+                        self.travelled = if self.slow { c.reacquire_distance } else { 0.0 };
                         self.last_u = f64::NAN;
                         self.v_lost = receding;
                         self.landing = false;

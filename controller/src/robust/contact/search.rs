@@ -61,10 +61,23 @@ impl ContactMachine {
     /// stiffness not identified yet): until `k̂_c` is the surface's and not the tuning's guess, the
     /// command goes on in at no more than the approach speed from the last command `u` (a guess too
     /// soft would command a step deep into the surface; the approach's speed is what the impact
-    /// bound is made of).
-    pub fn land(&self, want: f64, u: f64, sp: &Speeds, window: f64, dt: f64) -> f64 {
+    /// bound is made of). Later, while the force shows no touch (`touching` false: the conditioned
+    /// force below the contact threshold), no faster than stops within `2·f_r`: a contact declared
+    /// on noise short of the surface, with the `k̂_c` of a fit of noise, would otherwise drive in at
+    /// the force error over that stiffness per cycle (on the 12 ms cell 27 mm/s, into 44 N).
+    pub fn land(
+        &self,
+        want: f64,
+        u: f64,
+        sp: &Speeds,
+        window: f64,
+        touching: bool,
+        dt: f64,
+    ) -> f64 {
         if self.landing && self.in_contact < window {
             want.min(u + sp.approach * dt)
+        } else if !touching {
+            want.min(u + sp.near * dt)
         } else {
             want
         }
@@ -92,12 +105,15 @@ impl ContactMachine {
                 // was there, the surface is not nearer (a loss of contact the loop's own answer
                 // made, or a bounce, can leave the tool millimetres behind). Beyond it bounded near
                 // the lost contact, fast farther on; after the fast distance at what stops within
-                // 2·f_r, or faster when the surface was seen receding at lift-off (a receding
-                // surface outruns a slow search).
+                // 2·f_r (after a bounce or the tool's own retreat at approach speed: the `k̂_c` the
+                // speed is bounded with may be a fit of noise), or faster when the surface was seen
+                // receding at lift-off (a receding surface outruns a slow search).
                 let speed = if u < self.x_lost - sp.penetration {
                     sp.reacquire
                 } else if self.travelled >= c.reacquire_distance {
-                    (sp.near.max(sp.approach + c.reacquire_outrun * self.v_lost)).min(sp.reacquire)
+                    let slow = if self.slow { sp.approach } else { sp.near };
+                    slow.max(sp.approach + c.reacquire_outrun * self.v_lost)
+                        .min(sp.reacquire)
                 } else if sp.margin > 0.0 && u < self.x_lost + sp.margin {
                     sp.near
                 } else {

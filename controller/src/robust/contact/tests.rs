@@ -73,9 +73,9 @@ fn contact_lift_off_after_lift_time_and_force_limit() {
         Transition::LiftOff
     );
     assert_eq!(m.state(), ContactState::Reacquire);
-    // A bounce: the search goes on at the speed that stops within 2·f_r.
+    // A bounce: the search goes on at approach speed.
     let u = m.command(0.0, 0.0, &SP, 0.1, 1e-3).unwrap();
-    assert!((u - SP.near * 1e-3).abs() < 1e-15, "{u}");
+    assert!((u - SP.approach * 1e-3).abs() < 1e-15, "{u}");
     assert_eq!(
         m.step(&sig(70.0, 61.0), &TH, 60.0, 0.0, 1e-3),
         Transition::ForceLimit
@@ -174,7 +174,7 @@ fn the_fast_distance_counts_what_the_limits_let_through() {
 #[test]
 fn the_search_is_fast_back_to_where_contact_was_lost() {
     // Contact lost at 10 mm while the tool moved away (the loop's own answer): the search would be
-    // at the speed that stops within 2·f_r from the start; behind the lost contact it is fast.
+    // at approach speed from the start; behind the lost contact it is fast.
     let mut m = ContactMachine::new(params());
     let at = |f: f64, v_x: f64| Signals {
         x: 0.01,
@@ -194,7 +194,7 @@ fn the_search_is_fast_back_to_where_contact_was_lost() {
         let want = if u < 0.01 - SP.penetration {
             SP.reacquire
         } else {
-            SP.near
+            SP.approach
         };
         assert!((v - want).abs() < 1e-9, "{v} m/s at {u} m, want {want}");
         u = next;
@@ -216,17 +216,20 @@ fn a_touch_down_goes_on_at_approach_speed_until_the_stiffness_is_identified() {
     m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
     assert_eq!(m.state(), ContactState::Contact);
     // A guess too soft wants 1 mm in; the landing goes on at 2 mm/s.
-    let capped = m.land(0.011, 0.010, &SP, 0.1, 1e-3);
+    let capped = m.land(0.011, 0.010, &SP, 0.1, true, 1e-3);
     assert!((capped - (0.010 + 0.002e-3)).abs() < 1e-15, "{capped}");
     // Backing off is never held.
-    assert_eq!(m.land(0.009, 0.010, &SP, 0.1, 1e-3), 0.009);
+    assert_eq!(m.land(0.009, 0.010, &SP, 0.1, true, 1e-3), 0.009);
     // Past the window, or once identified, the law's command goes through.
     m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 0.2);
-    assert_eq!(m.land(0.011, 0.010, &SP, 0.1, 1e-3), 0.011);
+    assert_eq!(m.land(0.011, 0.010, &SP, 0.1, true, 1e-3), 0.011);
     let mut m = ContactMachine::new(params());
     m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
     m.identified();
-    assert_eq!(m.land(0.011, 0.010, &SP, 0.1, 1e-3), 0.011);
+    assert_eq!(m.land(0.011, 0.010, &SP, 0.1, true, 1e-3), 0.011);
+    // …unless the force shows no touch: then no faster than stops within 2·f_r.
+    let untouched = m.land(0.011, 0.010, &SP, 0.1, false, 1e-3);
+    assert!((untouched - (0.010 + SP.near * 1e-3)).abs() < 1e-15);
 }
 
 #[test]
