@@ -306,9 +306,10 @@ impl OnsetFit {
 
     /// The fit through the surface `x_c` (m) left where it was: `f = b·(x − x_c)/s + c·w`, no
     /// intercept of its own (a change of stiffness alone pivots the spring line about the surface). The
-    /// intercept at `x₀` follows the slope; variances from the residuals, at least `noise_var` (N²),
-    /// and from the surface's own uncertainty, variance `x_c_var` (m²), to first order.
-    pub fn fit_through(&self, x_c: f64, noise_var: f64, x_c_var: f64) -> Option<LineFit> {
+    /// intercept at `x₀` follows the slope; variances from the residuals, at least `noise_var` (N²).
+    /// With it, the slope variance the surface's own uncertainty adds per m² of its variance, to first
+    /// order, N²/m².
+    pub fn fit_through(&self, x_c: f64, noise_var: f64) -> Option<(LineFit, f64)> {
         let s = &self.sums;
         let d = (self.x0 - x_c) / self.scale;
         if s.n < 4.0 || !d.is_finite() {
@@ -337,8 +338,8 @@ impl OnsetFit {
         let residual_var = sse / (s.n - dof);
         // ∂b/∂d = −b·Σu_p/Σu_p² for samples on the line.
         let db = b * (s.u + s.n * d) / pp;
-        let var_b =
-            residual_var.max(noise_var) * i_pp + db * db * x_c_var / (self.scale * self.scale);
+        let var_b = residual_var.max(noise_var) * i_pp;
+        let per_surface_var = db * db / (self.scale * self.scale);
         let fit = LineFit {
             a: b * d,
             b,
@@ -355,7 +356,7 @@ impl OnsetFit {
             && [fit.a, fit.b, fit.var_b, fit.c]
                 .iter()
                 .all(|v| v.is_finite()))
-        .then_some(fit)
+        .then_some((fit, per_surface_var))
     }
 }
 
@@ -404,11 +405,11 @@ mod tests {
         let fit = o.fit(0.0).unwrap();
         assert!((fit.b / s - k).abs() < 1e-3 * k, "k {}", fit.b / s);
         assert!((fit.c / s - c_e).abs() < 1e-3 * c_e, "c_e {}", fit.c / s);
-        let through = o.fit_through(xc, 0.0, 0.0).unwrap();
+        let (through, _) = o.fit_through(xc, 0.0).unwrap();
         assert!((through.b / s - k).abs() < 1e-3 * k, "k {}", through.b / s);
         assert!(through.sse < 1e-9, "{}", through.sse);
         // Through a surface 10 µm off the line leaves a residual.
-        let off = o.fit_through(xc + 1e-5, 0.0, 0.0).unwrap().sse;
+        let off = o.fit_through(xc + 1e-5, 0.0).unwrap().0.sse;
         assert!(off > 1e-3, "{off}");
     }
 }

@@ -221,9 +221,10 @@ fn surface_step(
 ///
 /// Known limit, measured: the fast search is bounded by what stops below the force limit with a
 /// stopping time of the delay and one cycle, and on a stiff surface that bound is the limit itself.
-/// Where the tool's true stopping time is longer — on P1 and the 12 ms cell it is ≈ 1.5 ms longer
-/// (the command's lead over the lagging tool is taken back at the limiter's acceleration, and the
-/// force takes time to reach the detection threshold) — the re-contact trips the force limit and the
+/// Where the tool's true stopping time is longer — on P1 5.5–5.8 ms against 5 on stiff surfaces
+/// (`stopping_times`: the command's lead over the lagging tool is taken back at the limiter's
+/// acceleration, and the force takes time to reach the detection threshold) — the re-contact trips
+/// the force limit and the
 /// loop ends on fault 2, backed off. A margin that removes it costs B3 on P2 its 50 ms (B3's
 /// re-contact there is 54 N of the 60 N limit). These corners are asserted to end exactly so.
 #[test]
@@ -411,5 +412,38 @@ fn noise_corners() {
             .count();
         println!("f_r {f_r} N, {k_c} N/m, cell {cell_i}, σ {noise} N: {failing} of 199 fail");
         assert!(failing <= measured, "{failing} > {measured}");
+    }
+}
+
+/// The tool's own stopping time after a fast re-contact, the figures behind the fast search's known
+/// force-limit trips (README, "Not met"): a 1 mm retreat at f_r 2 N re-contacted by the fast search,
+/// the force limit lifted to 1000 N (the search at its configured 50 mm/s), on every cell and
+/// 20–500 kN/m; the
+/// effective stopping time is the impact over `k_c·v` (`v` the search's speed), printed beside the
+/// search's model, the delay and one cycle. Asserted only that every run re-contacts and stops.
+#[test]
+#[ignore = "figures for the README's known limits, not a criterion"]
+fn stopping_times() {
+    for plant in &CELLS {
+        let model = plant.delay() + plant.period;
+        let mut line = format!(
+            "{:>4.0} ms cycle (model {:.1} ms):",
+            plant.period * 1e3,
+            model * 1e3
+        );
+        for k_c in [20e3, 50e3, 100e3, 200e3, 500e3] {
+            let mut t = tuning(2.0);
+            let LawConfig::Robust(p) = &mut t.law else {
+                unreachable!()
+            };
+            p.limits.max_force = 1000.0;
+            let v = p.contact.reacquire_speed.min(1000.0 / (k_c * model));
+            t.loop_cfg.process.max_force = 1000.0;
+            let s = cell(3.0, k_c, 0.0, None, Some((2.0, 0.001)), 0.0, 1);
+            let r = run(&s, plant, &t).expect("re-contacted and stopped");
+            let peak = r.metrics(2.0, f64::INFINITY).peak_force;
+            line += &format!(" {:.0} kN/m {:.1} ms;", k_c / 1e3, peak / (k_c * v) * 1e3);
+        }
+        println!("{line}");
     }
 }

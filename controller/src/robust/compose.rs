@@ -144,7 +144,14 @@ impl RobustLaw {
 
     /// The command before limits: out of contact the state machine's (approach, search, retract), in
     /// contact the law's, held to the approach speed while touching down.
-    pub(super) fn command(&mut self, x: f64, s: &Signals, cycle: f64, dt: f64) -> f64 {
+    pub(super) fn command(
+        &mut self,
+        x: f64,
+        s: &Signals,
+        th: &contact::Thresholds,
+        cycle: f64,
+        dt: f64,
+    ) -> f64 {
         let anchor = self.anchor_time(cycle);
         let speeds = self.contact.speeds(
             self.identify.kc(),
@@ -160,7 +167,7 @@ impl RobustLaw {
             None => {
                 let want = self.in_contact(s, cycle, dt);
                 let window = self.p.identify.onset_window;
-                let touching = s.ff >= self.thresholds(cycle).contact;
+                let touching = s.ff >= th.contact;
                 self.contact
                     .land(want, self.limiter.command(), &speeds, window, touching, dt)
             }

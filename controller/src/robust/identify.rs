@@ -55,7 +55,7 @@ pub struct Identifier {
     c_e: f64,
     /// The onset fit of this contact has been significant (it set `k̂_c`) at least once.
     onset_seeded: bool,
-    /// How long the touch-down's onset window has run, s.
+    /// How long the current window (the touch-down's or a re-fit's) has run, s.
     onset_age: f64,
 }
 
@@ -135,12 +135,12 @@ impl Identifier {
     pub fn refit(&mut self, x: f64, f: f64, early: f64) {
         self.onset.clear();
         self.onset.begin(x, self.est.scale(), self.p.refit_window);
+        self.onset_age = 0.0;
         self.refit = Some(Refit {
             x0: x,
             f0: f,
             pivot: self.calm_surface,
             pivot_var: self.pivot_variance(x),
-            age: 0.0,
             early,
             refine: false,
         });
@@ -183,9 +183,6 @@ impl Identifier {
         if onset && !first {
             self.onset.add(x, f, v, dt);
             self.onset_age += dt;
-            if let Some(refit) = &mut self.refit {
-                refit.age += dt;
-            }
         }
         let fit = match self.refit {
             // A contact onset: the fit so far, every step, once its slope is significant (a contact

@@ -225,7 +225,7 @@ impl ForceLaw for RobustLaw {
         if in_contact {
             self.identify_in_contact(&s, cycle, moving, &mut ev, dt);
         }
-        let want = self.command(x, &s, cycle, dt);
+        let want = self.command(x, &s, &th, cycle, dt);
         if want.is_finite() {
             self.limiter.step(want, dt, &mut ev);
         } else {

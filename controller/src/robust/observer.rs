@@ -225,12 +225,13 @@ impl SurfaceObserver {
         let ahead = self.pred.command(0.0, delay, lag, cycle, 1.0, 1.0);
         let z_f = s.xf - s.ff / k;
         let [_, v, a] = self.pred.state();
+        let v_std = self.pred.velocity_std();
         if !jumped {
             // A jump says nothing about motion either way.
-            let thr = threshold(max_surface_speed, &p, self.pred.velocity_std());
+            let thr = threshold(max_surface_speed, &p, v_std);
             self.motion.observe(&p, v, s.v_raw, thr, dt);
         }
-        let sv = p.motion_significance * self.pred.velocity_std();
+        let sv = p.motion_significance * v_std;
         let sa = p.motion_significance * self.pred.acceleration_std();
         let m2 = v * v / (sv * sv + 1e-30) + a * a / (sa * sa + 1e-30);
         let weight = if self.motion.established() {

@@ -24,8 +24,7 @@ pub(super) struct Refit {
     pub f0: f64,
     pub pivot: f64,
     pub pivot_var: f64,
-    /// How long the re-fit has run, and how long it must run before it may be taken early, s.
-    pub age: f64,
+    /// How long the re-fit must run before it may be taken early, s (its age is the window's).
     pub early: f64,
     /// A fit was taken early (see [`Identifier::judge_refit`]): the window runs on and its end
     /// refines it.
@@ -47,15 +46,18 @@ pub(super) fn choose(
 ) -> Option<LineFit> {
     let free = onset.fit(noise_var);
     let through = if pivot.is_finite() {
-        onset.fit_through(pivot, noise_var, 0.0)
+        onset.fit_through(pivot, noise_var)
     } else {
         None
     };
     // What the surface's uncertainty costs the line through it in slope variance (the line keeps its
-    // own: a surface known from a fit that is itself in doubt only weighs the choice).
+    // own: a surface known from a fit that is itself in doubt only weighs the choice). A `k̂_c` never
+    // fitted has no measured uncertainty, and weighs nothing.
     let pivot_cost = through
-        .and_then(|t| Some(onset.fit_through(pivot, noise_var, pivot_var)?.var_b - t.var_b))
+        .map(|(_, per)| per * pivot_var)
+        .filter(|c| c.is_finite())
         .unwrap_or(0.0);
+    let through = through.map(|(t, _)| t);
     // Without a spring transient of its own (the free slope within `gate` deviations of none: noise
     // in a hold) the window says nothing the pivot did not.
     let free = free.filter(|f| f.b > gate * f.var_b.sqrt())?;
@@ -88,7 +90,7 @@ impl Identifier {
     pub(super) fn judge_refit(&mut self, noise_var: f64, noise_floor: f64) -> Option<LineFit> {
         let mut refit = self.refit?;
         let open = self.onset.active();
-        if open && (refit.age < refit.early || refit.refine) {
+        if open && (self.onset_age < refit.early || refit.refine) {
             return None;
         }
         let (scale, rel) = (self.est.scale(), self.p.steady_confidence);
