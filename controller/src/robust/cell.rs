@@ -48,11 +48,6 @@ impl CellParams {
         }
         Ok(())
     }
-
-    /// After a stop command the tool still travels for this long, s: the delay and one cycle.
-    pub fn stopping_time(&self, cycle: f64) -> f64 {
-        self.delay + cycle
-    }
 }
 
 /// The robot interface's cycle: configured, or measured from the steps' `dt` as the running level of
@@ -151,13 +146,12 @@ mod tests {
     }
 
     #[test]
-    fn the_stopping_time_is_the_delay_and_one_cycle() {
+    fn a_cell_is_validated() {
         let p = CellParams {
             cycle: 0.012,
             lag: 0.010,
             delay: 0.024,
         };
-        assert!((p.stopping_time(0.012) - 0.036).abs() < 1e-15);
         assert!(p.validate().is_ok());
         assert!(
             CellParams { delay: -1.0, ..p }

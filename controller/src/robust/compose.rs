@@ -153,11 +153,12 @@ impl RobustLaw {
         dt: f64,
     ) -> f64 {
         let anchor = self.anchor_time(cycle);
+        self.stopping.update(&self.p.cell, cycle, &self.p.limits);
         let speeds = self.contact.speeds(
             self.identify.kc(),
             self.response.set_point(),
-            self.p.limits.max_force,
-            self.p.cell.stopping_time(cycle),
+            self.p.limits.max_force - th.strong,
+            &self.stopping,
         );
         match self
             .contact

@@ -51,7 +51,8 @@
 //! [`signals`] (conditioning of force and position) → [`noise`] (sensor noise, measured) →
 //! [`contact`] (the state machine) → [`identify`] (`k̂_c`: onset fit, recursion, steady-contact fit) →
 //! [`observer`] (surface observer, predictor, feed-forward; [`motion`]: real motion or a stale `k̂_c`) and [`response`] (proportional, integral,
-//! set-point) → [`limiter`] (deviation, velocity, acceleration). [`cell`] is the inner loop's model.
+//! set-point) → [`limiter`] (deviation, velocity, acceleration). [`cell`] is the inner loop's model,
+//! [`stopping`] how far it carries the tool into a surface after a contact is seen.
 //! Every limit that acts is an [`Events`] flag of the step and a counter ([`ForceLaw::counters`]).
 
 use crate::law::{ContactState, EventCounts, Events, ForceLaw, Output};
@@ -67,6 +68,7 @@ pub mod observer;
 mod params;
 pub mod response;
 pub mod signals;
+pub mod stopping;
 #[cfg(test)]
 mod tests;
 
@@ -80,6 +82,7 @@ pub use params::RobustParams;
 pub(crate) use params::{non_negative, positive};
 pub use response::{Response, ResponseParams};
 pub use signals::{Conditioner, Signals};
+pub use stopping::Stopping;
 
 /// The robust law. See the module documentation.
 #[derive(Clone, Debug, PartialEq)]
@@ -93,6 +96,7 @@ pub struct RobustLaw {
     observer: SurfaceObserver,
     response: Response,
     limiter: Limiter,
+    stopping: Stopping,
     counts: EventCounts,
 }
 
@@ -109,6 +113,7 @@ impl RobustLaw {
             observer: SurfaceObserver::new(p.observer),
             response: Response::new(p.response, p.f_r),
             limiter: Limiter::new(p.limits),
+            stopping: Stopping::new(),
             counts: EventCounts::default(),
             p,
         })

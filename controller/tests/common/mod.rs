@@ -62,19 +62,25 @@ pub fn floor(k: f64, v: f64, plant: &InnerLoopModel) -> f64 {
 }
 
 /// The least time the search after a lost contact takes to a surface `gap` (m) away at stiffness `k`
-/// (N/m) on `plant` under `tuning`, s: no faster than stops below the force limit for the search's
-/// fast distance, then no faster than stops within `2·f_r`, never faster than the configured search
-/// speed; the stopping time is the delay and one cycle.
+/// (N/m) on `plant` under `tuning`, s: for the search's fast distance no faster than stops within the
+/// force limit less one strong raw sample, then no faster than stops within `2·f_r`, never faster
+/// than the configured search speed; how far the cell carries the tool in is the law's own model
+/// ([`controller::robust::Stopping`]) of the plant's cell.
 pub fn reach_time(t: &Tuning, k: f64, gap: f64, plant: &InnerLoopModel) -> f64 {
     let LawConfig::Robust(p) = &t.law else {
         panic!("robust")
     };
     let c = &p.contact;
-    let per_newton = 1.0 / (k * (plant.delay() + plant.period));
-    let fast = c.reacquire_speed.min(p.limits.max_force * per_newton);
-    let gentle = c
-        .reacquire_speed
-        .min(2.0 * p.f_r.max(c.contact_force) * per_newton);
+    let cell = controller::CellParams {
+        cycle: plant.period,
+        lag: plant.tau,
+        delay: plant.delay(),
+    };
+    let mut stop = controller::robust::Stopping::new();
+    stop.update(&cell, plant.period, &p.limits);
+    let strong = c.strong_contact * c.contact_force.min(0.5 * p.f_r);
+    let fast = stop.speed_within(p.limits.max_force - strong, k, c.reacquire_speed);
+    let gentle = stop.speed_within(2.0 * p.f_r.max(c.contact_force), k, c.reacquire_speed);
     let near = gap.clamp(0.0, c.reacquire_distance);
     near / fast + (gap - near).max(0.0) / gentle
 }

@@ -37,9 +37,9 @@ pub struct ContactParams {
     /// stop within twice the set-point, in set-point penetrations `f_r/k̂_c` (advanced; 0: off, the
     /// whole search is fast). A surface found there is the lost one moved a little; farther on it went
     /// away, and the search is fast. Each penetration costs a retreating surface about half the
-    /// stopping time (the delay and one cycle) before it is found again: on P2 (16 ms), over the
-    /// default wires, 4 bring the re-contact of B8 from 46 N to 13 N and B3's loss of contact from
-    /// 48 ms to 88 ms (target 50 ms).
+    /// stopping time ([`Stopping`](crate::robust::Stopping)) before it is found again: on P2 (16 ms
+    /// at that speed), over the default wires, 4 bring B8's peak from 44 N to 13 N and B3's loss of
+    /// contact from 48 ms to 76 ms (target 50 ms).
     #[serde(default)]
     pub reacquire_margin: f64,
     /// Once the search is past `reacquire_distance`, it moves faster than the approach by this many

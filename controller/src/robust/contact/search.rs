@@ -1,10 +1,12 @@
 //! The command out of contact: the approach, the search after a lost contact, the retract.
 //!
-//! Every speed towards a surface is bounded by what the cell can stop: after a stop command the tool
-//! still travels `v·T_s` (`T_s` the delay and one cycle) into a surface of stiffness `k̂_c`. The
-//! approach stops within `2·f_r` (`v ≤ 2·f_r/(k̂_c·T_s)`), the fast search after a lost contact below
-//! the force limit; after `reacquire_distance` the search is at the speed that stops within `2·f_r`.
-//! Behind the position where contact was lost the search is fast: the tool was there.
+//! Every speed towards a surface is bounded by what the cell can stop ([`Stopping`]: after the contact
+//! is seen the tool still goes on for the delay and one cycle, and until the command has taken back
+//! its lead over the lagging tool) in a surface of stiffness `k̂_c`. The approach stops within
+//! `2·f_r`, the fast search after a lost contact below the force limit (less what the force may
+//! reach before the contact is certainly seen: the limit is a trip); after `reacquire_distance` the
+//! search is at the speed that stops within `2·f_r`. Behind the position where contact was lost the
+//! search is fast: the tool was there.
 //!
 //! The fast search cannot also stop within `2·f_r` where a lost surface is found again close by (a
 //! transient, B8): the commands that catch up with a retreating surface in time (B3: 1 mm in 50 ms on
@@ -15,6 +17,7 @@
 
 use super::ContactMachine;
 use crate::law::ContactState;
+use crate::robust::Stopping;
 
 /// Speeds out of contact for one step, bounded by what the cell can stop (see
 /// [`ContactMachine::speeds`]).
@@ -33,20 +36,21 @@ pub struct Speeds {
 }
 
 impl ContactMachine {
-    /// Speeds for stiffness estimate `k` (N/m), set-point `f_r` (N), force limit `max_force` (N) and
-    /// stopping time `stop` (s: after a stop command the tool still travels for the delay and one
-    /// cycle): the approach and the search near the lost contact no faster than stops within `2·f_r`,
-    /// the fast search no faster than stops below the force limit.
-    pub fn speeds(&self, k: f64, f_r: f64, max_force: f64, stop: f64) -> Speeds {
+    /// Speeds for stiffness estimate `k` (N/m), set-point `f_r` (N) and `limit` (N: the force limit
+    /// less what the force may reach before a contact is certainly seen, one raw sample at
+    /// `strong`): the approach and the search near the lost contact no faster than the cell stops
+    /// within `2·f_r`, the fast search no faster than it stops within `limit` ([`Stopping`]).
+    pub fn speeds(&self, k: f64, f_r: f64, limit: f64, stop: &Stopping) -> Speeds {
         let c = &self.p;
-        let per_newton = 1.0 / (k * stop).max(1e-12);
-        let gentle = 2.0 * f_r.max(c.contact_force) * per_newton;
-        let approach = c.approach_speed.min(gentle);
-        let near = c.reacquire_speed.min(gentle).max(approach);
+        let gentle = 2.0 * f_r.max(c.contact_force);
+        let approach = stop.speed_within(gentle, k, c.approach_speed);
+        let near = stop
+            .speed_within(gentle, k, c.reacquire_speed)
+            .max(approach);
         Speeds {
             approach,
             near,
-            reacquire: c.reacquire_speed.min(max_force * per_newton).max(near),
+            reacquire: stop.speed_within(limit, k, c.reacquire_speed).max(near),
             margin: c.reacquire_margin * f_r.max(c.contact_force) / k.max(1e-12),
             penetration: f_r.max(c.contact_force) / k.max(1e-12),
         }

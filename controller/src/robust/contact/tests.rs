@@ -100,15 +100,19 @@ fn thresholds_scale_with_set_point_and_noise_and_speeds_with_stiffness() {
     assert_eq!(s, [7, 2], "f_r 2 N, σ 1 N: 7 in a row (was 4)");
     // One raw sample is contact beyond four of the raw noise's deviations, times `strong_contact`.
     assert!((noisy.strong - 12.0).abs() < 1e-12, "{noisy:?}");
-    // 70 kN/m, 16 ms to stop: 2·5 N is 8.9 mm/s, 60 N is 54 mm/s; 5 N is 71 µm in.
-    let sp = m.speeds(70_000.0, 5.0, 60.0, 0.016);
-    assert_eq!((sp.approach, sp.reacquire), (0.002, 0.05));
-    assert!((sp.near - 10.0 / 1120.0).abs() < 1e-12, "{sp:?}");
+    // P2, 70 kN/m: 2·5 N stops at 8.9 mm/s (the delay and one cycle, 16 ms: at that speed the
+    // command reverses within a cycle), 60 N at 48 mm/s (54 without the lag); on 500 kN/m 1.25 and
+    // 7.5 mm/s. 5 N is 71 µm in.
+    let (_, stop) = crate::robust::stopping::tests::cell(0.004, 0.012);
+    let sp = m.speeds(70_000.0, 5.0, 60.0, &stop);
+    assert_eq!(sp.approach, 0.002);
+    assert_eq!(sp.near, stop.speed_within(10.0, 70_000.0, 1.0), "{sp:?}");
+    assert!((0.047..0.049).contains(&sp.reacquire), "{sp:?}");
+    assert!((sp.near - 10.0 / 1120.0).abs() < 1e-6, "{sp:?}");
     assert!((sp.margin - 5.0 / 70_000.0).abs() < 1e-15, "{sp:?}");
-    let stiff = m.speeds(500_000.0, 5.0, 60.0, 0.016);
-    assert!((stiff.approach - 0.00125).abs() < 1e-12);
-    assert!((stiff.near - 0.00125).abs() < 1e-12);
-    assert!((stiff.reacquire - 0.0075).abs() < 1e-12);
+    let stiff = m.speeds(500_000.0, 5.0, 60.0, &stop);
+    assert!(stiff.approach == stiff.near && (stiff.near - 0.00125).abs() < 1e-6);
+    assert!((stiff.reacquire - 0.0075).abs() < 1e-6, "{stiff:?}");
 }
 
 /// A steady contact at `x`, lost: the machine searches from there.
