@@ -257,6 +257,22 @@ impl OnsetFit {
         self.left > 0.0
     }
 
+    /// Whether position `x` (m) is behind the surface the fit so far puts its line's zero at (its
+    /// spring force `a + b·u` negative): a sample there is on the hinge's flat part, not on the line.
+    /// Chosen by the position, not the force, so noise does not bias what is kept. `false` while the
+    /// fit is undetermined.
+    pub fn behind(&self, x: f64) -> bool {
+        self.fit(0.0)
+            .is_some_and(|f| f.a + f.b * (x - self.x0) / self.scale < 0.0)
+    }
+
+    /// Count `dt` s of the window without a sample (one [`behind`](Self::behind) the surface).
+    pub fn pass(&mut self, dt: f64) {
+        if self.left > 0.0 {
+            self.left -= dt;
+        }
+    }
+
     /// Keep the window open for `dt` s more (a fit not conclusive yet waits for more samples).
     pub fn extend(&mut self, dt: f64) {
         self.left = self.left.max(0.0) + dt;

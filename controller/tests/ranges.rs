@@ -26,10 +26,11 @@ use sim::InnerLoopModel;
 //   small set-point or the cycle is slow: `noise_corners` (ignored; `--ignored` runs it) counts the
 //   seeds 1–199 that fail the touch-down criteria — f_r 2 N on 10 kN/m, P1: 8 at σ 0.82 N, 10 at 1
 //   N (on the mean error at the end); on the 12 ms cell at σ 1 N: f_r 5 N on 50 kN/m 55, f_r 2 N on
-//   10 kN/m 87 (mostly the mean error; impacts, contact losses and fault-5 endings in a few). The
+//   10 kN/m 86 (mostly the mean error; impacts, contact losses and fault-5 endings in a few). The
 //   helper branch alone measured 9, 12, 0, 67 and 89 (breakdown there: at f_r 5 N 58 on the mean
 //   error alone, at f_r 2 N 75 and 4 fault-5 endings); merged with the identification changes of
-//   this session (`changes.rs`) 8, 10, 0, 56, 88, and with the landing's cap 8, 10, 0, 55, 87. They
+//   this session (`changes.rs`) 8, 10, 0, 56, 88, and with the landing's cap 8, 10, 0, 55, 87
+//   (with the onset window's bounce rule, a session later, 86). They
 //   were 21, 46, 84 and 184 at the session's start (the file said 90 and 181): the onset fit now
 //   waits for a significant slope (`a_noisy_touch_down_on_a_soft_surface_is_identified`: at f_r 2 N
 //   on 10 kN/m it kept the 50 kN/m guess, a loop five times too slow), the fallback feed-forward no
@@ -63,12 +64,14 @@ use sim::InnerLoopModel;
 //   (f_r 2.9 N, 150 → 300 kN/m, σ 0.42 N: 0.127 N against 0.1 N); 1000 pass. With 1000 cases
 //   `touch_down_and_hold` misses its mean error under σ 0.61 N at f_r 2.2 N on the 12 ms cell
 //   (0.145 N against 0.106 N, the corners below). `surface_steps` with 1000 cases ends on fault 2 on
-//   the 12 ms cell (f_r 2.6 N, 355 kN/m, a 0.66 mm retreat, 75.7 N): the touch-down fitted `k̂_c`
-//   256 kN/m (the surface 7.5 µm deep, under one cycle of the approach) and a noise-free hold never
-//   corrects it, so the fast search's speed, bounded with it, stops within the limit only on a
-//   surface that soft. (With the delay and one cycle as the search's stopping time, 200 cases
-//   tripped the limit on that cell too — f_r 15.3 N, 74.7 kN/m, 0.48 mm, 61.1 N — and two of
-//   `surface_step_corners`; `robust::stopping` models the stop and all pass.) Found with 200 cases and fixed,
+//   the 12 ms cell (f_r 4.1 N, 374 kN/m, a 1.08 mm retreat, 60.2 N): the fast search re-contacts at
+//   the force limit times `k_c/k̂_c`, and `k̂_c` is 1.8 % low; B3a on P2 has no margin to give (3 %
+//   costs it its 50 ms). Found with 1000 cases and fixed: a bounce in the onset window fitted as on
+//   the spring's line (`robust::identify` unit test: 340 → 164 kN/m, then a trip at 75.7 N), and a
+//   conditioned force's overshoot of a 54.7 N surface step taken for the 60 N limit. (With the delay
+//   and one cycle as the search's stopping time, 200 cases tripped the limit on that cell too — f_r
+//   15.3 N, 74.7 kN/m, 0.48 mm, 61.1 N — and two of `surface_step_corners`; `robust::stopping`
+//   models the stop and all pass.) Found with 200 cases and fixed,
 //   each a named test (in `changes.rs`, the retreat in `surface_step_corners`): a 2.62 mm retreat
 //   on 10 kN/m that the search did not reach (fault 5); damped doublings that rang into lost
 //   contacts or fault 5 (f_r 2 N on 49.6 kN/m, P2), that the recursion pressed to 73 N (f_r 20.3 N,
@@ -240,6 +243,24 @@ fn surface_step_corners() {
     }
 }
 
+/// Two surface steps on the 12 ms cell that 1000 cases found, drawn values: a 0.66 mm retreat at f_r
+/// 2.6 N on 355 kN/m, whose touch-down bounced within its onset window and fitted the bounce's 0 N
+/// sample as on the spring's line (`k̂_c` 256 kN/m; its search then tripped the limit at 75.7 N); a
+/// 1.2 mm advance at f_r 7.2 N on 39.5 kN/m, a 54.7 N step whose conditioned force overshot the 60 N
+/// limit (60.05 N) and retracted.
+#[test]
+fn surface_steps_the_slow_cell_tripped_on() {
+    let cases = [
+        (2.649606391760847, 354693.7495260486, 0.000659256598849384),
+        (7.247474537209428, 39538.86076955438, -0.0011990159879613563),
+    ];
+    for (f_r, k_c, delta) in cases {
+        if let Err(e) = surface_step(f_r, k_c, delta, &CELLS[2]) {
+            panic!("f_r {f_r} N, {k_c} N/m, step {delta} m: {e}");
+        }
+    }
+}
+
 /// The touch-down criteria (see `touch_down_and_hold`).
 fn touch_down(
     f_r: f64,
@@ -389,7 +410,7 @@ fn noise_corners() {
         (2.0, 10e3, 0, 1.0, 10),
         (20.0, 500e3, 1, 1.0, 0),
         (5.0, 50e3, 2, 1.0, 55),
-        (2.0, 10e3, 2, 1.0, 87),
+        (2.0, 10e3, 2, 1.0, 86),
     ];
     for (f_r, k_c, cell_i, noise, measured) in corners {
         let failing = (1..200u64)

@@ -95,10 +95,12 @@ impl RobustLaw {
     }
 
     /// In contact: re-identify `k̂_c` when the environment changed under a steady contact, and run the
-    /// identifier on the raw sample `(s.x, s.f)`; `moving`: the surface counts as moving.
+    /// identifier on the raw sample `(s.x, s.f)`; `moving`: the surface counts as moving; `lift`: the
+    /// raw force below which the tool is off the surface, N.
     pub(super) fn identify_in_contact(
         &mut self,
         s: &Signals,
+        lift: f64,
         cycle: f64,
         moving: bool,
         ev: &mut Events,
@@ -129,6 +131,7 @@ impl RobustLaw {
             dt,
             moving,
             ev.contact,
+            s.f < lift,
             disturbed,
             self.noise.var(),
             self.p.response.noise_floor,

@@ -228,7 +228,7 @@ impl ForceLaw for RobustLaw {
             .observer
             .hold(s.v_x, self.p.estimator.max_surface_speed, in_contact, dt);
         if in_contact {
-            self.identify_in_contact(&s, cycle, moving, &mut ev, dt);
+            self.identify_in_contact(&s, th.lift, cycle, moving, &mut ev, dt);
         }
         let want = self.command(x, &s, &th, cycle, dt);
         if want.is_finite() {

@@ -76,6 +76,9 @@ fn contact_lift_off_after_lift_time_and_force_limit() {
     // A bounce: the search goes on at approach speed.
     let u = m.command(0.0, 0.0, &SP, 0.1, 1e-3).unwrap();
     assert!((u - SP.approach * 1e-3).abs() < 1e-15, "{u}");
+    // The conditioning's overshoot of a step the raw force does not confirm is no force limit.
+    let overshoot = m.step(&sig(54.7, 60.05), &TH, 60.0, 0.0, 1e-3);
+    assert_ne!(overshoot, Transition::ForceLimit);
     assert_eq!(
         m.step(&sig(70.0, 61.0), &TH, 60.0, 0.0, 1e-3),
         Transition::ForceLimit
