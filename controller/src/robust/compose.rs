@@ -1,6 +1,7 @@
 //! The composed step's pieces that read several stages: the detector's thresholds, the approach's
 //! anchor, the re-identification and the command in contact.
 
+use super::identify::StepState;
 use super::{RobustLaw, Signals, contact, observer};
 use crate::law::Events;
 
@@ -129,10 +130,12 @@ impl RobustLaw {
             s.v_raw,
             s.ff,
             dt,
-            moving,
-            ev.contact,
-            s.f < lift,
-            disturbed,
+            StepState {
+                moving,
+                first: ev.contact,
+                lifted: s.f < lift,
+                disturbed,
+            },
             self.noise.var(),
             self.p.response.noise_floor,
         );

@@ -34,6 +34,20 @@ pub struct Identified {
     pub projected: bool,
 }
 
+/// What the law knows of a contact step besides its sample (see [`Identifier::step`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepState {
+    /// The surface moves: no stiffness to learn (a re-fit is judged by its own consistency instead,
+    /// as the apparent motion of the stale `k̂_c` makes it look moving).
+    pub moving: bool,
+    /// Contact was declared this step.
+    pub first: bool,
+    /// The raw force is below the lift force: off the surface, not yet a lift-off.
+    pub lifted: bool,
+    /// Something moved or jumped lately.
+    pub disturbed: bool,
+}
+
 /// The stiffness identification.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Identifier {
@@ -159,11 +173,8 @@ impl Identifier {
     }
 
     /// One step in contact with the raw `(x, f)`, the raw position's velocity `v` and conditioned force
-    /// `ff`. `moving`: the surface moves (no stiffness to learn; a re-fit is judged by its own
-    /// consistency instead, as the apparent motion of the stale `k̂_c` makes it look moving); `first`:
-    /// contact was declared this step; `lifted`: the raw force is below the lift force (off the
-    /// surface, not yet a lift-off); `disturbed`: something moved or jumped lately; `noise_var` and
-    /// `noise_floor` the sensor's noise, N², and its floor, N.
+    /// `ff`, what the law knows of the step (`state`), and the sensor's noise `noise_var`, N², and its
+    /// floor `noise_floor`, N.
     #[allow(clippy::too_many_arguments)]
     pub fn step(
         &mut self,
@@ -172,13 +183,16 @@ impl Identifier {
         v: f64,
         ff: f64,
         dt: f64,
-        moving: bool,
-        first: bool,
-        lifted: bool,
-        disturbed: bool,
+        state: StepState,
         noise_var: f64,
         noise_floor: f64,
     ) -> Identified {
+        let StepState {
+            moving,
+            first,
+            lifted,
+            disturbed,
+        } = state;
         if moving && self.refit.is_none() {
             self.onset.stop();
         }

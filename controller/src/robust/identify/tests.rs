@@ -35,7 +35,19 @@ fn the_onset_of_a_contact_from_the_approach_is_fitted() {
             first = true;
             id.begin_contact(x, f, true);
         }
-        let out = id.step(x, f, 0.0, f, 1e-3, false, first, false, false, 0.0, 0.02);
+        let out = id.step(
+            x,
+            f,
+            0.0,
+            f,
+            1e-3,
+            StepState {
+                first,
+                ..StepState::default()
+            },
+            0.0,
+            0.02,
+        );
         seeded |= out.seeded;
         if x < 0.010 + 5.0 / k {
             x += 2e-6;
@@ -62,38 +74,23 @@ fn a_bounce_within_the_onset_window_is_not_on_the_line() {
             id.remember(x_mm * 1e-3, force(x_mm), 2e-3, 0.012);
         }
         id.begin_contact(10.02166e-3, force(10.02166), true);
-        id.step(
-            10.02166e-3,
-            force(10.02166),
-            0.0,
-            0.0,
-            0.012,
-            false,
-            true,
-            false,
-            false,
-            0.0,
-            0.02,
-        );
+        let first = StepState {
+            first: true,
+            ..StepState::default()
+        };
+        let f = force(10.02166);
+        id.step(10.02166e-3, f, 0.0, 0.0, 0.012, first, 0.0, 0.02);
         let window = [
             10.04566, 10.06966, 10.02965, 9.96472, 10.00019, 10.01102, 9.98989,
         ];
         for x_mm in window {
             let f = force(x_mm);
-            let off = skip_off_surface && f < 0.3;
-            id.step(
-                x_mm * 1e-3,
-                f,
-                0.0,
-                f,
-                0.012,
-                false,
-                false,
-                off,
-                false,
-                0.0,
-                0.02,
-            );
+            let lifted = skip_off_surface && f < 0.3;
+            let state = StepState {
+                lifted,
+                ..StepState::default()
+            };
+            id.step(x_mm * 1e-3, f, 0.0, f, 0.012, state, 0.0, 0.02);
         }
         id.kc()
     };
@@ -128,7 +125,7 @@ fn change_judged(k: f64, k2: f64, xc2: f64, c_e: f64, early: f64) -> f64 {
     let mut x = xc + f_r / k;
     id.begin_contact(x, f_r, false);
     for _ in 0..1000 {
-        id.step(x, f_r, 0.0, f_r, dt, false, false, false, false, 0.0, 0.02);
+        id.step(x, f_r, 0.0, f_r, dt, StepState::default(), 0.0, 0.02);
     }
     assert!(
         (id.kc() - k).abs() < 1e-6 * k,
@@ -141,7 +138,7 @@ fn change_judged(k: f64, k2: f64, xc2: f64, c_e: f64, early: f64) -> f64 {
         let v = (x_end - x) / 0.020;
         x += v * dt;
         let f = k2 * (x - xc2) + c_e * v;
-        id.step(x, f, v, f, dt, false, false, false, false, 0.0, 0.02);
+        id.step(x, f, v, f, dt, StepState::default(), 0.0, 0.02);
     }
     id.kc()
 }
@@ -204,19 +201,11 @@ fn a_contact_declared_on_noise_is_not_fitted() {
     for i in 0..25 {
         x += 8e-6;
         let f = noise.sample(&mut rng);
-        let out = id.step(
-            x,
-            f,
-            2e-3,
-            0.0,
-            4e-3,
-            false,
-            i == 0,
-            false,
-            false,
-            0.81,
-            0.02,
-        );
+        let first = StepState {
+            first: i == 0,
+            ..StepState::default()
+        };
+        let out = id.step(x, f, 2e-3, 0.0, 4e-3, first, 0.81, 0.02);
         seeded |= out.seeded;
     }
     assert!(!seeded, "a fit of noise set k̂ to {}", id.kc());
