@@ -19,7 +19,7 @@ mod landing;
 mod params;
 mod refit;
 mod steady;
-pub use params::IdentifyParams;
+pub use params::{IdentifyParams, StepState};
 use refit::Refit;
 
 use crate::estimator::{EstimatorParams, SteadyEstimator, StiffnessEstimator};
@@ -32,20 +32,6 @@ pub struct Identified {
     pub seeded: bool,
     /// An estimate was projected into the configured bounds.
     pub projected: bool,
-}
-
-/// What the law knows of a contact step besides its sample (see [`Identifier::step`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct StepState {
-    /// The surface moves: no stiffness to learn (a re-fit is judged by its own consistency instead,
-    /// as the apparent motion of the stale `k̂_c` makes it look moving).
-    pub moving: bool,
-    /// Contact was declared this step.
-    pub first: bool,
-    /// The raw force is below the lift force: off the surface, not yet a lift-off.
-    pub lifted: bool,
-    /// Something moved or jumped lately.
-    pub disturbed: bool,
 }
 
 /// The stiffness identification.

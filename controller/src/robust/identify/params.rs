@@ -1,4 +1,4 @@
-//! Identification's parameters.
+//! Identification's parameters, and what the law tells it of each contact step.
 
 use serde::{Deserialize, Serialize};
 
@@ -82,4 +82,18 @@ impl IdentifyParams {
         }
         Ok(())
     }
+}
+
+/// What the law knows of a contact step besides its sample (see [`Identifier::step`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepState {
+    /// The surface moves: no stiffness to learn (a re-fit is judged by its own consistency instead,
+    /// as the apparent motion of the stale `k̂_c` makes it look moving).
+    pub moving: bool,
+    /// Contact was declared this step.
+    pub first: bool,
+    /// The raw force is below the lift force: off the surface, not yet a lift-off.
+    pub lifted: bool,
+    /// Something moved or jumped lately.
+    pub disturbed: bool,
 }
