@@ -135,6 +135,8 @@ pub struct StiffnessEstimator {
     x_slow: f64,
     /// Slow average of the force, N.
     f_slow: f64,
+    /// The last raw sample `(x, f)` in contact, m and N.
+    last: (f64, f64),
     /// `θ₀` at the contact onset: the prior [`seed`](Self::seed) combines a fit with, N.
     prior: f64,
     /// Variance of `θ₀` after the last [`seed`](Self::seed), N².
@@ -163,6 +165,7 @@ impl StiffnessEstimator {
             t: 0.0,
             x_slow: 0.0,
             f_slow: 0.0,
+            last: (0.0, 0.0),
             prior: p.kc0 * scale,
             seed_var: f64::INFINITY,
             p,
@@ -194,6 +197,7 @@ impl StiffnessEstimator {
         self.t = 0.0;
         self.x_slow = x;
         self.f_slow = f;
+        self.last = (x, f);
         self.theta[1] = f;
         self.theta[2] = 0.0;
         self.prior = self.theta[0];
@@ -319,6 +323,16 @@ impl StiffnessEstimator {
             // …and the same way, as a positive stiffness against a still surface makes them: a force
             // falling while the position advances is a surface moving away, not information on k_c.
             && (f_gate - self.f_slow) * (x - self.x_slow) > 0.0;
+        // …and the last step does not contradict it: against a still surface force and position move
+        // together, and a force rising while the position falls (both beyond the noise, the position
+        // at the stiffest expected surface) is a surface moving in, which the slow averages still
+        // call "the same way" just after a re-contact (B5b's sine start re-acquired its surface moving
+        // in, and `k̂_c` fell from 70 to 37 kN/m on P1 within 30 ms).
+        let (dx, df) = (x - self.last.0, f - self.last.1);
+        self.last = (x, f);
+        let floor = self.p.dead_zone.max(EXCITATION_SIGNIFICANCE * noise_sd);
+        let contradicts = dx * df < 0.0 && df.abs() > floor && self.p.kc_max * dx.abs() > floor;
+        let excited = excited && !contradicts;
         let phi = self.regressor(x);
         let err = f - self.predict(x);
         // A strong force transient (an impact, a stiffness change) is informative even when the observer,
@@ -566,6 +580,49 @@ mod tests {
         assert!(surface_moving(v, 0.0, 1e-3));
         // Slow enough to ignore.
         assert!(!surface_moving(0.0005, 0.0, 1e-3));
+    }
+
+    #[test]
+    fn a_surface_moving_in_after_a_re_contact_is_no_stiffness() {
+        // B5b's re-contact: the tool came in on a still surface, and now backs off at 1 mm/s while the
+        // surface moves in at 6 mm/s, so the force rises as the position falls. Against the slow averages, which still
+        // remember the tool coming in, both stand "the same way"; step by step they contradict a
+        // still surface. The same positions with the force of a still, stiffer surface are learnt.
+        let run = |moving_in: bool| {
+            let mut e = StiffnessEstimator::new(
+                EstimatorParams {
+                    kc0: 70_000.0,
+                    ..params()
+                },
+                1e-4,
+            );
+            let (k, mut x, mut xc) = (70_000.0, 0.01003, 0.01);
+            e.begin_contact(x, k * (x - xc));
+            for i in 0..40 {
+                let v = if i < 10 { 4e-3 } else { -1e-3 };
+                x += v * 1e-3;
+                let f = if moving_in {
+                    if i >= 10 {
+                        xc -= 6e-6;
+                    }
+                    k * (x - xc)
+                } else {
+                    2.0 * k * (x - 0.010015)
+                };
+                e.update(x, f, f, 0.0, 1e-3, false);
+            }
+            e.kc()
+        };
+        assert!(
+            (run(true) - 70_000.0).abs() < 0.02 * 70_000.0,
+            "{}",
+            run(true)
+        );
+        assert!(
+            run(false) > 80_000.0,
+            "a still stiffer surface is learnt: {}",
+            run(false)
+        );
     }
 
     #[test]
