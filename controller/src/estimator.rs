@@ -135,7 +135,7 @@ pub struct StiffnessEstimator {
     x_slow: f64,
     /// Slow average of the force, N.
     f_slow: f64,
-    /// The last raw sample `(x, f)` in contact, m and N.
+    /// The last raw sample `(x, f)` the recursion was given in this contact, m and N.
     last: (f64, f64),
     /// `θ₀` at the contact onset: the prior [`seed`](Self::seed) combines a fit with, N.
     prior: f64,
@@ -317,7 +317,8 @@ impl StiffnessEstimator {
         // would otherwise hide exactly the transients that correct it.
         // The thresholds stand out of the force's noise (`noise_sd`, N): the loop's answer to noise
         // moves position and force together too.
-        let excitation = self.p.excitation.max(EXCITATION_SIGNIFICANCE * noise_sd);
+        let noise = EXCITATION_SIGNIFICANCE * noise_sd;
+        let excitation = self.p.excitation.max(noise);
         let excited = self.p.kc_max * (x - self.x_slow).abs() >= excitation
             && (f_gate - self.f_slow).abs() >= excitation
             // …and the same way, as a positive stiffness against a still surface makes them: a force
@@ -330,7 +331,7 @@ impl StiffnessEstimator {
         // in, and `k̂_c` fell from 70 to 37 kN/m on P1 within 30 ms).
         let (dx, df) = (x - self.last.0, f - self.last.1);
         self.last = (x, f);
-        let floor = self.p.dead_zone.max(EXCITATION_SIGNIFICANCE * noise_sd);
+        let floor = self.p.dead_zone.max(noise);
         let contradicts = dx * df < 0.0 && df.abs() > floor && self.p.kc_max * dx.abs() > floor;
         let excited = excited && !contradicts;
         let phi = self.regressor(x);

@@ -33,8 +33,8 @@
 //! With a perfect prediction the loop's characteristic equation is the one above, so the feed-forward
 //! does not change stability; what it changes is what a *wrong* `k̂_c` does: then `x − f/k̂_c` moves
 //! with the robot (`(1 − k_c/k̂_c)·ẋ`) and a predictor would feed that back. So the weight `w` is 0
-//! until the estimator's motion test ([`crate::estimator::surface_moving`]: observed motion that leads or exceeds the
-//! robot's, on the conditioned pair, or on the raw pair for 8 ms without a break) has
+//! until the estimator's motion test ([`crate::estimator::surface_moving`]: observed motion that leads
+//! or exceeds the robot's, on the conditioned pair, or on the raw pair for 8 ms without a break) has
 //! seen real surface motion within the last 0.5 s (or the predicted surface velocity has kept its sign
 //! while the robot moved both with it and against it — which the apparent motion of a stale `k̂_c`,
 //! tied to the robot's, never does; that also keeps the estimator off the moving surface, whose
@@ -79,7 +79,7 @@ pub use limiter::{LimitParams, Limiter};
 pub use noise::{NoiseMeter, NoiseParams};
 pub use observer::{ObserverParams, SurfaceObserver};
 pub use params::RobustParams;
-pub(crate) use params::{non_negative, positive};
+pub(crate) use params::{at_least, non_negative, positive};
 pub use response::{Response, ResponseParams};
 pub use signals::{Conditioner, Signals};
 pub use stopping::Stopping;

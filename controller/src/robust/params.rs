@@ -48,10 +48,14 @@ pub(crate) fn positive(name: &str, v: f64) -> Result<(), String> {
 }
 
 pub(crate) fn non_negative(name: &str, v: f64) -> Result<(), String> {
-    if v.is_finite() && v >= 0.0 {
+    at_least(name, v, 0.0)
+}
+
+pub(crate) fn at_least(name: &str, v: f64, min: f64) -> Result<(), String> {
+    if v.is_finite() && v >= min {
         Ok(())
     } else {
-        Err(format!("{name} must be >= 0, got {v}"))
+        Err(format!("{name} must be >= {min}, got {v}"))
     }
 }
 

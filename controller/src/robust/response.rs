@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{non_negative, positive};
+use super::{at_least, non_negative, positive};
 
 /// How the law responds in contact.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -70,13 +70,7 @@ impl ResponseParams {
         positive("response.set_point_rate", self.set_point_rate)?;
         non_negative("response.noise_gate", self.noise_gate)?;
         positive("response.integration_band", self.integration_band)?;
-        if self.jump_caution.is_nan() || self.jump_caution < 1.0 {
-            return Err(format!(
-                "response.jump_caution {} must be at least 1",
-                self.jump_caution
-            ));
-        }
-        Ok(())
+        at_least("response.jump_caution", self.jump_caution, 1.0)
     }
 }
 
@@ -205,7 +199,7 @@ mod tests {
     fn validation_names_the_field() {
         let p = ResponseParams { kappa: 1.5, ..P };
         assert!(p.validate().unwrap_err().contains("kappa"));
-        for jump_caution in [0.5, f64::NAN] {
+        for jump_caution in [0.5, f64::NAN, f64::INFINITY] {
             let p = ResponseParams { jump_caution, ..P };
             assert!(p.validate().unwrap_err().contains("jump_caution"));
         }

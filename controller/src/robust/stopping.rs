@@ -18,9 +18,11 @@ use super::{CellParams, LimitParams};
 /// approach is resolved as well as the fast search.
 const POINTS: usize = 12;
 
-/// Steps of the stop simulated at most (a pathological lag on a fast cycle); beyond it the travel is
-/// bounded by the farthest command, which the lagging tool never passes.
-const MAX_STEPS: usize = 100_000;
+/// Steps of the stop simulated at most, so that a re-tabulation (12 of them, in a control step) stays
+/// short: a real cell stops within tens of cycles (P1: the delay's 4 and about 10 of braking). Past
+/// it (a lag of seconds on a fast cycle) the travel is bounded by the farthest command, which the
+/// lagging tool never passes and which the braking reaches within `v/(a·T)` steps.
+const MAX_STEPS: usize = 4096;
 
 /// The travel after contact as a function of speed, for one cell and one set of limits.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -211,6 +213,23 @@ pub(crate) mod tests {
             "never above the limiter's velocity"
         );
         assert_eq!(s.speed_within(-1.0, 1e3, 0.05), 0.0);
+    }
+
+    #[test]
+    fn a_lag_of_seconds_on_a_fast_cycle_is_bounded_by_the_farthest_command() {
+        let c = CellParams {
+            cycle: 1e-4,
+            lag: 10.0,
+            delay: 0.004,
+        };
+        let d = travel(&c, 1e-4, &LIMITS, 0.05);
+        // At most the ramp to the first braked command, the command's lead over the tool at that
+        // speed (`v·τ`, half a metre here) and the braking's own travel, `v²/2a`.
+        let most = 0.05 * (0.004 + 1e-4) + 0.05 * 10.0 + 0.05 * 0.05 / 40.0;
+        assert!(
+            d.is_finite() && d > 0.05 * (0.004 + 1e-4) && d <= most + 1e-9,
+            "{d}"
+        );
     }
 
     #[test]

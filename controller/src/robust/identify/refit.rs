@@ -18,11 +18,13 @@ use crate::onset::{LineFit, OnsetFit};
 /// A re-fit while it runs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Refit {
-    /// Where the transient started, `(x, f)` (m, N), and the surface before the jump (m): the pivot
-    /// of a stiffness change, and its variance (m²).
+    /// Where the transient started, m.
     pub x0: f64,
+    /// The force there, N.
     pub f0: f64,
+    /// The surface before the jump, m: the pivot of a stiffness change.
     pub pivot: f64,
+    /// That surface's variance, m².
     pub pivot_var: f64,
     /// How long the re-fit must run before it may be taken early, s (its age is the window's).
     pub early: f64,
