@@ -107,15 +107,26 @@ fn thresholds_scale_with_set_point_and_noise_and_speeds_with_stiffness() {
     // command reverses within a cycle), 60 N at 48 mm/s (54 without the lag); on 500 kN/m 1.25 and
     // 7.5 mm/s. 5 N is 71 µm in.
     let (_, stop) = crate::robust::stopping::tests::cell(0.004, 0.012);
-    let sp = m.speeds(70_000.0, 5.0, 60.0, &stop);
+    let sp = m.speeds(70_000.0, 0.0, 5.0, 60.0, &stop);
     assert_eq!(sp.approach, 0.002);
     assert_eq!(sp.near, stop.speed_within(10.0, 70_000.0, 1.0), "{sp:?}");
     assert!((0.047..0.049).contains(&sp.reacquire), "{sp:?}");
     assert!((sp.near - 10.0 / 1120.0).abs() < 1e-6, "{sp:?}");
     assert!((sp.margin - 5.0 / 70_000.0).abs() < 1e-15, "{sp:?}");
-    let stiff = m.speeds(500_000.0, 5.0, 60.0, &stop);
+    let stiff = m.speeds(500_000.0, 0.0, 5.0, 60.0, &stop);
     assert!(stiff.approach == stiff.near && (stiff.near - 0.00125).abs() < 1e-6);
     assert!((stiff.reacquire - 0.0075).abs() < 1e-6, "{stiff:?}");
+    // A `k̂_c` known to 2 %: the fast search stops within the limit on a surface 6 % stiffer; the
+    // approach and the near search stay at the estimate's (2·f_r is a target, the limit a trip).
+    let unsure = m.speeds(70_000.0, 0.02, 5.0, 60.0, &stop);
+    let sure_of_stiffer = stop.speed_within(60.0, 70_000.0 * 1.06, 1.0);
+    assert!(
+        (unsure.reacquire - sure_of_stiffer).abs() < 1e-12,
+        "{unsure:?}"
+    );
+    assert!(
+        unsure.reacquire < sp.reacquire && (unsure.near, unsure.approach) == (sp.near, sp.approach)
+    );
 }
 
 /// A steady contact at `x`, lost: the machine searches from there.

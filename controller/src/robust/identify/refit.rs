@@ -146,9 +146,9 @@ impl Identifier {
         self.refit.filter(|r| !r.refine).map(|r| r.f0)
     }
 
-    /// How well the surface before a jump at `x` (m) is known, m²: its distance from `x` is `f/k̂_c`,
-    /// as uncertain as `k̂_c` (its last fit's variance, or the steady-contact estimator's once used).
-    pub(super) fn pivot_variance(&self, x: f64) -> f64 {
+    /// The relative variance of `k̂_c`: its last fit's, or the steady-contact estimator's once used
+    /// (infinite before any fit).
+    pub fn kc_rel_var(&self) -> f64 {
         let theta = self.est.kc() * self.est.scale();
         let mut rel_var = self.est.seed_variance() / (theta * theta);
         if let Some((_, rel)) = self.steady.estimate()
@@ -156,7 +156,13 @@ impl Identifier {
         {
             rel_var = rel_var.min(rel * rel);
         }
+        rel_var
+    }
+
+    /// How well the surface before a jump at `x` (m) is known, m²: its distance from `x` is `f/k̂_c`,
+    /// as uncertain as `k̂_c` ([`kc_rel_var`](Self::kc_rel_var)).
+    pub(super) fn pivot_variance(&self, x: f64) -> f64 {
         let d = x - self.calm_surface;
-        d * d * rel_var
+        d * d * self.kc_rel_var()
     }
 }
