@@ -201,7 +201,7 @@ impl Identifier {
             None if onset => self.onset_fit(noise_var, dt),
             None => None,
             // A re-fit: as soon as it is conclusive, at the latest at the window's end.
-            Some(_) => self.judge_refit(noise_var, noise_floor),
+            Some(_) => self.judge_refit(x, f, noise_var, noise_floor),
         };
         match fit {
             Some(fit) => {

@@ -88,8 +88,14 @@ impl Identifier {
     /// The re-fit's fit if it is conclusive now: significant, different from `k̂_c`, and one still
     /// spring — what the plane leaves beyond the noise is at most `steady_confidence` of the
     /// transient's variance (a surface that started to move leaves the force unexplained by the
-    /// position). The re-fit ends at the window's end.
-    pub(super) fn judge_refit(&mut self, noise_var: f64, noise_floor: f64) -> Option<LineFit> {
+    /// position). The re-fit ends at the window's end; `(x, f)` is the raw sample now (m, N).
+    pub(super) fn judge_refit(
+        &mut self,
+        x: f64,
+        f: f64,
+        noise_var: f64,
+        noise_floor: f64,
+    ) -> Option<LineFit> {
         let mut refit = self.refit?;
         let open = self.onset.active();
         if open && (self.onset_age < refit.early || refit.refine) {
@@ -120,6 +126,13 @@ impl Identifier {
         } else if fit.is_some() || !open {
             self.refit = None;
             self.onset.stop();
+        }
+        if fit.is_none() && !open {
+            // The window ends with `k̂_c` kept (a surface step leaves the stiffness as it was): the
+            // recursion, which waited, starts again here. Its averages and its model are the
+            // contact's before the jump, and a surface moved 1.8 mm read as a slope of almost none
+            // (on the 12 ms cell `k̂_c` fell from 21.6 to 13.7 kN/m in one step, and the loop rang).
+            self.est.begin_contact(x, f);
         }
         if fit.is_some() {
             self.est.begin_contact(refit.x0, refit.f0);
