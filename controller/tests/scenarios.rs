@@ -166,30 +166,6 @@ fn b5_a_re_contact_on_the_moving_surface_learns_no_stiffness() {
     }
 }
 
-/// B5b's sine starts at its full speed, 6.3 mm/s away from the tool: the contact is lost, the fast
-/// search finds the surface again, and that contact is lost within a bounce, as the surface goes on
-/// receding. The observer restarts at rest with every contact and had not seen the surface move in
-/// that one, so the search went on at approach speed (2 mm/s) and found the surface only when it
-/// turned, 0.21 s later on P2 (over the default wires). Now the search follows at the speed the tool
-/// followed the surface in the contact it lost.
-#[test]
-fn b5_a_contact_lost_to_a_receding_surface_is_searched_for_at_its_speed() {
-    let s = scenario("b05b-curve-fast");
-    for (name, plant) in plants(&s) {
-        let r = run(&s, &plant, &robust()).expect("the simulated cell never fails");
-        let m = r.metrics(2.0, f64::INFINITY);
-        println!(
-            "{name}: longest loss {:.3} s, peak {:.1} N",
-            m.contact_loss_time, m.peak_force
-        );
-        assert!(
-            m.contact_loss_time <= 0.1,
-            "{name}: lost for {} s",
-            m.contact_loss_time
-        );
-    }
-}
-
 /// B7's sweep: the 16 ms file's targets up to 16 ms of delay, the 32 ms file's up to 32 ms, contact
 /// and finite commands at 48 ms.
 fn b7_targets(t: &Tuning, fails: &mut Vec<String>) {

@@ -63,8 +63,6 @@ pub struct ContactMachine {
     v_lost: f64,
     /// The measured position when contact was last lost, m.
     x_lost: f64,
-    /// The measured position when contact was last declared, m.
-    x_found: f64,
     /// That loss is searched for at approach speed (a bounce, or the tool moving away).
     slow: bool,
     /// A touch-down from the approach whose stiffness is not identified yet.
@@ -84,7 +82,6 @@ impl ContactMachine {
             in_contact: f64::INFINITY,
             v_lost: 0.0,
             x_lost: 0.0,
-            x_found: 0.0,
             slow: false,
             landing: false,
         };
@@ -107,7 +104,6 @@ impl ContactMachine {
         self.in_contact = f64::INFINITY;
         self.v_lost = 0.0;
         self.x_lost = 0.0;
-        self.x_found = 0.0;
         self.slow = false;
         self.landing = false;
     }
@@ -181,7 +177,6 @@ impl ContactMachine {
                     self.below = 0.0;
                     self.below_samples = 0;
                     self.in_contact = 0.0;
-                    self.x_found = s.x;
                     return Transition::Contact { from_approach };
                 }
             }
@@ -209,12 +204,7 @@ impl ContactMachine {
                         self.slow = retracting || self.in_contact < c.bounce_time;
                         self.travelled = if self.slow { c.reacquire_distance } else { 0.0 };
                         self.last_u = f64::NAN;
-                        // The surface's speed away from the tool: the observer's, or, faster, how
-                        // far the tool followed it since the contact was declared (a contact lost
-                        // within a bounce is too young for the observer, which starts at rest; on
-                        // a still surface the tool ends nearer than it was declared, by the force).
-                        let followed = (s.x - self.x_found).max(0.0) / self.in_contact.max(dt);
-                        self.v_lost = receding.max(followed);
+                        self.v_lost = receding;
                         self.landing = false;
                         self.x_lost = s.x;
                         return Transition::LiftOff;
