@@ -122,6 +122,7 @@ impl Identifier {
             self.onset.begin(x, self.est.scale(), self.p.onset_window);
         } else {
             self.onset.clear();
+            self.keep_confidence();
         }
         self.steady.stop();
         self.steady_var0 = f64::INFINITY;
