@@ -160,11 +160,9 @@ impl RobustLaw {
     ) -> f64 {
         let anchor = self.anchor_time(cycle);
         self.stopping.update(&self.p.cell, cycle, &self.p.limits);
-        // Before any fit `k̂_c` is the tuning's guess, as uncertain as the estimator's start.
-        let k_sd = (self.identify.kc_rel_var().sqrt()).min(self.p.estimator.initial_uncertainty);
         let speeds = self.contact.speeds(
             self.identify.kc(),
-            k_sd,
+            self.identify.kc_rel_sd(),
             self.response.set_point(),
             self.p.limits.max_force - th.strong,
             &self.stopping,

@@ -62,15 +62,14 @@ pub fn floor(k: f64, v: f64, plant: &InnerLoopModel) -> f64 {
 }
 
 /// The least time the search after a lost contact takes to a surface `gap` (m) away at stiffness `k`
-/// (N/m) on `plant` under `tuning`, s: for the search's fast distance no faster than stops within the
-/// force limit less one strong raw sample, then no faster than stops within `2·f_r`, never faster
-/// than the configured search speed; how far the cell carries the tool in is the law's own model
-/// ([`controller::robust::Stopping`]) of the plant's cell.
+/// (N/m) on `plant` under `tuning`, s: the law's own speeds ([`controller::robust::ContactMachine::speeds`],
+/// `k̂_c` exact and known exactly, a quiet sensor) on the law's own model of the plant's cell
+/// ([`controller::robust::Stopping`]): the fast search for its fast distance, then the one that stops
+/// within `2·f_r`.
 pub fn reach_time(t: &Tuning, k: f64, gap: f64, plant: &InnerLoopModel) -> f64 {
     let LawConfig::Robust(p) = &t.law else {
         panic!("robust")
     };
-    let c = &p.contact;
     let cell = controller::CellParams {
         cycle: plant.period,
         lag: plant.tau,
@@ -78,11 +77,11 @@ pub fn reach_time(t: &Tuning, k: f64, gap: f64, plant: &InnerLoopModel) -> f64 {
     };
     let mut stop = controller::robust::Stopping::new();
     stop.update(&cell, plant.period, &p.limits);
-    let strong = c.strong_contact * c.contact_force.min(0.5 * p.f_r);
-    let fast = stop.speed_within(p.limits.max_force - strong, k, c.reacquire_speed);
-    let gentle = stop.speed_within(2.0 * p.f_r.max(c.contact_force), k, c.reacquire_speed);
-    let near = gap.clamp(0.0, c.reacquire_distance);
-    near / fast + (gap - near).max(0.0) / gentle
+    let machine = controller::robust::ContactMachine::new(p.contact);
+    let strong = machine.thresholds(p.f_r, 0.0, 0.0).strong;
+    let sp = machine.speeds(k, 0.0, p.f_r, p.limits.max_force - strong, &stop);
+    let near = gap.clamp(0.0, p.contact.reacquire_distance);
+    near / sp.reacquire + (gap - near).max(0.0) / sp.near
 }
 
 /// The relative standard deviation below which nothing can know the new stiffness after a change by

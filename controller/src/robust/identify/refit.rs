@@ -172,12 +172,19 @@ impl Identifier {
         rel_var
     }
 
+    /// How well `k̂_c` is known, as a relative standard deviation: [`kc_rel_var`](Self::kc_rel_var),
+    /// and before any fit the estimator's initial uncertainty (`k̂_c` is then the tuning's guess).
+    pub fn kc_rel_sd(&self) -> f64 {
+        let start = self.est.params().initial_uncertainty;
+        self.kc_rel_var().sqrt().min(start)
+    }
+
     /// A re-acquired contact: no unknown surface, maybe a moving one. The recursion keeps the
-    /// confidence `k̂_c` earned ([`kc_rel_var`](Self::kc_rel_var)), at least `steady_confidence`,
+    /// confidence `k̂_c` earned ([`kc_rel_sd`](Self::kc_rel_sd)), at least `steady_confidence`,
     /// instead of the estimator's initial uncertainty (B5b at 200 kN/m on P2: reopened, `k̂_c` went
     /// from 247 to 129 kN/m within 60 ms of a re-contact on the moving surface).
     pub(super) fn keep_confidence(&mut self) {
-        let rel = self.kc_rel_var().sqrt().max(self.p.steady_confidence);
+        let rel = self.kc_rel_sd().max(self.p.steady_confidence);
         self.est.limit_uncertainty(rel);
     }
 
