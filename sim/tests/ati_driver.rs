@@ -96,6 +96,32 @@ fn bias_is_averaged_on_raw_gauges_and_refused_when_unsafe() {
 }
 
 #[test]
+fn a_bias_after_a_pause_takes_fresh_samples() {
+    // A command's lock-step driver is stale when stepped late (a stalled host, a slow terminal); the
+    // bias needs no recent sample, only a window of fresh ones.
+    let bus = MemBus::with_virtual_clock();
+    let tool = hal::Wrench::from_array([1.0, -2.0, 15.0, 0.05, 0.02, -0.01]);
+    bus.attach(fixed_node(tool));
+    let mut driver = ati_can::Driver::new(bus.port(), Config::default()).unwrap();
+    driver.start().unwrap();
+    while driver.health() != ati_can::Health::Ok {
+        driver.step().unwrap();
+    }
+    let clock = bus.clock();
+    clock.advance_to(clock.now() + Duration::from_secs(1));
+    assert_eq!(driver.health(), ati_can::Health::Stale);
+    let bias = driver
+        .tare(BiasConfig {
+            window: 16,
+            max_spread: 4,
+        })
+        .expect("a bias after a pause");
+    assert!(bias[2].abs() > 100.0, "{bias:?}");
+    let s = driver.read().unwrap();
+    assert!(s.wrench.force.norm() < 0.02, "{s:?}");
+}
+
+#[test]
 fn bus_off_stops_polling_until_restart() {
     ati_common::bus_off_stops_polling_until_restart(&Mem);
 }

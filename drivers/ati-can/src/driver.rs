@@ -461,9 +461,13 @@ impl<T: CanTransport> Driver<T> {
         self.bias
     }
 
-    /// Set the bias (counts per gauge); applies from the next sample on.
+    /// Set the bias (counts per gauge). It applies at once: the newest sample is converted again
+    /// from its raw gauges, so no read after this returns a wrench with the old bias.
     pub fn set_bias(&mut self, bias: [f64; 6]) {
         self.bias = bias;
+        if let (Some(l), Some(conv)) = (self.latest.as_mut(), self.converter) {
+            l.wrench = conv.wrench(&l.gauges, &self.bias);
+        }
     }
 
     /// Give the transport back.
@@ -538,7 +542,9 @@ impl<T: CanTransport> Driver<T> {
         }
     }
 
-    /// Start taking a bias over the next `cfg.window` good samples. Refused unless the health is Ok.
+    /// Start taking a bias over the next `cfg.window` good samples. Refused unless the newest answer
+    /// was a good sample: health Ok, or Stale (a driver stepped late, as a command's lock-step driver
+    /// is after a pause; the window takes fresh samples only, and a missing one refuses it).
     pub fn begin_bias(&mut self, cfg: BiasConfig) -> Result<(), BiasError> {
         if cfg.window == 0 {
             return Err(BiasError::EmptyWindow);
@@ -547,7 +553,7 @@ impl<T: CanTransport> Driver<T> {
             return Err(BiasError::Busy);
         }
         match self.health() {
-            Health::Ok => {}
+            Health::Ok | Health::Stale => {}
             Health::Saturated => return Err(BiasError::Saturated),
             Health::DeviceError(s) => return Err(BiasError::DeviceFault(s)),
             _ => return Err(BiasError::NotReady),
@@ -581,7 +587,7 @@ impl<T: CanTransport> Driver<T> {
 
     fn finish_bias(&mut self, r: Result<[f64; 6], BiasError>) {
         if let Ok(b) = r {
-            self.bias = b;
+            self.set_bias(b);
         }
         self.bias_job = None;
         self.bias_outcome = Some(r);

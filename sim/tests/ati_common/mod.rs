@@ -519,6 +519,10 @@ pub fn bias_is_averaged_on_raw_gauges_and_refused_when_unsafe(bus: &dyn Bus) {
             max_spread: 4,
         })
         .expect("bias while still");
+    // The bias applies to the newest sample at once (the window's last): a read before the next
+    // poll (a slow poll rate) never shows the unbiased wrench.
+    let s = rig.driver.read().unwrap();
+    assert!(s.wrench.force.norm() < 0.02, "right after the tare: {s:?}");
     rig.driver.step().unwrap();
     let s = rig.driver.read().unwrap();
     assert!(
