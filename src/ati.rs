@@ -346,7 +346,8 @@ fn stream<T: CanTransport + Send + 'static>(
     rate: f64,
 ) -> Result<()> {
     let mut sensor = AtiSensor::spawn(driver, rate)?;
-    crate::readout::print_readings(&mut sensor, count, AtiSensor::health);
+    let every = crate::readout::reading_interval(rate);
+    crate::readout::print_readings(&mut sensor, count, every, AtiSensor::health);
     let c = sensor.counters();
     println!(
         "{} samples, {} timeouts, {} malformed, {} out of sequence, {} device errors, {} saturated",

@@ -167,7 +167,7 @@ struct SensorArgs {
 enum SensorCommand {
     /// Identity and calibration (firmware, serial, slot, matrix, counts per unit, units, status).
     Info,
-    /// A stream of readings (N, N·m, bias removed), ten per second.
+    /// A stream of readings (N, N·m, bias removed), ten per second (one per poll below 10 Hz).
     Read {
         /// Lines to print.
         #[arg(long, default_value_t = 20)]

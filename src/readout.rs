@@ -7,11 +7,23 @@ use std::time::Instant;
 
 use hal::ForceSensor;
 
-/// Print `count` readings of `sensor`, one every 100 ms: time, the wrench (N, N·m), the sample's age
-/// and `health(sensor)`; a read error is printed in the reading's place. Returns the time it took.
+/// The readout's pace: ten lines a second, or one per sample when the sensor delivers fewer (a line
+/// more often than that would print the same sample again).
+pub fn reading_interval(sample_rate_hz: f64) -> Duration {
+    let tenth = Duration::from_millis(100);
+    if sample_rate_hz.is_finite() && sample_rate_hz > 0.0 {
+        tenth.max(Duration::from_secs_f64(1.0 / sample_rate_hz))
+    } else {
+        tenth
+    }
+}
+
+/// Print `count` readings of `sensor`, one every `every`: time, the wrench (N, N·m), the sample's
+/// age and `health(sensor)`; a read error is printed in the reading's place. Returns the time it took.
 pub fn print_readings<S: ForceSensor, H: Debug>(
     sensor: &mut S,
     count: u32,
+    every: Duration,
     health: impl Fn(&S) -> H,
 ) -> Duration {
     let t0 = Instant::now();
@@ -20,7 +32,7 @@ pub fn print_readings<S: ForceSensor, H: Debug>(
         "t s", "Fx N", "Fy N", "Fz N", "Mx N·m", "My N·m", "Mz N·m", "age ms"
     );
     for _ in 0..count {
-        std::thread::sleep(Duration::from_millis(100));
+        std::thread::sleep(every);
         let t = t0.elapsed().as_secs_f64();
         match sensor.read() {
             Ok(s) => {
@@ -41,4 +53,18 @@ pub fn print_readings<S: ForceSensor, H: Debug>(
         }
     }
     t0.elapsed()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn readings_come_ten_a_second_or_one_per_sample_when_slower() {
+        assert_eq!(reading_interval(500.0), Duration::from_millis(100));
+        assert_eq!(reading_interval(10.0), Duration::from_millis(100));
+        assert_eq!(reading_interval(2.0), Duration::from_millis(500));
+        assert_eq!(reading_interval(f64::NAN), Duration::from_millis(100));
+        assert_eq!(reading_interval(0.0), Duration::from_millis(100));
+    }
 }

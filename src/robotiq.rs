@@ -219,7 +219,14 @@ fn info(port: &Path) -> Result<()> {
 }
 
 fn stream(mut ft: Ft300, count: u32) -> Result<()> {
-    let secs = crate::readout::print_readings(&mut ft, count, Ft300::health).as_secs_f64();
+    // The FT 300 streams at 100 Hz.
+    let secs = crate::readout::print_readings(
+        &mut ft,
+        count,
+        crate::readout::reading_interval(100.0),
+        Ft300::health,
+    )
+    .as_secs_f64();
     let c = ft.counters();
     println!(
         "{} frames ({:.1} Hz), {} CRC errors ({:.2} %), {} bytes skipped, {} stale, {} lost",
