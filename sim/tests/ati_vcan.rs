@@ -5,7 +5,7 @@
 //! Each test uses its own base identifier, so tests may share the interface. The interface name comes
 //! from `FORCECELL_VCAN` (default `vcan0`). Deadlines are generous (system calls inside UML are slow)
 //! and are multiplied by `FORCECELL_VCAN_TIME_SCALE` (default 1; `scripts/vcan-tests.sh` raises it
-//! under QEMU's software emulation): headroom, never a weaker assertion. No test asserts on timing.
+//! under User-Mode Linux and QEMU): headroom, never a weaker assertion. No test asserts on timing.
 
 mod ati_common;
 
