@@ -922,3 +922,61 @@ pub fn load_trace(path: &Path) -> Result<(Vec<Row>, Option<String>)> {
         Ok((rows, None))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A channel field's description, from its JSON schema.
+    fn description(topic: &str, field: &str) -> String {
+        let def = CHANNELS.iter().find(|c| c.topic == topic).unwrap();
+        let schema: serde_json::Value = serde_json::from_str(def.json_schema).unwrap();
+        schema["properties"][field]["description"]
+            .as_str()
+            .unwrap_or_else(|| panic!("{topic} {field}: no description"))
+            .to_owned()
+    }
+
+    /// `c name` for each code, joined as a schema lists them.
+    fn legend(codes: impl IntoIterator<Item = u8>, name: impl Fn(u8) -> &'static str) -> String {
+        codes
+            .into_iter()
+            .map(|c| format!("{c} {}", name(c)))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
+    #[test]
+    fn every_schema_legend_names_the_codes_as_the_recording_does() {
+        let cases = [
+            ("/state", "state", legend([0, 1, 2, 3, 255], state_name)),
+            ("/state", "fault", legend(0..=7, fault_name)),
+            (
+                "/process",
+                "mode",
+                legend(0..=2, |c| mode_name(Some(i64::from(c)))),
+            ),
+            (
+                "/process",
+                "phase",
+                legend([0, 1, 2, 3, 4, 9], |c| phase_name(Some(c))),
+            ),
+            ("/process", "fault", hal::ProcessFault::legend()),
+        ];
+        for (topic, field, want) in cases {
+            let d = description(topic, field);
+            // The list after any "…: " lead, item by item (a longer name is no match).
+            let listed: Vec<&str> = d.rsplit(": ").next().unwrap().split(", ").collect();
+            for item in want.split(", ") {
+                assert!(
+                    listed.contains(&item),
+                    "{topic} {field}: {d:?} does not list {item:?}"
+                );
+            }
+        }
+        // Past the listed codes the names say so (a new code must be listed above).
+        assert_eq!(fault_name(8), "unknown");
+        assert_eq!(process_fault_name(Some(7)), "unknown");
+        assert_eq!(phase_name(Some(5)), "unknown");
+    }
+}

@@ -326,6 +326,15 @@ impl ProcessFault {
         }
     }
 
+    /// Every wire number with its name, for a legend: `0 none, 1 sensor lost, …, 6 hold timeout`.
+    pub fn legend() -> String {
+        (0..)
+            .map_while(Self::from_code)
+            .map(|f| format!("{} {}", f.code(), f.name()))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
     /// The fault for a wire number, if the contract defines it.
     pub fn from_code(code: i64) -> Option<Self> {
         Some(match code {

@@ -261,6 +261,7 @@ impl ProcessSetup {
             "RSI -> KRL (ETHERNET outputs, written through MAP2SEN_PINT / MAP2SEN_PREA objects):"
                 .to_owned(),
         );
+        let fault_legend = hal::ProcessFault::legend();
         for (var, tag, what) in [
             (
                 format!("$SEN_PINT[{}]", io.state_pint),
@@ -275,7 +276,7 @@ impl ProcessSetup {
             (
                 format!("$SEN_PINT[{}]", io.fault_pint),
                 format!("{FC_STATE}.Fault"),
-                "0 none, 1 sensor, 2 force limit, 3 correction limit, 4 bad command, 5 contact lost, 6 hold timeout",
+                &fault_legend,
             ),
         ] {
             out.push(format!("  {var:<14} <- {tag:<14} ({}) {what}", indx(&tag)));
