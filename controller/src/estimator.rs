@@ -184,10 +184,10 @@ impl StiffnessEstimator {
         self.theta[0] = k * self.scale;
     }
 
-    /// Start over at `k̂_c(0)`.
+    /// Start over at `k̂_c(0)`, as [`new`](Self::new) left it: no fit's variance survives (it would
+    /// claim the tuning's guess known to that fit's precision).
     pub fn reset(&mut self) {
-        self.theta = [self.p.kc0 * self.scale, 0.0, 0.0];
-        self.cov = [[0.0; 3]; 3];
+        *self = Self::new(self.p, self.scale);
     }
 
     /// Contact begins at measured position `x` (m) with measured force `f` (N): re-anchor the model there

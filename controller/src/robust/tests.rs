@@ -199,3 +199,50 @@ fn one_zero_sample_or_a_short_dropout_is_not_a_lift_off_even_on_a_slow_cycle() {
     }
     assert_eq!(law.counters().contacts, 1);
 }
+
+#[test]
+fn a_restarted_law_is_a_fresh_law() {
+    // `start` (each PRESS of a process pass) must forget what the last pass learnt: anything a stage
+    // keeps across it makes the next pass differ from a first one. The first pass touches down, is
+    // fitted, loses the contact to a retreat and re-acquires it; the second, on a stiffer surface,
+    // loses its contact within a few cycles of touching down, before any fit of its own.
+    let p = params();
+    let mut used = RobustLaw::new(p).unwrap();
+    let mut x = 0.0095;
+    used.start(x);
+    let first = drive(&mut used, &mut x, 6000, 70_000.0, |i| {
+        if i < 3000 { 0.010 } else { 0.0115 }
+    });
+    assert!(
+        first.iter().any(|o| o.events.lift_off),
+        "the first pass lost contact"
+    );
+
+    let k = 200_000.0;
+    let touch = {
+        let mut law = RobustLaw::new(p).unwrap();
+        let mut x = 0.0095;
+        law.start(x);
+        let outs = drive(&mut law, &mut x, 3000, k, |_| 0.010);
+        outs.iter().position(|o| o.events.contact).unwrap()
+    };
+    let surface = move |i: usize| if i < touch + 3 { 0.010 } else { 0.0115 };
+    let mut fresh = RobustLaw::new(p).unwrap();
+    let (mut xa, mut xb) = (0.0095, 0.0095);
+    used.start(xa);
+    fresh.start(xb);
+    let again = drive(&mut used, &mut xa, 6000, k, surface);
+    let first = drive(&mut fresh, &mut xb, 6000, k, surface);
+    assert!(
+        first.iter().any(|o| o.events.lift_off),
+        "the second pass lost contact"
+    );
+    let differs = again
+        .iter()
+        .zip(&first)
+        .position(|(a, b)| a.x_cmd.to_bits() != b.x_cmd.to_bits() || a.state != b.state);
+    assert_eq!(
+        differs, None,
+        "the restarted law departs from a fresh one at step {differs:?}"
+    );
+}

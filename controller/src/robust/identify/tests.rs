@@ -55,8 +55,12 @@ fn the_onset_of_a_contact_from_the_approach_is_fitted() {
     }
     assert!(seeded, "the transient was fitted");
     assert!((id.kc() - k).abs() < 0.02 * k, "k̂ {}", id.kc());
+    assert!(id.kc_rel_sd() < 0.1, "the fit knows k̂: {}", id.kc_rel_sd());
     id.reset();
     assert_eq!(id.kc(), 50_000.0);
+    // Back at the tuning's guess, nothing is known of it: no fit's confidence survives a reset
+    // (the fast search's margin and a re-contact's confidence come from it).
+    assert_eq!(id.kc_rel_sd(), est().initial_uncertainty);
 }
 
 /// A touch-down on the 12 ms cell that bounces within the onset window (f_r 2.6 N on 355 kN/m, the
