@@ -148,7 +148,9 @@ fn ready_node(args: &[&str]) -> Kill {
 }
 
 /// `examples/cell.toml` as shipped (`tare = true`, the `[gravity]` model), pointed at loopback and `can`,
-/// with `duration` in place of the example's 60 s (`None`: the example's own).
+/// with `duration` in place of the example's 60 s (`None`: the example's own), its wall-clock bounds
+/// scaled by [`time_scale`], and the shipped robust tuning beside it as `robust.toml` with its hold
+/// scaled the same way.
 fn example_cell(dir: &Path, can: &str, port: u16, duration: Option<&str>) -> PathBuf {
     let shipped =
         std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/cell.toml"))
