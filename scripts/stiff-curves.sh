@@ -34,6 +34,8 @@ for k in "${stiffnesses[@]}"; do
   row="| $((k / 1000)) kN/m"
   for base in b05a-curve-slow b05b-curve-fast; do
     sed "s/^k_c = .*/k_c = $k.0/" "$here/scenarios/$base.toml" > "$tmp/$base-$k.toml"
+    # A file whose stiffness line reads otherwise would run unchanged under this row's label.
+    grep -qx "k_c = $k.0" "$tmp/$base-$k.toml" || { echo "stiff-curves: no 'k_c = ' line in $base.toml" >&2; exit 1; }
     for plant in p1 p2; do
       row+=" | $(cell "$tmp/$base-$k.toml" "$plant")"
     done

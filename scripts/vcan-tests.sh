@@ -14,6 +14,8 @@
 # Usage: scripts/vcan-tests.sh                         (auto: native, else UML, else QEMU)
 #        FORCECELL_VCAN_FILTER=replay scripts/vcan-tests.sh   (only the tests whose names contain it)
 #        FORCECELL_VCAN_MODE=native|uml|qemu scripts/vcan-tests.sh   (force one; fails if it cannot run)
+#        FORCECELL_VCAN_STALL=60/300 scripts/vcan-tests.sh   (UML: the guest gets 60 ms of CPU in every
+#                                                            300 ms, a host that stalls it up to 240 ms)
 # Prerequisites are installed with apt-get when missing. Exits non-zero, with the guest's output, when a
 # prerequisite is missing, the guest does not boot or finish, or any test fails. Never a silent skip.
 set -euo pipefail
@@ -194,7 +196,33 @@ EOF
       )" "${FORCECELL_VCAN_TIME_SCALE:-20}" "halt -f"
     } >"$init"
     chmod +x "$init"
-    uml_run "$init" "$work/console.log" 900
+    if [ -n "${FORCECELL_VCAN_STALL:-}" ]; then
+      # A stalling host on demand: the guest gets QUOTA ms of CPU in every PERIOD ms (a CPU cgroup),
+      # so it stalls up to PERIOD - QUOTA ms, as CI's host did.
+      [[ "$FORCECELL_VCAN_STALL" =~ ^([0-9]+)/([0-9]+)$ ]] ||
+        die "FORCECELL_VCAN_STALL must be QUOTA/PERIOD in ms (e.g. 60/300), not '$FORCECELL_VCAN_STALL'"
+      quota=$((BASH_REMATCH[1] * 1000)) period=$((BASH_REMATCH[2] * 1000))
+      if [ -d /sys/fs/cgroup/cpu ] && [ -f /sys/fs/cgroup/cpu/cgroup.procs ]; then
+        cg=/sys/fs/cgroup/cpu/forcecell-vcan-stall
+        as_root mkdir -p "$cg"
+        echo "$period" | as_root tee "$cg/cpu.cfs_period_us" >/dev/null
+        echo "$quota" | as_root tee "$cg/cpu.cfs_quota_us" >/dev/null
+      elif [ -f /sys/fs/cgroup/cgroup.controllers ]; then
+        cg=/sys/fs/cgroup/forcecell-vcan-stall
+        as_root mkdir -p "$cg"
+        echo "$quota $period" | as_root tee "$cg/cpu.max" >/dev/null
+      else
+        die "FORCECELL_VCAN_STALL needs a CPU cgroup (v1 cpu or v2), and this machine has none"
+      fi
+      say "stalling the guest: $((quota / 1000)) ms of CPU in every $((period / 1000)) ms ($cg)"
+      (
+        me=$BASHPID # this subshell (a pipeline's $BASHPID would be the pipeline's own)
+        echo "$me" | as_root tee "$cg/cgroup.procs" >/dev/null || die "cannot move the guest into $cg"
+        uml_run "$init" "$work/console.log" 1800
+      )
+    else
+      uml_run "$init" "$work/console.log" 900
+    fi
     finish UML "$work/console.log"
     exit 0
   fi
