@@ -24,9 +24,11 @@ use sim::InnerLoopModel;
 //   passed at three, and 1000 cases found a contact loss — the caution was chosen);
 // * the touch-down under noise still fails at its corners, where the noise is a large part of a
 //   small set-point or the cycle is slow: `noise_corners` (ignored; `--ignored` runs it) counts the
-//   seeds 1–199 that fail the touch-down criteria — f_r 2 N on 10 kN/m, P1: 8 at σ 0.82 N, 10 at 1
-//   N (on the mean error at the end); on the 12 ms cell at σ 1 N: f_r 5 N on 50 kN/m 55, f_r 2 N on
-//   10 kN/m 86 (mostly the mean error; impacts, contact losses and fault-5 endings in a few). The
+//   seeds 1–199 that fail the touch-down criteria — f_r 2 N on 10 kN/m, P1: 1 at σ 0.82 N, 2 at 1
+//   N (on the mean error at the end); on the 12 ms cell at σ 1 N: f_r 5 N on 50 kN/m 37, f_r 2 N on
+//   10 kN/m 62 (the mean error but for four impacts). They were 8, 10, 55 and 86 while the integral
+//   kept its full gain inside the noise and random-walked on it
+//   (`a_noisy_hold_at_a_small_set_point_does_not_wander_on_its_integral`). Before that: the
 //   helper branch alone measured 9, 12, 0, 67 and 89 (breakdown there: at f_r 5 N 58 on the mean
 //   error alone, at f_r 2 N 75 and 4 fault-5 endings); merged with the identification changes of
 //   this session (`changes.rs`) 8, 10, 0, 56, 88, and with the landing's cap 8, 10, 0, 55, 87
@@ -60,10 +62,11 @@ use sim::InnerLoopModel;
 //   had to stand out of the raw noise, they were 94, 158, 183 and 198, and f_r 20 N on 500 kN/m,
 //   P2, σ 1 N failed 106 (now 0). The 200 cases drawn here pass;
 // * with 3000 cases (`FORCECELL_RANGE_CASES=3000`; `FORCECELL_RANGE_SHRINK=0` shows them as drawn)
-//   `stiffness_changes` misses its mean error under noise at a small set-point on the 12 ms cell
-//   (f_r 2.9 N, 150 → 300 kN/m, σ 0.42 N: 0.127 N against 0.1 N); 1000 pass. With 1000 cases
-//   `touch_down_and_hold` misses its mean error under σ 0.61 N at f_r 2.2 N on the 12 ms cell
-//   (0.145 N against 0.106 N, the corners below). `surface_steps` passes 5000 cases; 20000 find a
+//   `stiffness_changes` misses its mean error under noise at a small set-point on P2 (f_r 2.5 N,
+//   78 → 39 kN/m, σ 0.47 N, 135 N·s/m: 0.161 N against 0.097 N); 1000 pass. With 1000 cases
+//   `touch_down_and_hold` misses its mean error under σ 0.43 N at f_r 2.46 N on the 12 ms cell
+//   (0.146 N against 0.093 N, the corners below); it found and we fixed a contact the law took back
+//   counted as lost (`a_contact_taken_back_at_the_start_is_not_a_lost_one`). `surface_steps` passes 5000 cases; 20000 find a
 //   step whose jump is within 0.03 % of the force limit (72.68 N against 72.71 N), which trips it:
 //   this test's bound has no margin there. Found with 1000 and 5000 cases and fixed
 //   (`surface_steps_found_on_the_slow_cell`): the fast search's re-contact at the force limit times
@@ -419,6 +422,30 @@ fn no_contact_is_declared_on_noise_measured_on_few_samples() {
     }
 }
 
+/// A noisy hold at a small set-point on P1 does not wander on its integral: f_r 2 N on 10 kN/m under
+/// σ 1 N, seeds that ended 0.12–0.2 N off on average over the last 0.5 s (bound 0.14 N) while the
+/// integral, at its full gain inside the noise, random-walked and the noise gate's weighted-down
+/// proportional path let the force follow the walk. The integral's gain now falls with the noise
+/// relative to the set-point (`response.integral_noise`).
+#[test]
+fn a_noisy_hold_at_a_small_set_point_does_not_wander_on_its_integral() {
+    for seed in [46, 71, 73, 106, 116, 133, 171, 173, 183] {
+        if let Err(e) = touch_down(2.0, 10e3, &CELLS[0], 1.0, seed) {
+            panic!("seed {seed}: {e}");
+        }
+    }
+}
+
+/// Found with 1000 cases: a first sample 3.1 N of noise (σ 0.91 N, before any noise was measured a
+/// strong raw sample is contact) was declared contact at f_r 21 N on 48 kN/m on P2, seed 625. The
+/// law took it back as a spike in free air and approached on, but the loop's guard counted the
+/// approach as contact lost while pressing and ended the run on fault 5 0.5 s later, just as the
+/// tool reached the surface.
+#[test]
+fn a_contact_taken_back_at_the_start_is_not_a_lost_one() {
+    touch_down(21.05, 48.25e3, &CELLS[1], 0.9065, 625).unwrap();
+}
+
 /// The touch-down's known limits under noise (see above), as failing seeds out of 1–199 per corner:
 /// no more than measured when this was written.
 #[test]
@@ -426,11 +453,11 @@ fn no_contact_is_declared_on_noise_measured_on_few_samples() {
 fn noise_corners() {
     // (f_r, k_c, cell, σ, failing seeds measured)
     let corners = [
-        (2.0, 10e3, 0, 0.82, 8),
-        (2.0, 10e3, 0, 1.0, 10),
+        (2.0, 10e3, 0, 0.82, 1),
+        (2.0, 10e3, 0, 1.0, 2),
         (20.0, 500e3, 1, 1.0, 0),
-        (5.0, 50e3, 2, 1.0, 55),
-        (2.0, 10e3, 2, 1.0, 86),
+        (5.0, 50e3, 2, 1.0, 37),
+        (2.0, 10e3, 2, 1.0, 62),
     ];
     for (f_r, k_c, cell_i, noise, measured) in corners {
         let failing = (1..200u64)

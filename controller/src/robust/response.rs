@@ -16,6 +16,13 @@ pub struct ResponseParams {
     pub integral: f64,
     /// Largest magnitude of the integral term, m.
     pub integral_limit: f64,
+    /// Sensor noise, relative to the set-point, at which the integral's gain is halved (advanced): the
+    /// gain is `integral / (1 + (σ / (integral_noise·f_r))²)`. The integral pulls in what the
+    /// proportional path leaves standing (a servo that stops short of its command); inside the noise
+    /// gate it would random-walk on the noise instead, and the weighted-down proportional path lets
+    /// the force follow that walk.
+    #[serde(default = "default_integral_noise")]
+    pub integral_noise: f64,
     /// Natural frequency of the surface observer the estimator's motion test and the reported `x̂_c`
     /// use, Hz.
     pub surface_bandwidth: f64,
@@ -50,6 +57,10 @@ fn default_jump_caution() -> f64 {
     2.0
 }
 
+fn default_integral_noise() -> f64 {
+    0.1
+}
+
 fn default_integration_band() -> f64 {
     0.3
 }
@@ -63,6 +74,7 @@ impl ResponseParams {
         }
         non_negative("response.integral", self.integral)?;
         non_negative("response.integral_limit", self.integral_limit)?;
+        positive("response.integral_noise", self.integral_noise)?;
         positive("response.surface_bandwidth", self.surface_bandwidth)?;
         positive("response.surface_jerk", self.surface_jerk)?;
         positive("response.noise_floor", self.noise_floor)?;
@@ -151,7 +163,8 @@ impl Response {
         // answers: integrating it would wind up and overshoot the ramp's end.
         if e.abs() <= r.integration_band * force_scale && self.rate == 0.0 {
             let lim = r.integral_limit;
-            self.integ = (self.integ + dt * r.integral * delta).clamp(-lim, lim);
+            let gain = r.integral / (1.0 + noise_var / (r.integral_noise * force_scale).powi(2));
+            self.integ = (self.integ + dt * gain * delta).clamp(-lim, lim);
         }
         (weight * r.kappa * delta, self.integ)
     }
@@ -165,6 +178,7 @@ mod tests {
         kappa: 0.8,
         integral: 1.5,
         integral_limit: 0.0003,
+        integral_noise: 0.1,
         surface_bandwidth: 8.0,
         surface_jerk: 0.001,
         noise_floor: 0.02,
@@ -193,6 +207,28 @@ mod tests {
         assert!(p < 0.1 * 0.8 * 0.1 / 50_000.0, "{p}");
         r.begin_contact();
         assert_eq!(r.correction(0.0, 50_000.0, 0.0, 5.0, 1e-3).1, 0.0);
+    }
+
+    /// The integral's gain halves where the noise is `integral_noise` of the set-point, and falls with
+    /// its square beyond: it pulls in a standing error, not the noise.
+    #[test]
+    fn the_integral_slows_down_in_noise() {
+        let first_step = |noise_var: f64| {
+            let mut r = Response::new(P, 5.0);
+            r.correction(4.9, 50_000.0, noise_var, 5.0, 1e-3).1
+        };
+        let quiet = first_step(0.0);
+        assert!(
+            (quiet - 1e-3 * 1.5 * 0.1 / 50_000.0).abs() < 1e-18,
+            "{quiet}"
+        );
+        assert!((first_step(0.25) - quiet / 2.0).abs() < 1e-18);
+        assert!((first_step(1.0) - quiet / 5.0).abs() < 1e-18);
+        let p = ResponseParams {
+            integral_noise: 0.0,
+            ..P
+        };
+        assert!(p.validate().unwrap_err().contains("integral_noise"));
     }
 
     #[test]

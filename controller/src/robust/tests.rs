@@ -246,3 +246,22 @@ fn a_restarted_law_is_a_fresh_law() {
         "the restarted law departs from a fresh one at step {differs:?}"
     );
 }
+
+/// A servo that stops short of its command (2 µm here, 1.25 N on 500 kN/m: stiction, a position loop
+/// without integral action) is pulled in by the law's integral, which the proportional path, anchored
+/// on the reported position, cannot do: without the integral the force stands 1.25 N short.
+#[test]
+fn a_servo_that_stops_short_is_pulled_in() {
+    let p = params();
+    let (k, short) = (500_000.0, 2e-6);
+    let mut law = RobustLaw::new(p).unwrap();
+    let mut x = 0.0095;
+    law.start(x);
+    let mut f = 0.0;
+    for _ in 0..4000 {
+        f = (k * (x - 0.010)).max(0.0);
+        let out = law.step(x, f, 1e-3);
+        x += 0.2 * (out.x_cmd - short - x);
+    }
+    assert!((f - p.f_r).abs() < 0.01, "force {f} N after 4 s");
+}

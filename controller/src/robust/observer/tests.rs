@@ -50,6 +50,7 @@ fn response() -> crate::robust::ResponseParams {
         kappa: 0.8,
         integral: 1.5,
         integral_limit: 3e-4,
+        integral_noise: 0.1,
         surface_bandwidth: 8.0,
         surface_jerk: 1e-3,
         noise_floor: 0.02,
