@@ -289,6 +289,50 @@ pub fn bias_config() -> BiasConfig {
     }
 }
 
+/// How many windows [`tare`] takes before a bus that keeps losing samples refuses the bias.
+pub const TARE_WINDOWS: u32 = 3;
+
+/// Take the bias over [`bias_config`]'s window. A window that missed a sample (one poll unanswered:
+/// a bus hiccup) is taken again, up to [`TARE_WINDOWS`] windows, each retry said on stderr; a moving
+/// or saturated tool, a sensor fault or a sensor gone are refused at once, as the driver says.
+pub fn tare<T: CanTransport>(driver: &mut Driver<T>) -> Result<[f64; 6]> {
+    let mut window = 1;
+    loop {
+        match driver.tare(bias_config()) {
+            Ok(bias) => return Ok(bias),
+            Err(ati_can::AtiError::Bias(ati_can::BiasError::NoAnswer)) if window < TARE_WINDOWS => {
+                window += 1;
+                eprintln!(
+                    "bias: a sample was missing in the window; taking it again ({window} of {TARE_WINDOWS})"
+                );
+                // The driver's health may have left Ok on the miss: a bias starts on a good sample.
+                first_good_sample(driver)?;
+            }
+            Err(ati_can::AtiError::Bias(ati_can::BiasError::NoAnswer)) => {
+                bail!(
+                    "bias refused: samples were missing in each of {TARE_WINDOWS} windows of {} (check the bus and the turnaround)",
+                    bias_config().window
+                )
+            }
+            Err(e) => return Err(e.into()),
+        }
+    }
+}
+
+/// Step until the newest answer is a good sample (20 polls at most).
+fn first_good_sample<T: CanTransport>(driver: &mut Driver<T>) -> Result<()> {
+    for _ in 0..20 {
+        if matches!(driver.health(), Health::Ok) {
+            return Ok(());
+        }
+        driver.step()?;
+    }
+    bail!(
+        "bias refused: no good sample in 20 polls after a missed one (health {:?})",
+        driver.health()
+    )
+}
+
 /// `forcecell sensor ati`: talk to a real sensor (or the simulated node) on `iface`.
 /// With `can_log`, every frame sent and received is logged there in candump `-L` format.
 pub fn sensor(
@@ -323,7 +367,7 @@ pub fn sensor(
             Ok(())
         }
         SensorAction::Tare => {
-            let bias = driver.tare(bias_config())?;
+            let bias = tare(&mut driver)?;
             println!("bias (counts, sg0..sg5): {bias:.1?}");
             println!(
                 "the bias lives in this process only; `sensor ati read --tare` takes it again"
@@ -332,7 +376,7 @@ pub fn sensor(
         }
         SensorAction::Read { count, rate, tare } => {
             if tare {
-                let bias = driver.tare(bias_config())?;
+                let bias = self::tare(&mut driver)?;
                 println!("bias (counts): {bias:.1?}");
             }
             stream(driver, count, rate)

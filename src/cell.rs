@@ -234,7 +234,7 @@ impl SensorConfig {
                 if zero_at_start {
                     // The bias needs samples: start-up ends before the first poll.
                     crate::ati::first_sample(&mut driver)?;
-                    let bias = driver.tare(crate::ati::bias_config()).context(
+                    let bias = crate::ati::tare(&mut driver).context(
                         "bias at start (sensor.tare = true; the tool must be in free air and still)",
                     )?;
                     println!("bias taken (counts): {bias:.1?}");
