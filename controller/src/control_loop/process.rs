@@ -8,7 +8,7 @@ use hal::{ProcessCommand, ProcessFault, ProcessMode, ProcessPhase, ProcessState}
 use serde::{Deserialize, Serialize};
 
 use super::guard::{Guard, Tripped, back_off_target};
-use crate::law::Output;
+use crate::law::{ContactState, Output};
 
 /// How the process reacts to the program's commands. Forces in N, times in s.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -349,6 +349,18 @@ impl Process {
     pub fn after_step(&mut self, out: &Output, f: f64, dt: f64) -> Result<(), Tripped> {
         let in_contact = self.guard.check(&self.cfg, out, f, self.target, dt)?;
         match self.phase {
+            ProcessPhase::Ramp | ProcessPhase::Pressing
+                if out.state == Some(ContactState::Approach) =>
+            {
+                // The law took the contact back (a touch-down that bounced before its stiffness was
+                // known, a noise spike in free air) and approaches again: so does the pass, and a
+                // ramp starts over from the next contact.
+                self.phase = ProcessPhase::Approach;
+                if self.ramp > 0.0 {
+                    self.sp = self.cfg.entry_force.min(self.target);
+                    self.rate = self.ramp_rate(self.sp, self.target);
+                }
+            }
             ProcessPhase::Approach if in_contact => {
                 self.phase = ProcessPhase::Ramp;
                 if self.ramp > 0.0 {
@@ -390,7 +402,6 @@ impl Process {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::law::ContactState;
 
     fn press(f: f64, ramp: f64) -> ProcessCommand {
         ProcessCommand {
@@ -443,6 +454,33 @@ mod tests {
         p.guard.f_filt = 19.5;
         p.after_step(&contact, 19.5, 0.004).unwrap();
         assert_eq!(p.phase, ProcessPhase::Pressing);
+    }
+
+    /// A contact the law takes back (it approaches again) puts the pass back to its approach, and
+    /// the program's ramp starts over from the next contact instead of going on in free air.
+    #[test]
+    fn a_contact_the_law_takes_back_restarts_the_approach_and_the_ramp() {
+        let mut p = Process::new(ProcessConfig::default());
+        p.command(&press(20.0, 0.5)).unwrap();
+        let contact = Output {
+            state: Some(ContactState::Contact),
+            ..Output::default()
+        };
+        p.after_step(&contact, 3.0, 0.004).unwrap();
+        for _ in 0..10 {
+            p.ramp_step(0.004);
+        }
+        assert!(p.sp > 4.0, "{}", p.sp);
+        let approach = Output {
+            state: Some(ContactState::Approach),
+            ..Output::default()
+        };
+        p.after_step(&approach, 0.0, 0.004).unwrap();
+        assert_eq!(p.phase, ProcessPhase::Approach);
+        assert_eq!(p.sp, 2.0, "back to the entry force");
+        assert!(!p.ramp_step(0.004), "no ramp before the next contact");
+        p.after_step(&contact, 2.5, 0.004).unwrap();
+        assert_eq!((p.phase, p.sp), (ProcessPhase::Ramp, 2.5));
     }
 
     #[test]

@@ -1,6 +1,6 @@
 //! The loop's unit tests, against mocked devices.
 use super::*;
-use crate::law::ImpedanceLaw;
+use crate::law::{ContactState, ImpedanceLaw};
 use hal::mock::{MockRobot, MockSensor};
 use hal::{Pose, Sample, Vector3, Wrench};
 use mockall::Sequence;
@@ -610,4 +610,76 @@ fn the_laws_clock_is_the_robots_stamps_held_and_skipped_cycles_included() {
         .zip(&steps)
         .all(|(dt, n)| *dt == *n as f64 * 0.004);
     assert!(whole, "{:?}", lp.law().dts);
+}
+
+/// A law in contact for its first `contact_steps` steps, then approaching again (it took the contact
+/// back), that keeps the set-point it is given.
+struct TakeBackLaw {
+    contact_steps: usize,
+    steps: usize,
+    sp: f64,
+}
+
+impl ForceLaw for TakeBackLaw {
+    fn start(&mut self, _x: f64) {}
+    fn step(&mut self, x: f64, _f: f64, _dt: f64) -> Output {
+        self.steps += 1;
+        let state = if self.steps <= self.contact_steps {
+            ContactState::Contact
+        } else {
+            ContactState::Approach
+        };
+        Output {
+            x_cmd: x,
+            state: Some(state),
+            ..Output::default()
+        }
+    }
+    fn set_point(&self) -> f64 {
+        self.sp
+    }
+    fn set_set_point(&mut self, f_r: f64) -> Result<(), String> {
+        self.sp = f_r;
+        Ok(())
+    }
+}
+
+#[test]
+fn a_contact_the_law_takes_back_hands_it_the_entry_force_again() {
+    // PRESS 20 N over a 0.5 s ramp; the law touches at 3 N, ramps for five steps, then approaches
+    // again: the pass is back at its approach and the law at the entry force (2 N), not at the
+    // ramp's 3.7 N, until the next contact.
+    let press = hal::ProcessCommand {
+        mode: hal::ProcessMode::Press,
+        force: 20.0,
+        ramp: 0.5,
+        segment: 1,
+    };
+    let mut robot = MockRobot::new();
+    let mut k = 0;
+    robot.expect_next_cycle().returning(move || {
+        k += 1;
+        Ok(Cycle {
+            process: Some(press),
+            ..cycle_at(k, 0.001)
+        })
+    });
+    robot.expect_reply().returning(|_| Ok(()));
+    let mut sensor = MockSensor::new();
+    sensor.expect_read().returning(|| Ok(sample(3.0)));
+    let law = TakeBackLaw {
+        contact_steps: 5,
+        steps: 0,
+        sp: 0.0,
+    };
+    let mut lp = ControlLoop::new(robot, sensor, law, LoopConfig::default());
+    for _ in 0..5 {
+        lp.cycle().unwrap();
+    }
+    assert!(lp.law().sp > 3.0, "ramping: {}", lp.law().sp);
+    for _ in 0..3 {
+        lp.cycle().unwrap();
+    }
+    assert_eq!(lp.process_state().phase, hal::ProcessPhase::Approach);
+    assert_eq!(lp.law().sp, 2.0);
 }
