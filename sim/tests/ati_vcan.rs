@@ -5,7 +5,8 @@
 //! Each test uses its own base identifier, so tests may share the interface. The interface name comes
 //! from `FORCECELL_VCAN` (default `vcan0`). Deadlines are generous (system calls inside UML are slow)
 //! and are multiplied by `FORCECELL_VCAN_TIME_SCALE` (default 1; `scripts/vcan-tests.sh` raises it
-//! under User-Mode Linux and QEMU): headroom, never a weaker assertion. No test asserts on timing.
+//! under User-Mode Linux and QEMU; the driver's turnaround by at most 5 of it): headroom, never a
+//! weaker assertion. No test asserts on timing.
 
 mod ati_common;
 
@@ -30,9 +31,9 @@ fn iface() -> String {
     std::env::var("FORCECELL_VCAN").unwrap_or_else(|_| "vcan0".into())
 }
 
-/// A deadline with the configured headroom for slow guests (`FORCECELL_VCAN_TIME_SCALE`, 1 to 100).
-fn deadline(d: Duration) -> Duration {
-    let scale = std::env::var("FORCECELL_VCAN_TIME_SCALE")
+/// The configured headroom for slow guests (`FORCECELL_VCAN_TIME_SCALE`, 1 to 100).
+fn scale() -> u32 {
+    std::env::var("FORCECELL_VCAN_TIME_SCALE")
         .ok()
         .map(|s| {
             s.parse::<u32>()
@@ -40,9 +41,19 @@ fn deadline(d: Duration) -> Duration {
                 .filter(|k| (1..=100).contains(k))
                 .unwrap_or_else(|| panic!("FORCECELL_VCAN_TIME_SCALE must be 1 to 100, not {s:?}"))
         })
-        .unwrap_or(1);
-    d * scale
+        .unwrap_or(1)
 }
+
+/// A deadline with the configured headroom.
+fn deadline(d: Duration) -> Duration {
+    d * scale()
+}
+
+/// The most of the time scale the driver's turnaround takes. The scale is set for `run`'s chains of
+/// wall-clock bounds (`tests/ati_cli_vcan.rs`: 20 under UML); a turnaround only needs to outlast a
+/// stall of the guest (CI's UML guest stalled 150 ms, `FORCECELL_VCAN_STALL=60/300` stalls it up to
+/// 240 ms): 200 ms × 5 = 1 s. Every answer these tests drop waits out a whole turnaround.
+const TURNAROUND_SCALE_MAX: u32 = 5;
 
 fn open() -> SocketCanTransport {
     SocketCanTransport::open(&iface()).unwrap_or_else(|e| panic!("{e}: {WHY}"))
@@ -87,8 +98,8 @@ fn vcan_config(base: u8) -> Config {
     Config {
         base: Base::new(base).unwrap(),
         // vcan has no bit rate; inside UML a system call takes ~0.1–0.5 ms and threads are scheduled
-        // on a slow clock: give every answer 200 ms.
-        turnaround: deadline(Duration::from_millis(200)),
+        // on a slow clock: give every answer 200 ms, more under a guest that may stall.
+        turnaround: Duration::from_millis(200) * scale().min(TURNAROUND_SCALE_MAX),
         stale_after: Duration::from_secs(60),
         ..Config::default()
     }
@@ -115,7 +126,9 @@ impl Bus for Vcan {
             raise: Some(Box::new(move |e| {
                 raiser.inject_error(e).expect("inject error frame")
             })),
-            settle: || std::thread::sleep(deadline(Duration::from_millis(100))),
+            settle: || {
+                std::thread::sleep(Duration::from_millis(100) * scale().min(TURNAROUND_SCALE_MAX))
+            },
             keep: vec![Box::new(thread)],
         }
     }
