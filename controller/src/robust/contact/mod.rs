@@ -63,6 +63,16 @@ pub struct ContactMachine {
     v_lost: f64,
     /// The measured position when contact was last lost, m.
     x_lost: f64,
+    /// Time searched since contact was last lost, s.
+    t_lost: f64,
+    /// How fast the surface went away during the search that ended in the last re-contact: the
+    /// re-contact's position less the loss's, over the search's time (0 when it came nearer, and
+    /// after a touch-down from the approach), m/s.
+    v_seen: f64,
+    /// `v_seen` when contact was lost again within a bounce of that re-contact (0 otherwise), m/s:
+    /// the surface is going away at about that speed while the observer, restarted at the
+    /// re-contact, has not seen it move.
+    v_bounced: f64,
     /// That loss is searched for at approach speed (a bounce, or the tool moving away).
     slow: bool,
     /// A touch-down from the approach whose stiffness is not identified yet.
@@ -82,6 +92,9 @@ impl ContactMachine {
             in_contact: f64::INFINITY,
             v_lost: 0.0,
             x_lost: 0.0,
+            t_lost: 0.0,
+            v_seen: 0.0,
+            v_bounced: 0.0,
             slow: false,
             landing: false,
         };
@@ -104,6 +117,9 @@ impl ContactMachine {
         self.in_contact = f64::INFINITY;
         self.v_lost = 0.0;
         self.x_lost = 0.0;
+        self.t_lost = 0.0;
+        self.v_seen = 0.0;
+        self.v_bounced = 0.0;
         self.slow = false;
         self.landing = false;
     }
@@ -170,8 +186,16 @@ impl ContactMachine {
             ContactState::Approach | ContactState::Reacquire => {
                 // The conditioned force, confirmed by the raw one (the filter still remembers a
                 // contact just lost), or one strong raw sample.
+                if self.state == ContactState::Reacquire {
+                    self.t_lost += dt;
+                }
                 if (s.ff >= th.contact && s.f >= th.lift) || s.f >= th.strong {
                     let from_approach = self.state == ContactState::Approach;
+                    self.v_seen = if from_approach {
+                        0.0
+                    } else {
+                        ((s.x - self.x_lost) / self.t_lost.max(dt)).max(0.0)
+                    };
                     self.landing = from_approach;
                     self.state = ContactState::Contact;
                     self.below = 0.0;
@@ -205,6 +229,12 @@ impl ContactMachine {
                         self.travelled = if self.slow { c.reacquire_distance } else { 0.0 };
                         self.last_u = f64::NAN;
                         self.v_lost = receding;
+                        self.v_bounced = if self.in_contact < c.bounce_time {
+                            self.v_seen
+                        } else {
+                            0.0
+                        };
+                        self.t_lost = 0.0;
                         self.landing = false;
                         self.x_lost = s.x;
                         return Transition::LiftOff;

@@ -120,12 +120,19 @@ impl ContactMachine {
                 // the lost contact, fast farther on; after the fast distance at what stops within
                 // 2·f_r (after a bounce or the tool's own retreat at approach speed: the `k̂_c` the
                 // speed is bounded with may be a fit of noise), or faster when the surface was seen
-                // receding at lift-off (a receding surface outruns a slow search).
+                // receding at lift-off (a receding surface outruns a slow search). After a bounce
+                // off a re-contact, a surface seen going away during the search before chases it at
+                // up to the speed that stops within 2·f_r (B5b's sine start on P2: the observer,
+                // restarted at the re-contact, saw 0.2 mm/s of the surface's 6 mm/s, and the search
+                // at approach speed caught it 0.21 s later as it turned; at the seen speed, bounded
+                // only by the fast search, it hit at 18 N).
                 let speed = if u < self.x_lost - sp.penetration {
                     sp.reacquire
                 } else if self.travelled >= c.reacquire_distance {
                     let slow = if self.slow { sp.approach } else { sp.near };
+                    let chase = (sp.approach + c.reacquire_outrun * self.v_bounced).min(sp.near);
                     slow.max(sp.approach + c.reacquire_outrun * self.v_lost)
+                        .max(chase)
                         .min(sp.reacquire)
                 } else if sp.margin > 0.0 && u < self.x_lost + sp.margin {
                     sp.near
