@@ -254,19 +254,32 @@ fn print_info(info: &DeviceInfo) {
     }
 }
 
-/// Poll until the driver has its first sample (start-up ends before the first poll), at most 20
-/// polls, each bounded by the request deadline. `Err` says why no sample came.
+/// Poll until the driver has its first sample (start-up ends before the first poll), at most
+/// [`POLLS`] polls, each bounded by the request deadline. `Err` says why no sample came.
 pub fn first_sample<T: CanTransport>(driver: &mut Driver<T>) -> Result<()> {
-    for _ in 0..20 {
-        if driver.health() != Health::Waiting {
-            return Ok(());
+    if !poll_until(driver, |h| h != Health::Waiting)? {
+        bail!(
+            "the sensor answered start-up but no poll in {POLLS} (check the bus and the turnaround)"
+        );
+    }
+    Ok(())
+}
+
+/// How many polls [`first_sample`] and a tare's retry wait for a sample.
+const POLLS: usize = 20;
+
+/// Step the driver until `done(health)`, at most [`POLLS`] polls; whether it got there.
+fn poll_until<T: CanTransport>(
+    driver: &mut Driver<T>,
+    done: impl Fn(Health) -> bool,
+) -> Result<bool> {
+    for _ in 0..POLLS {
+        if done(driver.health()) {
+            return Ok(true);
         }
         driver.step()?;
     }
-    if driver.health() == Health::Waiting {
-        bail!("the sensor answered start-up but no poll in 20 (check the bus and the turnaround)");
-    }
-    Ok(())
+    Ok(done(driver.health()))
 }
 
 /// One line naming a sensor: firmware, serial, calibration slot, units.
@@ -306,7 +319,12 @@ pub fn tare<T: CanTransport>(driver: &mut Driver<T>) -> Result<[f64; 6]> {
                     "bias: a sample was missing in the window; taking it again ({window} of {TARE_WINDOWS})"
                 );
                 // The driver's health may have left Ok on the miss: a bias starts on a good sample.
-                first_good_sample(driver)?;
+                if !poll_until(driver, |h| h == Health::Ok)? {
+                    bail!(
+                        "bias refused: no good sample in {POLLS} polls after a missed one (health {:?})",
+                        driver.health()
+                    );
+                }
             }
             Err(ati_can::AtiError::Bias(ati_can::BiasError::NoAnswer)) => {
                 bail!(
@@ -317,20 +335,6 @@ pub fn tare<T: CanTransport>(driver: &mut Driver<T>) -> Result<[f64; 6]> {
             Err(e) => return Err(e.into()),
         }
     }
-}
-
-/// Step until the newest answer is a good sample (20 polls at most).
-fn first_good_sample<T: CanTransport>(driver: &mut Driver<T>) -> Result<()> {
-    for _ in 0..20 {
-        if matches!(driver.health(), Health::Ok) {
-            return Ok(());
-        }
-        driver.step()?;
-    }
-    bail!(
-        "bias refused: no good sample in 20 polls after a missed one (health {:?})",
-        driver.health()
-    )
 }
 
 /// `forcecell sensor ati`: talk to a real sensor (or the simulated node) on `iface`.

@@ -604,10 +604,11 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             Act::Control => {
                 if let (None, Some(fv)) = (fault, f) {
                     let dt = self.law_dt(&cycle);
-                    // The ramp's step, or a set-point the process changed after the last law
-                    // step (a contact the law took back restarts the ramp at the entry force).
-                    let ramped = self.process.ramp_step(dt);
-                    if ramped || self.law.set_point() != self.process.sp {
+                    // The law takes the process's set-point: the ramp's step, or one the process
+                    // changed after the last law step (a contact the law took back restarts the
+                    // ramp at the entry force).
+                    self.process.ramp_step(dt);
+                    if self.law.set_point() != self.process.sp {
                         self.law
                             .set_set_point(self.process.sp)
                             .expect("a ramp between checked forces is a valid set-point");

@@ -319,17 +319,15 @@ impl Process {
         }
     }
 
-    /// Move the set-point one step along its ramp; true when it changed.
-    pub fn ramp_step(&mut self, dt: f64) -> bool {
+    /// Move the set-point one step along its ramp (none before contact).
+    pub fn ramp_step(&mut self, dt: f64) {
         let to = match (self.phase, self.release) {
             (ProcessPhase::Release, Release::RampDown) => self.cfg.entry_force.min(self.target),
-            (ProcessPhase::Approach, _) => return false,
+            (ProcessPhase::Approach, _) => return,
             _ => self.target,
         };
-        let before = self.sp;
         let d = self.rate * dt;
         self.sp += (to - self.sp).clamp(-d, d);
-        self.sp != before
     }
 
     /// What to do with the command this cycle.
@@ -436,7 +434,8 @@ mod tests {
         assert_eq!(p.command(&press(20.0, 0.5)), Ok(true));
         assert_eq!(p.phase, ProcessPhase::Approach);
         assert_eq!(p.sp, 2.0);
-        assert!(!p.ramp_step(0.004), "no ramp before contact");
+        p.ramp_step(0.004);
+        assert_eq!(p.sp, 2.0, "no ramp before contact");
         let contact = Output {
             state: Some(ContactState::Contact),
             ..Output::default()
@@ -478,7 +477,8 @@ mod tests {
         p.after_step(&approach, 0.0, 0.004).unwrap();
         assert_eq!(p.phase, ProcessPhase::Approach);
         assert_eq!(p.sp, 2.0, "back to the entry force");
-        assert!(!p.ramp_step(0.004), "no ramp before the next contact");
+        p.ramp_step(0.004);
+        assert_eq!(p.sp, 2.0, "no ramp before the next contact");
         p.after_step(&contact, 2.5, 0.004).unwrap();
         assert_eq!((p.phase, p.sp), (ProcessPhase::Ramp, 2.5));
     }

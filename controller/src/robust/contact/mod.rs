@@ -49,12 +49,10 @@ pub struct ContactMachine {
     t_lost: f64,
     /// How fast the surface went away during the search that ended in the last re-contact: the
     /// re-contact's position less the loss's, over the search's time (0 when it came nearer, and
-    /// after a touch-down from the approach), m/s.
+    /// after a touch-down from the approach), m/s. Kept through a bounce off that re-contact (the
+    /// surface is going away at about that speed while the observer, restarted at the re-contact,
+    /// has not seen it move); a steady contact's loss clears it.
     v_seen: f64,
-    /// `v_seen` when contact was lost again within a bounce of that re-contact (0 otherwise), m/s:
-    /// the surface is going away at about that speed while the observer, restarted at the
-    /// re-contact, has not seen it move.
-    v_bounced: f64,
     /// That loss is searched for at approach speed (a bounce, or the tool moving away).
     slow: bool,
     /// A touch-down from the approach whose stiffness is not identified yet.
@@ -76,7 +74,6 @@ impl ContactMachine {
             x_lost: 0.0,
             t_lost: 0.0,
             v_seen: 0.0,
-            v_bounced: 0.0,
             slow: false,
             landing: false,
         };
@@ -101,7 +98,6 @@ impl ContactMachine {
         self.x_lost = 0.0;
         self.t_lost = 0.0;
         self.v_seen = 0.0;
-        self.v_bounced = 0.0;
         self.slow = false;
         self.landing = false;
     }
@@ -183,11 +179,9 @@ impl ContactMachine {
                         self.travelled = if self.slow { c.reacquire_distance } else { 0.0 };
                         self.last_u = f64::NAN;
                         self.v_lost = receding;
-                        self.v_bounced = if self.in_contact < c.bounce_time {
-                            self.v_seen
-                        } else {
-                            0.0
-                        };
+                        if self.in_contact >= c.bounce_time {
+                            self.v_seen = 0.0;
+                        }
                         self.t_lost = 0.0;
                         self.landing = false;
                         self.x_lost = s.x;

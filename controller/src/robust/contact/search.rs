@@ -130,7 +130,7 @@ impl ContactMachine {
                     sp.reacquire
                 } else if self.travelled >= c.reacquire_distance {
                     let slow = if self.slow { sp.approach } else { sp.near };
-                    let chase = (sp.approach + c.reacquire_outrun * self.v_bounced).min(sp.near);
+                    let chase = (sp.approach + c.reacquire_outrun * self.v_seen).min(sp.near);
                     slow.max(sp.approach + c.reacquire_outrun * self.v_lost)
                         .max(chase)
                         .min(sp.reacquire)
