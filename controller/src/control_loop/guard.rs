@@ -11,6 +11,20 @@ use crate::law::{ContactState, Output};
 /// A fault the guard found: its contract code and why, for the operator.
 pub type Tripped = (ProcessFault, String);
 
+/// What a law step's output says of contact, as the guard read it: the one reading the process
+/// follows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Touch {
+    /// In contact: the law's contact state, or the filtered force without one.
+    Contact,
+    /// The law approaches: the first approach, or anew after what it had taken for contact it now
+    /// calls a touch-down that bounced, or a noise spike in free air. No contact is lost; the next
+    /// one counts.
+    Approach,
+    /// No contact: not made yet, or lost for less than `contact_loss_time`.
+    Free,
+}
+
 /// The guard's state: the filtered force, and whether and how long contact was lost.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(super) struct Guard {
@@ -36,8 +50,8 @@ impl Guard {
     }
 
     /// Check a law step's output `out` taken with force `f` against set-point `f_r`, `dt` after the
-    /// last step. `Ok(true)` while in contact. Contact is the law's own contact state where it has
-    /// one, else the filtered force at or above `min(entry_force, f_r)`.
+    /// last step. Contact is the law's own contact state where it has one, else the filtered force
+    /// at or above `min(entry_force, f_r)`.
     pub fn check(
         &mut self,
         cfg: &ProcessConfig,
@@ -45,7 +59,7 @@ impl Guard {
         f: f64,
         f_r: f64,
         dt: f64,
-    ) -> Result<bool, Tripped> {
+    ) -> Result<Touch, Tripped> {
         if out.events.force_limit || f > cfg.max_force {
             return Err((
                 ProcessFault::ForceLimit,
@@ -65,13 +79,16 @@ impl Guard {
         if in_contact {
             self.had_contact = true;
             self.lost = 0.0;
-        } else if out.state == Some(ContactState::Approach) {
-            // The law approaches anew: what it had taken for contact it now calls a touch-down
-            // that bounced, or a noise spike in free air, and it approaches at approach speed. A
-            // loss counts again after the next contact (a spike on the first sample, before the
-            // noise was measured, ended a run 0.5 s later, as the tool reached the surface).
+            return Ok(Touch::Contact);
+        }
+        if out.state == Some(ContactState::Approach) {
+            // The law approaches at approach speed, bounded like any approach. A loss counts again
+            // after the next contact (a spike on the first sample, before the noise was measured,
+            // ended a run 0.5 s later, as the tool reached the surface).
             self.reset();
-        } else if self.had_contact {
+            return Ok(Touch::Approach);
+        }
+        if self.had_contact {
             self.lost += dt;
             if self.lost > cfg.contact_loss_time {
                 return Err((
@@ -80,7 +97,7 @@ impl Guard {
                 ));
             }
         }
-        Ok(in_contact)
+        Ok(Touch::Free)
     }
 }
 
@@ -131,7 +148,10 @@ mod tests {
         let cfg = ProcessConfig::default();
         let mut g = Guard::default();
         let contact = out(Some(ContactState::Contact));
-        assert_eq!(g.check(&cfg, &contact, 59.9, 20.0, 0.004), Ok(true));
+        assert_eq!(
+            g.check(&cfg, &contact, 59.9, 20.0, 0.004),
+            Ok(Touch::Contact)
+        );
         let (code, why) = g.check(&cfg, &contact, 60.1, 20.0, 0.004).unwrap_err();
         assert_eq!(code, ProcessFault::ForceLimit);
         assert!(why.contains("60.1"), "{why}");
@@ -162,7 +182,10 @@ mod tests {
         let searching = out(Some(ContactState::Approach));
         // An approach that never touched is not a lost contact, however long it lasts.
         for _ in 0..1000 {
-            assert_eq!(g.check(&cfg, &searching, 0.0, 20.0, 0.004), Ok(false));
+            assert_eq!(
+                g.check(&cfg, &searching, 0.0, 20.0, 0.004),
+                Ok(Touch::Approach)
+            );
         }
         g.check(&cfg, &out(Some(ContactState::Contact)), 20.0, 20.0, 0.004)
             .unwrap();
@@ -174,7 +197,7 @@ mod tests {
         g.check(&cfg, &out(Some(ContactState::Contact)), 20.0, 20.0, 0.004)
             .unwrap();
         assert_eq!(g.lost, 0.0);
-        let mut r = Ok(false);
+        let mut r = Ok(Touch::Free);
         let mut n = 0;
         while r.is_ok() {
             r = g.check(&cfg, &lost, 0.0, 20.0, 0.004);
@@ -186,7 +209,7 @@ mod tests {
         assert!((125..=126).contains(&n), "{n}");
         assert!(g.lost > cfg.contact_loss_time && g.lost - 0.004 <= cfg.contact_loss_time);
         g.reset();
-        assert_eq!(g.check(&cfg, &lost, 0.0, 20.0, 0.004), Ok(false));
+        assert_eq!(g.check(&cfg, &lost, 0.0, 20.0, 0.004), Ok(Touch::Free));
     }
 
     /// A contact the law itself takes back (it approaches anew: a bounce at touch-down, a noise
@@ -200,7 +223,10 @@ mod tests {
             .unwrap();
         let approach = out(Some(ContactState::Approach));
         for _ in 0..1000 {
-            assert_eq!(g.check(&cfg, &approach, 0.0, 20.0, 0.004), Ok(false));
+            assert_eq!(
+                g.check(&cfg, &approach, 0.0, 20.0, 0.004),
+                Ok(Touch::Approach)
+            );
         }
         g.check(&cfg, &out(Some(ContactState::Contact)), 20.0, 20.0, 0.004)
             .unwrap();
@@ -216,19 +242,19 @@ mod tests {
         let cfg = ProcessConfig::default();
         let mut g = Guard::default();
         let none = out(None);
-        assert_eq!(g.check(&cfg, &none, 0.0, 20.0, 0.004), Ok(false));
+        assert_eq!(g.check(&cfg, &none, 0.0, 20.0, 0.004), Ok(Touch::Free));
         for _ in 0..100 {
             g.observe(&cfg, 5.0, 0.004);
         }
         assert!((g.f_filt - 5.0).abs() < 1e-6);
         assert_eq!(
             g.check(&cfg, &none, 5.0, 20.0, 0.004),
-            Ok(true),
+            Ok(Touch::Contact),
             "5 N ≥ the 2 N entry force"
         );
         assert_eq!(
             g.check(&cfg, &none, 5.0, 1.0, 0.004),
-            Ok(true),
+            Ok(Touch::Contact),
             "a set-point below the entry force lowers the bar"
         );
     }

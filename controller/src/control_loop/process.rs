@@ -7,8 +7,8 @@
 use hal::{ProcessCommand, ProcessFault, ProcessMode, ProcessPhase, ProcessState};
 use serde::{Deserialize, Serialize};
 
-use super::guard::{Guard, Tripped, back_off_target};
-use crate::law::{ContactState, Output};
+use super::guard::{Guard, Touch, Tripped, back_off_target};
+use crate::law::Output;
 
 /// How the process reacts to the program's commands. Forces in N, times in s.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -345,11 +345,9 @@ impl Process {
 
     /// After a law step: contact, ramp end, `PRESSING`, contact loss. `Err` is a fault to latch.
     pub fn after_step(&mut self, out: &Output, f: f64, dt: f64) -> Result<(), Tripped> {
-        let in_contact = self.guard.check(&self.cfg, out, f, self.target, dt)?;
-        match self.phase {
-            ProcessPhase::Ramp | ProcessPhase::Pressing
-                if out.state == Some(ContactState::Approach) =>
-            {
+        let touch = self.guard.check(&self.cfg, out, f, self.target, dt)?;
+        match (self.phase, touch) {
+            (ProcessPhase::Ramp | ProcessPhase::Pressing, Touch::Approach) => {
                 // The law took the contact back (a touch-down that bounced before its stiffness was
                 // known, a noise spike in free air) and approaches again: so does the pass, and a
                 // ramp starts over from the next contact.
@@ -359,14 +357,14 @@ impl Process {
                     self.rate = self.ramp_rate(self.sp, self.target);
                 }
             }
-            ProcessPhase::Approach if in_contact => {
+            (ProcessPhase::Approach, Touch::Contact) => {
                 self.phase = ProcessPhase::Ramp;
                 if self.ramp > 0.0 {
                     self.sp = f.clamp(self.sp.min(self.target), self.target);
                     self.rate = self.ramp_rate(self.sp, self.target);
                 }
             }
-            ProcessPhase::Ramp
+            (ProcessPhase::Ramp, _)
                 if self.sp == self.target
                     && (self.guard.f_filt - self.target).abs()
                         <= self.cfg.tolerance * self.target =>
@@ -400,6 +398,7 @@ impl Process {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::law::ContactState;
 
     fn press(f: f64, ramp: f64) -> ProcessCommand {
         ProcessCommand {
