@@ -15,7 +15,7 @@ use common::{
 use sim::krc::KrcEnd;
 
 fn iface() -> String {
-    std::env::var("FORCECELL_VCAN").unwrap_or_else(|_| "vcan0".into())
+    sim::vcan_env::interface()
 }
 
 /// Headroom for slow guests (`FORCECELL_VCAN_TIME_SCALE`, 1 to 100; `scripts/vcan-tests.sh` raises it
@@ -23,15 +23,7 @@ fn iface() -> String {
 /// divided by it, so the driver's own check (a poll must fit in one period) still holds; `run`'s
 /// watchdog, hold and orientation age are multiplied by it too (see [`example_cell`]).
 fn time_scale() -> u32 {
-    std::env::var("FORCECELL_VCAN_TIME_SCALE")
-        .ok()
-        .map(|s| {
-            s.parse::<u32>()
-                .ok()
-                .filter(|k| (1..=100).contains(k))
-                .unwrap_or_else(|| panic!("FORCECELL_VCAN_TIME_SCALE must be 1 to 100, not {s:?}"))
-        })
-        .unwrap_or(1)
+    sim::vcan_env::time_scale().unwrap_or_else(|e| panic!("{e}"))
 }
 
 #[test]

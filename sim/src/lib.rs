@@ -9,6 +9,7 @@ pub mod krc;
 pub mod plant;
 pub mod program;
 pub mod sensor_model;
+pub mod vcan_env;
 pub mod world;
 
 pub use inner::{InnerLoop, InnerLoopModel};

@@ -28,20 +28,12 @@ use sim::ati_node::{NodeConfig, SharedNode, serve};
 const WHY: &str = "needs a vcan0 interface: run scripts/vcan-tests.sh";
 
 fn iface() -> String {
-    std::env::var("FORCECELL_VCAN").unwrap_or_else(|_| "vcan0".into())
+    sim::vcan_env::interface()
 }
 
 /// The configured headroom for slow guests (`FORCECELL_VCAN_TIME_SCALE`, 1 to 100).
 fn scale() -> u32 {
-    std::env::var("FORCECELL_VCAN_TIME_SCALE")
-        .ok()
-        .map(|s| {
-            s.parse::<u32>()
-                .ok()
-                .filter(|k| (1..=100).contains(k))
-                .unwrap_or_else(|| panic!("FORCECELL_VCAN_TIME_SCALE must be 1 to 100, not {s:?}"))
-        })
-        .unwrap_or(1)
+    sim::vcan_env::time_scale().unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// A deadline with the configured headroom.
