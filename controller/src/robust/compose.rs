@@ -95,6 +95,21 @@ impl RobustLaw {
             + ramp
     }
 
+    /// Identification at a contact declared at the raw `(x, f)`: a re-contact tells it where the
+    /// search began and how long it took (a surface found moved holds the recursion).
+    pub(super) fn begin_contact(&mut self, x: f64, f: f64, from_approach: bool) {
+        self.identify.begin_contact(x, f, from_approach);
+        if !from_approach {
+            let (x_lost, t_lost) = self.contact.search();
+            let (v, hold) = (
+                self.p.estimator.max_surface_speed,
+                self.p.observer.motion_hold,
+            );
+            self.identify
+                .recontact(x, f, x_lost, t_lost, self.p.f_r, v, hold);
+        }
+    }
+
     /// In contact: re-identify `k̂_c` when the environment changed under a steady contact, and run the
     /// identifier on the raw sample `(s.x, s.f)`; `moving`: the surface counts as moving; `lift`: the
     /// raw force below which the tool is off the surface, N.
@@ -114,8 +129,11 @@ impl RobustLaw {
             (0.2 * self.force_scale()).max(5.0 * self.noise.std() * self.signals.noise_gain(cycle));
         let off = (s.ff - self.response.set_point()).abs() > band;
         let persist = 0.5 * self.signals.step_time(cycle);
-        let calm =
-            self.contact.steady() && !moving && !self.identify.fitting() && self.observer.still();
+        let calm = self.contact.steady()
+            && !moving
+            && !self.identify.fitting()
+            && !self.identify.held()
+            && self.observer.still();
         let excursion = self.identify.excursion(off, calm, persist, dt);
         if excursion || (calm && self.observer.jump_on_still_surface()) {
             // The loop answers the jump within its lead time and the conditioning's step time.

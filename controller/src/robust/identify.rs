@@ -11,11 +11,13 @@
 //!   surface before the jump unless a surface step shows; taken early once conclusive, and refined by
 //!   the rest of its window (`refit.rs`).
 //! * Afterwards the recursive estimator ([`StiffnessEstimator`]) goes on from the fitted values, with
-//!   its excitation, dead-zone and motion gates, on the force less the identified damping.
+//!   its excitation, dead-zone and motion gates, on the force less the identified damping. After a
+//!   re-contact that found the surface moved it waits (`moved.rs`).
 //! * In a steady contact the slow least-squares fit ([`SteadyEstimator`]) learns from the loop's answer
 //!   to sensor noise, and once confident moves `k̂_c` to its estimate at a bounded rate.
 
 mod landing;
+mod moved;
 mod params;
 mod refit;
 mod steady;
@@ -57,6 +59,9 @@ pub struct Identifier {
     onset_seeded: bool,
     /// How long the current window (the touch-down's or a re-fit's) has run, s.
     onset_age: f64,
+    /// Time left during which the recursion waits after a re-contact that found the surface moved
+    /// (`moved.rs`), s.
+    moved_hold: f64,
 }
 
 impl Identifier {
@@ -75,6 +80,7 @@ impl Identifier {
             c_e: 0.0,
             onset_seeded: false,
             onset_age: 0.0,
+            moved_hold: 0.0,
         }
     }
 
@@ -94,6 +100,7 @@ impl Identifier {
         self.refit = None;
         self.calm_surface = f64::NAN;
         self.c_e = 0.0;
+        self.moved_hold = 0.0;
     }
 
     /// `k̂_c`, N/m.
@@ -104,28 +111,6 @@ impl Identifier {
     /// Surface damping `ĉ_e` identified with `k̂_c`, N·s/m (0 until a fit has seen it).
     pub fn damping(&self) -> f64 {
         self.c_e
-    }
-
-    /// Keep a raw sample `(x, f)` of the approach, at velocity `v` (m/s), for the onset fit: the last
-    /// `approach_memory` at control cycle `cycle` (s).
-    pub fn remember(&mut self, x: f64, f: f64, v: f64, cycle: f64) {
-        let keep = OnsetFit::samples(self.p.approach_memory, cycle);
-        self.onset.remember(x, f, v, keep);
-    }
-
-    /// Contact is declared at `(x, f)`; `from_approach`: on a still surface, so the transient is fitted.
-    pub fn begin_contact(&mut self, x: f64, f: f64, from_approach: bool) {
-        self.est.begin_contact(x, f);
-        self.onset_seeded = false;
-        self.onset_age = 0.0;
-        if from_approach {
-            self.onset.begin(x, self.est.scale(), self.p.onset_window);
-        } else {
-            self.onset.clear();
-            self.keep_confidence();
-        }
-        self.steady.stop();
-        self.steady_var0 = f64::INFINITY;
     }
 
     /// The force jumped in a steady contact on a still surface at `(x, f)`: the environment changed
@@ -180,6 +165,9 @@ impl Identifier {
             lifted,
             disturbed,
         } = state;
+        if self.hold_step(dt) {
+            return Identified::default();
+        }
         if moving && self.refit.is_none() {
             self.onset.stop();
         }

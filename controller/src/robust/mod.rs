@@ -212,7 +212,7 @@ impl ForceLaw for RobustLaw {
             Transition::None => {}
             Transition::ForceLimit => ev.force_limit = true,
             Transition::Contact { from_approach } => {
-                self.identify.begin_contact(x, f, from_approach);
+                self.begin_contact(x, f, from_approach);
                 self.observer.restart(s.xf - s.ff / self.identify.kc());
                 self.response.begin_contact();
                 ev.contact = true;

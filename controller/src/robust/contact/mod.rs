@@ -107,6 +107,12 @@ impl ContactMachine {
         self.state == ContactState::Contact && self.in_contact >= self.p.bounce_time
     }
 
+    /// The search that ended in a re-contact this step: the measured position where contact was lost,
+    /// m, and the time searched since, s.
+    pub fn search(&self) -> (f64, f64) {
+        (self.x_lost, self.t_lost)
+    }
+
     /// The state.
     pub fn state(&self) -> ContactState {
         self.state

@@ -1,4 +1,5 @@
-//! The onset fit at a touch-down, and its patience under noise.
+//! A contact's start: the approach's samples kept, the onset fit at a touch-down, and its patience
+//! under noise.
 //!
 //! The fit sets `k̂_c` once its slope is significant. On a soft surface at a small set-point under
 //! sensor noise the window's samples may not make it significant in `onset_window` (f_r 2 N on
@@ -9,9 +10,32 @@
 //! Once the fit is significant the window closes on the next step.
 
 use super::Identifier;
-use crate::onset::LineFit;
+use crate::onset::{LineFit, OnsetFit};
 
 impl Identifier {
+    /// Keep a raw sample `(x, f)` of the approach, at velocity `v` (m/s), for the onset fit: the last
+    /// `approach_memory` at control cycle `cycle` (s).
+    pub fn remember(&mut self, x: f64, f: f64, v: f64, cycle: f64) {
+        let keep = OnsetFit::samples(self.p.approach_memory, cycle);
+        self.onset.remember(x, f, v, keep);
+    }
+
+    /// Contact is declared at `(x, f)`; `from_approach`: on a still surface, so the transient is fitted.
+    pub fn begin_contact(&mut self, x: f64, f: f64, from_approach: bool) {
+        self.est.begin_contact(x, f);
+        self.onset_seeded = false;
+        self.onset_age = 0.0;
+        self.moved_hold = 0.0;
+        if from_approach {
+            self.onset.begin(x, self.est.scale(), self.p.onset_window);
+        } else {
+            self.onset.clear();
+            self.keep_confidence();
+        }
+        self.steady.stop();
+        self.steady_var0 = f64::INFINITY;
+    }
+
     /// The onset fit after a step of `dt` in the window, if its slope is significant (`pivot_gate`
     /// deviations above zero; a contact declared on noise has no force rising with the position).
     pub(super) fn onset_fit(&mut self, noise_var: f64, dt: f64) -> Option<LineFit> {

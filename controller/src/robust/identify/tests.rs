@@ -238,3 +238,49 @@ fn a_surface_in_doubt_gives_the_line_through_it_no_preference() {
     assert_eq!(doubt, free, "the free line when the surface is in doubt");
     assert!((doubt.b / s - k).abs() < 0.02 * k, "k̂ {}", doubt.b / s);
 }
+
+/// A re-contact on a surface moving in with the tool backing off faster: the force falls at
+/// `k_c·(v_tool − v_surface)`, which a still-surface model reads as a softer surface. Returns `k̂_c`
+/// after `steps` of 1 ms, the contact re-acquired at `x` after a search from `x_lost` of 0.26 s.
+fn re_contact_on_a_surface_moving_in(x_lost: f64, steps: usize) -> (Identifier, f64) {
+    let k = 50_000.0;
+    let mut id = Identifier::new(IdentifyParams::default(), est(), 5.0 / k);
+    let (v_tool, v_surface) = (-4.3e-3, -3.35e-3);
+    let (mut x, mut xc) = (0.011, 0.011 - 7.0 / k);
+    id.begin_contact(x, 7.0, false);
+    id.recontact(x, 7.0, x_lost, 0.26, 5.0, 0.001, 0.5);
+    for i in 0..steps {
+        let f = k * (x - xc);
+        let state = StepState {
+            first: i == 0,
+            ..StepState::default()
+        };
+        id.step(x, f, v_tool, f, 1e-3, state, 0.0, 0.02);
+        x += v_tool * 1e-3;
+        xc += v_surface * 1e-3;
+    }
+    (id, k)
+}
+
+/// B5b's re-contacts on 500 kN/m: the surface found 1 mm from where contact was lost has moved, and
+/// may be moving still; the recursion waits for the observer's `motion_hold` instead of reading the
+/// motion as stiffness. Found where contact was lost, the same data moves `k̂_c` (what the wait
+/// prevents), and a touch-down from the approach ends the wait.
+#[test]
+fn a_re_contact_that_found_the_surface_moved_learns_nothing_while_it_may_move() {
+    let (id, k) = re_contact_on_a_surface_moving_in(0.010, 120);
+    assert_eq!(id.kc(), k, "nothing learnt from the motion");
+    assert!(id.held(), "0.12 s into a 0.5 s wait");
+    let (unmoved, _) = re_contact_on_a_surface_moving_in(0.011, 120);
+    assert!(!unmoved.held(), "found where it was lost: no wait");
+    assert!(
+        unmoved.kc() < 0.9 * k,
+        "the same samples read as a softer surface: {}",
+        unmoved.kc()
+    );
+    let (mut id, _) = re_contact_on_a_surface_moving_in(0.010, 120);
+    id.begin_contact(0.011, 2.0, true);
+    assert!(!id.held(), "a touch-down from the approach ends the wait");
+    let (id, _) = re_contact_on_a_surface_moving_in(0.010, 501);
+    assert!(!id.held(), "the wait ends after motion_hold");
+}
