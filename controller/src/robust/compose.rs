@@ -150,6 +150,7 @@ impl RobustLaw {
             dt,
             StepState {
                 moving,
+                drifted: self.observer.drifted(),
                 first: ev.contact,
                 lifted: s.f < lift,
                 disturbed,

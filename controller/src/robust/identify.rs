@@ -161,6 +161,7 @@ impl Identifier {
     ) -> Identified {
         let StepState {
             moving,
+            drifted,
             first,
             lifted,
             disturbed,
@@ -214,9 +215,9 @@ impl Identifier {
                 let f_spring = f - self.c_e * v;
                 let up = self
                     .est
-                    .update(x, f_spring, ff, noise_var.sqrt(), dt, moving);
+                    .update(x, f_spring, ff, noise_var.sqrt(), dt, moving || drifted);
                 let r = noise_var.max(noise_floor * noise_floor);
-                let calm = !(moving || up.adapted || disturbed);
+                let calm = !(moving || drifted || up.adapted || disturbed);
                 if up.adapted {
                     self.calm_surface = f64::NAN;
                 } else if calm {

@@ -7,14 +7,21 @@
 //! * The *predictor* ([`crate::predictor`]) runs on the raw pseudo-measurement `x − f/k̂_c` and puts the
 //!   tool on the surface predicted the inner loop's delay ahead, through its inverted lag. Its weight is
 //!   0 until real surface motion is established (the apparent motion of a stale `k̂_c` is tied to the
-//!   robot's), then `m²/(m² + 1)` with `m` the estimated motion in units of its own uncertainty.
+//!   robot's), then `m²/(m² + 1)` with `m` the estimated motion in units of its own uncertainty
+//!   (`observer/feedforward.rs`).
+//! * The *drift test* (`observer/drift.rs`) holds the recursion off a surface the observer saw go
+//!   further than a still one can appear to, at any speed.
 
+mod drift;
+mod feedforward;
 mod params;
+pub use feedforward::FeedForward;
 pub use params::ObserverParams;
 
 use super::motion::{Motion, threshold};
 use crate::estimator::surface_moving;
-use crate::predictor::{JumpTest, SurfacePredictor};
+use crate::predictor::SurfacePredictor;
+use drift::Drift;
 
 /// What the observer needs from the rest of the law in one contact step.
 #[derive(Clone, Copy, Debug)]
@@ -41,17 +48,6 @@ pub struct View {
     pub step_time: f64,
 }
 
-/// The surface model's part of the command: `w·(ahead − x̃_c) + (1 − w)·fallback`.
-#[derive(Clone, Copy, Debug)]
-pub struct FeedForward {
-    /// Weight `w` of the prediction (0: no real surface motion established).
-    pub weight: f64,
-    /// The predicted surface through the inverted inner loop, less the conditioned one, m.
-    pub predicted: f64,
-    /// The conditioned observer's velocity over the lead time, outside the noise dead-band, m.
-    pub fallback: f64,
-}
-
 /// Surface observer, predictor and motion tests.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SurfaceObserver {
@@ -70,6 +66,7 @@ pub struct SurfaceObserver {
     /// The observer's velocity before its last step (undone when that step was a small jump), m/s.
     vc_before: f64,
     motion: Motion,
+    drift: Drift,
 }
 
 impl SurfaceObserver {
@@ -87,6 +84,7 @@ impl SurfaceObserver {
             passing_small: 0.0,
             vc_before: 0.0,
             motion: Motion::default(),
+            drift: Drift::default(),
         };
         o.reset();
         o
@@ -116,6 +114,13 @@ impl SurfaceObserver {
         self.passing_small = 0.0;
         self.vc_before = 0.0;
         self.motion.restart();
+        self.drift.restart(z);
+    }
+
+    /// Whether the observed surface went further than a still one can appear to (`observer/drift.rs`):
+    /// the recursion takes it for a moving one.
+    pub fn drifted(&self) -> bool {
+        self.drift.moved()
     }
 
     /// Observed surface, m (NaN before the first contact).
@@ -170,82 +175,7 @@ impl SurfaceObserver {
             self.vc += dt * w * w * e;
             self.zc += dt * (self.vc + 2.0 * self.p.damping * w * e);
         }
-    }
-
-    /// The feed-forward for a cell of `lag` and `delay` (s) at `cycle` (s); `lead` is the whole lead
-    /// time of the fallback (lag, delay and conditioning), `jerk`, `noise_floor` and `deadband` the
-    /// response's surface parameters.
-    #[allow(clippy::too_many_arguments)]
-    pub fn feedforward(
-        &mut self,
-        s: &View,
-        r: &super::ResponseParams,
-        max_surface_speed: f64,
-        lag: f64,
-        delay: f64,
-        cycle: f64,
-        lead: f64,
-        dt: f64,
-    ) -> FeedForward {
-        let (p, k, floor) = (self.p, s.k, r.noise_floor);
-        let var = (s.noise_var + floor * floor) / (k * k);
-        // A jump: beyond a share of the set-point's penetration, or far beyond a cycle of motion and
-        // the robot's own displacement (a stale k̂_c within ×2 of k_c shows at most that). A jump
-        // that lasts longer than the conditioning takes to pass one is motion.
-        let test = if self.pred_jump_time <= s.step_time {
-            JumpTest {
-                gate: p.jump_gate,
-                floor: p.step_innovation * s.force_scale / k,
-                step_gate: p.step_gate,
-                step_floor: s.v_raw.abs() * dt,
-            }
-        } else {
-            JumpTest::gated(p.jump_gate, f64::INFINITY)
-        };
-        let jump = self
-            .pred
-            .update(s.x - s.f / k, var, r.surface_jerk, dt, &test);
-        let jumped = jump.is_some();
-        if let Some(y) = jump {
-            // A step seen raw starts passing the conditioning now (and is the start of a jump).
-            self.jump_started |= self.pred_jump_time == 0.0;
-            self.passing = s.step_time;
-            if y.abs() <= test.floor {
-                // The observer took this step's start for motion: undone.
-                self.passing_small = s.step_time;
-                self.vc = self.vc_before;
-                self.zc = s.xf - s.ff / k;
-            }
-        }
-        self.pred_jump_time = if jumped {
-            self.pred_jump_time + dt
-        } else {
-            0.0
-        };
-        let ahead = self.pred.command(0.0, delay, lag, cycle, 1.0, 1.0);
-        let z_f = s.xf - s.ff / k;
-        let [_, v, a] = self.pred.state();
-        let v_std = self.pred.velocity_std();
-        if !jumped {
-            // A jump says nothing about motion either way.
-            let thr = threshold(max_surface_speed, &p, v_std);
-            self.motion.observe(&p, v, s.v_raw, thr, dt);
-        }
-        let sv = p.motion_significance * v_std;
-        let sa = p.motion_significance * self.pred.acceleration_std();
-        let m2 = v * v / (sv * sv + 1e-30) + a * a / (sa * sa + 1e-30);
-        let weight = if self.motion.established() {
-            m2 / (m2 + 1.0)
-        } else {
-            0.0
-        };
-        let deadband = p.deadband(r, s.noise_var.sqrt(), s.noise_gain, k);
-        let v_ff = self.vc.signum() * (self.vc.abs() - deadband).max(0.0);
-        FeedForward {
-            weight,
-            predicted: ahead - z_f,
-            fallback: lead * v_ff,
-        }
+        self.drift.step(&self.p, self.zc, s.force_scale / s.k, dt);
     }
 }
 

@@ -90,6 +90,10 @@ pub struct StepState {
     /// The surface moves: no stiffness to learn (a re-fit is judged by its own consistency instead,
     /// as the apparent motion of the stale `k̂_c` makes it look moving).
     pub moving: bool,
+    /// The observed surface went further than a still one can appear to: the recursion waits, the
+    /// rest goes on (the touch-down's fit before it has `k̂_c` sees the surface move by the whole
+    /// force over the tuning's guess).
+    pub drifted: bool,
     /// Contact was declared this step.
     pub first: bool,
     /// The raw force is below the lift force: off the surface, not yet a lift-off.

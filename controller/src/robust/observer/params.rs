@@ -25,6 +25,10 @@ pub struct ObserverParams {
     /// How long the feed-forward stays on after real surface motion was last seen, s (it passes
     /// through zero velocity at every turn of a curved surface).
     pub motion_hold: f64,
+    /// How many of the set-point's penetrations `f_r/k̂_c` the observed surface may leave its own
+    /// average over `motion_hold` by before the recursion takes it for a moving one: a still surface
+    /// seen through a `k̂_c` within a factor of two moves by under one (`observer/drift.rs`).
+    pub drift_span: f64,
     /// How long the predictor must see surface motion without a break before it is believed, s.
     pub motion_confirm: f64,
     /// How long the robot must have moved both with and against one run of surface velocity for
@@ -56,6 +60,7 @@ impl Default for ObserverParams {
             jump_gate: 6.0,
             step_gate: 70.0,
             motion_hold: 0.5,
+            drift_span: 4.0,
             motion_confirm: 0.008,
             opposed_confirm: 0.01,
             motion_significance: 3.0,
@@ -73,6 +78,7 @@ impl ObserverParams {
         positive("observer.jump_gate", self.jump_gate)?;
         positive("observer.step_gate", self.step_gate)?;
         positive("observer.motion_hold", self.motion_hold)?;
+        positive("observer.drift_span", self.drift_span)?;
         positive("observer.motion_confirm", self.motion_confirm)?;
         positive("observer.opposed_confirm", self.opposed_confirm)?;
         positive("observer.motion_significance", self.motion_significance)?;
