@@ -198,7 +198,9 @@ fn b5_the_sine_start_on_p2_is_caught_up_with_within_twice_the_set_point() {
 /// kN/m on P2 and the loop, that much too eager, rang (1.12 N RMS; over the default wires 1.02 N, and
 /// fault 2 at 61.5 N before the session's other changes). A re-acquired contact now keeps the confidence
 /// `k̂_c` earned (its fit's or the steady estimator's deviation, at least `identify.steady_confidence`):
-/// 0.33 N, 222 kN/m. At 500 kN/m: the next test.
+/// 0.33 N, 222 kN/m. Since a re-contact that found the surface moved waits (through the bounces that
+/// follow it, `robust::identify::moved`): 0.163 / 0.418 N, `k̂_c` 200 kN/m on both. At 500 kN/m: the
+/// next test.
 #[test]
 fn b5_a_stiff_sine_keeps_its_stiffness_through_re_contacts() {
     let mut s = scenario("b05b-curve-fast");
@@ -211,7 +213,7 @@ fn b5_a_stiff_sine_keeps_its_stiffness_through_re_contacts() {
             assert!(c.pass, "{name}: {} {}", c.target.metric, c.value);
         }
         assert!(
-            m.kc_rel_error <= 0.15,
+            m.kc_rel_error <= 0.1,
             "{name}: k̂_c off by {}",
             m.kc_rel_error
         );
@@ -248,7 +250,7 @@ fn b5_a_sine_on_500_kn_per_m_keeps_its_stiffness_through_re_contacts() {
 /// test took the surface for a still one seen through a `k̂_c` too high, and the recursion took the
 /// falling force for a softer surface: on P1 `k̂_c` 499 → 376 kN/m (0.085 N RMS, passing), on P2
 /// fault 2 at 62 N. The observed surface leaving its average by more than a still one can appear to
-/// move now holds the recursion (`robust::observer::drift`): 0.099 / 0.180 N, `k̂_c` 488 / 471 kN/m.
+/// move now holds the recursion (`robust::observer::drift`): 0.101 / 0.186 N, `k̂_c` 500 / 499 kN/m.
 #[test]
 fn b5_a_slow_sine_on_500_kn_per_m_keeps_its_stiffness() {
     let mut s = scenario("b05a-curve-slow");

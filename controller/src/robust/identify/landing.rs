@@ -25,8 +25,9 @@ impl Identifier {
         self.est.begin_contact(x, f);
         self.onset_seeded = false;
         self.onset_age = 0.0;
-        self.moved_hold = 0.0;
         if from_approach {
+            // A touch-down ends the wait after a moved surface (it runs on through a bounce).
+            self.moved_hold = 0.0;
             self.onset.begin(x, self.est.scale(), self.p.onset_window);
         } else {
             self.onset.clear();

@@ -265,7 +265,7 @@ fn re_contact_on_a_surface_moving_in(x_lost: f64, steps: usize) -> (Identifier, 
 /// B5b's re-contacts on 500 kN/m: the surface found 1 mm from where contact was lost has moved, and
 /// may be moving still; the recursion waits for the observer's `motion_hold` instead of reading the
 /// motion as stiffness. Found where contact was lost, the same data moves `k̂_c` (what the wait
-/// prevents), and a touch-down from the approach ends the wait.
+/// prevents); the wait runs on through a bounce and a touch-down from the approach ends it.
 #[test]
 fn a_re_contact_that_found_the_surface_moved_learns_nothing_while_it_may_move() {
     let (id, k) = re_contact_on_a_surface_moving_in(0.010, 120);
@@ -279,6 +279,10 @@ fn a_re_contact_that_found_the_surface_moved_learns_nothing_while_it_may_move() 
         unmoved.kc()
     );
     let (mut id, _) = re_contact_on_a_surface_moving_in(0.010, 120);
+    // A bounce off it, re-contacted where it was lost: the surface is no stiller for that.
+    id.begin_contact(0.0105, 2.0, false);
+    id.recontact(0.0105, 2.0, 0.0105, 0.01, 5.0, 0.001, 0.5);
+    assert!(id.held(), "the wait runs on through a bounce");
     id.begin_contact(0.011, 2.0, true);
     assert!(!id.held(), "a touch-down from the approach ends the wait");
     let (id, _) = re_contact_on_a_surface_moving_in(0.010, 501);
