@@ -468,6 +468,66 @@ fn noise_corners() {
     }
 }
 
+/// Moving surfaces beyond B5's two files (not a spec'd range, and not the issue's): a sine of 0.2,
+/// 0.5 or 1 mm at 0.25, 0.5 or 1 Hz starting at full speed at 2 s on 10–500 kN/m, f_r 2–50 N, the
+/// three cells, 6 s each. Counted per stiffness: runs that end on a fault, runs that end with `k̂_c`
+/// more than 15 % off, and runs that lose contact after 3 s — no more than measured when this was
+/// written (README, known limits). At the commit before the re-contact's wait and the drift test:
+/// 132 faults, 56 off, 17 lossy.
+#[test]
+#[ignore = "540 closed-loop runs: the known limits' figures, not a criterion"]
+fn moving_surfaces() {
+    // (k_c, faults, k̂_c off, lossy) measured
+    let rows = [
+        (10e3, 0, 0, 0),
+        (30e3, 2, 10, 0),
+        (100e3, 9, 13, 0),
+        (300e3, 35, 5, 11),
+        (500e3, 47, 10, 11),
+    ];
+    let (mut faults_all, mut off_all, mut lossy_all) = (0, 0, 0);
+    for (k_c, faults_measured, off_measured, lossy_measured) in rows {
+        let (mut faults, mut off, mut lossy) = (0, 0, 0);
+        for f_r in [2.0, 5.0, 20.0, 50.0] {
+            for plant in &CELLS {
+                for amplitude in [0.2e-3, 0.5e-3, 1e-3] {
+                    for frequency in [0.25, 0.5, 1.0] {
+                        let text = format!(
+                            "name = \"sine\"\nduration = 6.0\nx0 = 0.009\n[environment]\nk_c = {k_c}\n\
+                             x_c = 0.010\nx_c_events = [{{ kind = \"sine\", start = 2.0, \
+                             amplitude = {amplitude}, frequency = {frequency} }}]\n"
+                        );
+                        let s = scenario::scenario::Scenario::from_toml(&text, "sine")
+                            .expect("a valid sine scenario");
+                        match run(&s, plant, &tuning(f_r)) {
+                            Err(_) => faults += 1,
+                            Ok(r) => {
+                                let m = r.metrics(3.0, f64::INFINITY);
+                                if m.kc_rel_error > 0.15 {
+                                    off += 1;
+                                } else if m.contact_losses > 0.0 {
+                                    lossy += 1;
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        println!(
+            "{k_c} N/m: {faults} faults, {off} k̂_c off > 15 %, {lossy} lossy after 3 s, of 108"
+        );
+        (faults_all, off_all, lossy_all) = (faults_all + faults, off_all + off, lossy_all + lossy);
+        assert!(
+            faults <= faults_measured,
+            "{faults} faults > {faults_measured}"
+        );
+        assert!(off <= off_measured, "{off} off > {off_measured}");
+        assert!(lossy <= lossy_measured, "{lossy} lossy > {lossy_measured}");
+    }
+    println!("all: {faults_all} faults, {off_all} off, {lossy_all} lossy, of 540");
+}
+
 /// The tool's own stopping time after a fast re-contact, the figures behind the search's speed bound
 /// ([`controller::robust::stopping`], README "Search speeds"): a 1 mm retreat at f_r 2 N re-contacted
 /// by the fast search, the force limit lifted to 1000 N (the search at its configured 50 mm/s, or at
