@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::{CELLS, cell, change_bound, floor, mean_error, reach_time, stiffness, tuning};
+use common::{CELLS, cell, change_bound, floor, mean_error, reach_time, sine, stiffness, tuning};
 use controller::LawConfig;
 use proptest::prelude::*;
 use scenario::run::run;
@@ -473,17 +473,17 @@ fn noise_corners() {
 /// three cells, 6 s each. Counted per stiffness: runs that end on a fault, runs that end with `k̂_c`
 /// more than 15 % off, and runs that lose contact after 3 s — no more than measured when this was
 /// written (README, known limits). At the commit before the re-contact's wait and the drift test:
-/// 132 faults, 56 off, 17 lossy.
+/// 132 faults, 56 off, 17 lossy; before `identify.max_refit_change` 93, 38, 22.
 #[test]
 #[ignore = "540 closed-loop runs: the known limits' figures, not a criterion"]
 fn moving_surfaces() {
     // (k_c, faults, k̂_c off, lossy) measured
     let rows = [
         (10e3, 0, 0, 0),
-        (30e3, 2, 10, 0),
-        (100e3, 9, 13, 0),
-        (300e3, 35, 5, 11),
-        (500e3, 47, 10, 11),
+        (30e3, 0, 5, 0),
+        (100e3, 7, 5, 0),
+        (300e3, 26, 4, 11),
+        (500e3, 39, 9, 11),
     ];
     let (mut faults_all, mut off_all, mut lossy_all) = (0, 0, 0);
     for (k_c, faults_measured, off_measured, lossy_measured) in rows {
@@ -492,13 +492,7 @@ fn moving_surfaces() {
             for plant in &CELLS {
                 for amplitude in [0.2e-3, 0.5e-3, 1e-3] {
                     for frequency in [0.25, 0.5, 1.0] {
-                        let text = format!(
-                            "name = \"sine\"\nduration = 6.0\nx0 = 0.009\n[environment]\nk_c = {k_c}\n\
-                             x_c = 0.010\nx_c_events = [{{ kind = \"sine\", start = 2.0, \
-                             amplitude = {amplitude}, frequency = {frequency} }}]\n"
-                        );
-                        let s = scenario::scenario::Scenario::from_toml(&text, "sine")
-                            .expect("a valid sine scenario");
+                        let s = sine(k_c, amplitude, frequency);
                         match run(&s, plant, &tuning(f_r)) {
                             Err(_) => faults += 1,
                             Ok(r) => {
@@ -526,6 +520,20 @@ fn moving_surfaces() {
         assert!(lossy <= lossy_measured, "{lossy} lossy > {lossy_measured}");
     }
     println!("all: {faults_all} faults, {off_all} off, {lossy_all} lossy, of 540");
+}
+
+/// A surface receding at 0.31 mm/s (0.2 mm at 0.25 Hz, under `max_surface_speed`) on 500 kN/m at
+/// f_r 20 N on P1 (a `moving_surfaces` case): the force drifted out of its band, which opened a re-fit
+/// as for a stiffness change on a still surface, and the samples, the tool following the surface,
+/// lay on a line of 183 kN/m through the surface before. The surface predictor, fed what that `k̂_c`
+/// makes of the tool's motion, ran the command away: 268 N before the 60 N trip. A re-fit further
+/// than `identify.max_refit_change` from `k̂_c` is not taken now: 22 N at most, `k̂_c` 500 kN/m.
+#[test]
+fn a_surface_receding_slowly_is_no_stiffness_change() {
+    let r = run(&sine(500e3, 0.2e-3, 0.25), &CELLS[0], &tuning(20.0)).expect("no fault");
+    let m = r.metrics(0.0, f64::INFINITY);
+    assert!(m.peak_force <= 2.0 * 20.0, "peak {} N", m.peak_force);
+    assert!(m.kc_rel_error <= 0.1, "k̂_c off by {}", m.kc_rel_error);
 }
 
 /// The tool's own stopping time after a fast re-contact, the figures behind the search's speed bound

@@ -55,6 +55,16 @@ pub fn cell(
     Scenario::from_toml(&text, "range").expect("a valid range scenario")
 }
 
+/// A sine surface: 1 mm short of a surface at 10 mm, which moves as `amplitude·sin(2π·frequency·t)`
+/// (m, Hz) from 2 s on, starting at full speed; 6 s.
+pub fn sine(k_c: f64, amplitude: f64, frequency: f64) -> Scenario {
+    let text = format!(
+        "name = \"sine\"\nduration = 6.0\nx0 = 0.009\n[environment]\nk_c = {k_c}\nx_c = 0.010\n\
+         x_c_events = [{{ kind = \"sine\", start = 2.0, amplitude = {amplitude}, frequency = {frequency} }}]\n"
+    );
+    Scenario::from_toml(&text, "sine").expect("a valid sine scenario")
+}
+
 /// The physical floor of an impact: after a stop command the tool still travels `v·(delay + one
 /// cycle)` into a surface of stiffness `k`, N.
 pub fn floor(k: f64, v: f64, plant: &InnerLoopModel) -> f64 {

@@ -111,11 +111,16 @@ impl Identifier {
         let (gate, stale) = (self.p.pivot_gate, self.est.kc() * scale);
         let r = noise_var.max(noise_floor * noise_floor);
         let (pivot, pivot_var) = (refit.pivot, refit.pivot_var);
+        // A change beyond `max_refit_change` (widened by what `k̂_c` is unsure of) is no stiffness
+        // change the law believes: a surface moving slowly fits such a line too.
+        let trust = self.p.max_refit_change * (1.0 + 3.0 * self.kc_rel_sd());
         let fit = choose(&self.onset, pivot, pivot_var, noise_var, r, gate).filter(|fit| {
             let sd = fit.var_b.sqrt();
+            let believed = fit.b <= trust * stale && fit.b * trust >= stale;
             let conclusive = sd <= precision * fit.b
                 || (open && sd <= rel * fit.b && (fit.b - stale).abs() > gate * sd);
             fit.b > 0.0
+                && believed
                 && conclusive
                 && (refit.refine || (fit.b / scale - self.est.kc()).abs() > rel * self.est.kc())
                 && fit.residual_var - r <= rel * fit.force_var
