@@ -197,6 +197,17 @@ impl<RE, SE> LoopError<RE, SE> {
     }
 }
 
+/// Why a hold of `held` s ended the loop or latched a fault, with the last cycle's fault.
+fn hold_reason(held: f64, last: Option<Fault>) -> String {
+    let ms = held * 1e3;
+    match last {
+        Some(last) => {
+            format!("held the last command for {ms:.0} ms without a usable input (last: {last:?})")
+        }
+        None => format!("held the last command for {ms:.0} ms without a usable input"),
+    }
+}
+
 /// The code of a hold that lasted too long: the sensor's, when it was the sensor that failed.
 fn hold_code(last: Fault) -> ProcessFault {
     match last {
@@ -211,10 +222,7 @@ impl<RE: fmt::Display, SE: fmt::Display> LoopError<RE, SE> {
         match self {
             Self::Robot(e) => format!("robot link: {e}"),
             Self::Sensor(e) => format!("force sensor: {e}"),
-            Self::HoldTimeout { held, last } => format!(
-                "held the last command for {:.0} ms without a usable input (last: {last:?})",
-                held * 1e3
-            ),
+            Self::HoldTimeout { held, last } => hold_reason(*held, Some(*last)),
             Self::Guard { reason, .. } => reason.clone(),
         }
     }
@@ -639,12 +647,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         if self.held > self.cfg.max_hold {
             let code = fault.map_or(ProcessFault::HoldTimeout, hold_code);
             let held = self.held;
-            let why = || {
-                format!(
-                    "held the last command for {:.0} ms without a usable input (last: {fault:?})",
-                    held * 1e3
-                )
-            };
+            let why = || hold_reason(held, fault);
             self.process.latch(code, why, cmd, lift, floor);
             self.held = 0.0;
         }
