@@ -95,18 +95,17 @@ impl RobustLaw {
             + ramp
     }
 
-    /// Identification at a contact declared at the raw `(x, f)`: a re-contact tells it where the
-    /// search began and how long it took (a surface found moved holds the recursion).
+    /// Identification at a contact declared at the raw `(x, f)`: a re-contact tells it how the search
+    /// went (a surface found moved, or the fast search's momentum, holds the recursion).
     pub(super) fn begin_contact(&mut self, x: f64, f: f64, from_approach: bool) {
         self.identify.begin_contact(x, f, from_approach);
         if !from_approach {
-            let (x_lost, t_lost) = self.contact.search();
             let (v, hold) = (
                 self.p.estimator.max_surface_speed,
                 self.p.observer.motion_hold,
             );
             self.identify
-                .recontact(x, f, x_lost, t_lost, self.p.f_r, v, hold);
+                .recontact(x, f, &self.contact.search(), self.p.f_r, v, hold);
         }
     }
 

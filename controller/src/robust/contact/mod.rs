@@ -26,6 +26,18 @@ pub enum Transition {
     ForceLimit,
 }
 
+/// The search that ended in a re-contact: where it began and how.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Search {
+    /// The measured position where contact was lost, m.
+    pub x_lost: f64,
+    /// The time searched since, s.
+    pub t_lost: f64,
+    /// The search's last command was faster than what stops within `2·f_r`: its momentum presses the
+    /// surface beyond the set-point at the re-contact.
+    pub fast: bool,
+}
+
 /// The state machine's state.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ContactMachine {
@@ -55,6 +67,8 @@ pub struct ContactMachine {
     v_seen: f64,
     /// That loss is searched for at approach speed (a bounce, or the tool moving away).
     slow: bool,
+    /// The search's last command was faster than what stops within `2·f_r` (the fast search).
+    fast: bool,
     /// A touch-down from the approach whose stiffness is not identified yet.
     landing: bool,
 }
@@ -75,6 +89,7 @@ impl ContactMachine {
             t_lost: 0.0,
             v_seen: 0.0,
             slow: false,
+            fast: false,
             landing: false,
         };
         m.reset();
@@ -99,6 +114,7 @@ impl ContactMachine {
         self.t_lost = 0.0;
         self.v_seen = 0.0;
         self.slow = false;
+        self.fast = false;
         self.landing = false;
     }
 
@@ -107,10 +123,13 @@ impl ContactMachine {
         self.state == ContactState::Contact && self.in_contact >= self.p.bounce_time
     }
 
-    /// The search that ended in a re-contact this step: the measured position where contact was lost,
-    /// m, and the time searched since, s.
-    pub fn search(&self) -> (f64, f64) {
-        (self.x_lost, self.t_lost)
+    /// The search that ended in a re-contact this step.
+    pub fn search(&self) -> Search {
+        Search {
+            x_lost: self.x_lost,
+            t_lost: self.t_lost,
+            fast: self.fast,
+        }
     }
 
     /// The state.

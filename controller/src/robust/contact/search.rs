@@ -140,6 +140,7 @@ impl ContactMachine {
                     sp.reacquire
                 };
                 let gap = c.reacquire_distance + sp.approach * anchor;
+                self.fast = speed > sp.near;
                 Some((u + speed * dt).min(x + gap))
             }
             ContactState::Retract => {

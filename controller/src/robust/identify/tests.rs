@@ -1,6 +1,7 @@
 //! Unit tests of the identification stage.
 
 use super::*;
+use crate::robust::contact::Search;
 
 fn est() -> EstimatorParams {
     EstimatorParams {
@@ -248,7 +249,12 @@ fn re_contact_on_a_surface_moving_in(x_lost: f64, steps: usize) -> (Identifier, 
     let (v_tool, v_surface) = (-4.3e-3, -3.35e-3);
     let (mut x, mut xc) = (0.011, 0.011 - 7.0 / k);
     id.begin_contact(x, 7.0, false);
-    id.recontact(x, 7.0, x_lost, 0.26, 5.0, 0.001, 0.5);
+    let search = Search {
+        x_lost,
+        t_lost: 0.26,
+        fast: false,
+    };
+    id.recontact(x, 7.0, &search, 5.0, 0.001, 0.5);
     for i in 0..steps {
         let f = k * (x - xc);
         let state = StepState {
@@ -265,7 +271,8 @@ fn re_contact_on_a_surface_moving_in(x_lost: f64, steps: usize) -> (Identifier, 
 /// B5b's re-contacts on 500 kN/m: the surface found 1 mm from where contact was lost has moved, and
 /// may be moving still; the recursion waits for the observer's `motion_hold` instead of reading the
 /// motion as stiffness. Found where contact was lost, the same data moves `k̂_c` (what the wait
-/// prevents); the wait runs on through a bounce and a touch-down from the approach ends it.
+/// prevents); the wait runs on through a bounce and a touch-down from the approach ends it. A
+/// re-contact the fast search made waits too, wherever it found the surface.
 #[test]
 fn a_re_contact_that_found_the_surface_moved_learns_nothing_while_it_may_move() {
     let (id, k) = re_contact_on_a_surface_moving_in(0.010, 120);
@@ -281,10 +288,25 @@ fn a_re_contact_that_found_the_surface_moved_learns_nothing_while_it_may_move() 
     let (mut id, _) = re_contact_on_a_surface_moving_in(0.010, 120);
     // A bounce off it, re-contacted where it was lost: the surface is no stiller for that.
     id.begin_contact(0.0105, 2.0, false);
-    id.recontact(0.0105, 2.0, 0.0105, 0.01, 5.0, 0.001, 0.5);
+    let bounce = Search {
+        x_lost: 0.0105,
+        t_lost: 0.01,
+        fast: false,
+    };
+    id.recontact(0.0105, 2.0, &bounce, 5.0, 0.001, 0.5);
     assert!(id.held(), "the wait runs on through a bounce");
     id.begin_contact(0.011, 2.0, true);
     assert!(!id.held(), "a touch-down from the approach ends the wait");
     let (id, _) = re_contact_on_a_surface_moving_in(0.010, 501);
     assert!(!id.held(), "the wait ends after motion_hold");
+    // Found where it was lost, but by the fast search: its momentum's transient is no stiffness.
+    let mut id = Identifier::new(IdentifyParams::default(), est(), 1e-4);
+    id.begin_contact(0.011, 30.0, false);
+    let fast = Search {
+        x_lost: 0.011,
+        t_lost: 0.02,
+        fast: true,
+    };
+    id.recontact(0.011, 30.0, &fast, 5.0, 0.001, 0.5);
+    assert!(id.held(), "a re-contact the fast search made waits");
 }
