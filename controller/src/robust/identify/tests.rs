@@ -240,6 +240,15 @@ fn a_surface_in_doubt_gives_the_line_through_it_no_preference() {
     assert!((doubt.b / s - k).abs() < 0.02 * k, "k̂ {}", doubt.b / s);
 }
 
+/// A search that began at `x_lost` (m) and took `t_lost` (s), `fast` or not.
+fn search(x_lost: f64, t_lost: f64, fast: bool) -> Search {
+    Search {
+        x_lost,
+        t_lost,
+        fast,
+    }
+}
+
 /// A re-contact on a surface moving in with the tool backing off faster: the force falls at
 /// `k_c·(v_tool − v_surface)`, which a still-surface model reads as a softer surface. Returns `k̂_c`
 /// after `steps` of 1 ms, the contact re-acquired at `x` after a search from `x_lost` of 0.26 s.
@@ -249,12 +258,7 @@ fn re_contact_on_a_surface_moving_in(x_lost: f64, steps: usize) -> (Identifier, 
     let (v_tool, v_surface) = (-4.3e-3, -3.35e-3);
     let (mut x, mut xc) = (0.011, 0.011 - 7.0 / k);
     id.begin_contact(x, 7.0, false);
-    let search = Search {
-        x_lost,
-        t_lost: 0.26,
-        fast: false,
-    };
-    id.recontact(x, 7.0, &search, 5.0, 0.001, 0.5);
+    id.recontact(x, 7.0, &search(x_lost, 0.26, false), 5.0, 0.001, 0.5);
     for i in 0..steps {
         let f = k * (x - xc);
         let state = StepState {
@@ -288,12 +292,7 @@ fn a_re_contact_that_found_the_surface_moved_learns_nothing_while_it_may_move() 
     let (mut id, _) = re_contact_on_a_surface_moving_in(0.010, 120);
     // A bounce off it, re-contacted where it was lost: the surface is no stiller for that.
     id.begin_contact(0.0105, 2.0, false);
-    let bounce = Search {
-        x_lost: 0.0105,
-        t_lost: 0.01,
-        fast: false,
-    };
-    id.recontact(0.0105, 2.0, &bounce, 5.0, 0.001, 0.5);
+    id.recontact(0.0105, 2.0, &search(0.0105, 0.01, false), 5.0, 0.001, 0.5);
     assert!(id.held(), "the wait runs on through a bounce");
     id.begin_contact(0.011, 2.0, true);
     assert!(!id.held(), "a touch-down from the approach ends the wait");
@@ -302,11 +301,6 @@ fn a_re_contact_that_found_the_surface_moved_learns_nothing_while_it_may_move() 
     // Found where it was lost, but by the fast search: its momentum's transient is no stiffness.
     let mut id = Identifier::new(IdentifyParams::default(), est(), 1e-4);
     id.begin_contact(0.011, 30.0, false);
-    let fast = Search {
-        x_lost: 0.011,
-        t_lost: 0.02,
-        fast: true,
-    };
-    id.recontact(0.011, 30.0, &fast, 5.0, 0.001, 0.5);
+    id.recontact(0.011, 30.0, &search(0.011, 0.02, true), 5.0, 0.001, 0.5);
     assert!(id.held(), "a re-contact the fast search made waits");
 }
