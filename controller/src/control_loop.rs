@@ -198,14 +198,11 @@ impl<RE, SE> LoopError<RE, SE> {
 }
 
 /// Why a hold of `held` s ended the loop or latched a fault, with the last cycle's fault.
-fn hold_reason(held: f64, last: Option<Fault>) -> String {
-    let ms = held * 1e3;
-    match last {
-        Some(last) => {
-            format!("held the last command for {ms:.0} ms without a usable input (last: {last:?})")
-        }
-        None => format!("held the last command for {ms:.0} ms without a usable input"),
-    }
+fn hold_reason(held: f64, last: Fault) -> String {
+    format!(
+        "held the last command for {:.0} ms without a usable input (last: {last:?})",
+        held * 1e3
+    )
 }
 
 /// The code of a hold that lasted too long: the sensor's, when it was the sensor that failed.
@@ -222,7 +219,7 @@ impl<RE: fmt::Display, SE: fmt::Display> LoopError<RE, SE> {
         match self {
             Self::Robot(e) => format!("robot link: {e}"),
             Self::Sensor(e) => format!("force sensor: {e}"),
-            Self::HoldTimeout { held, last } => hold_reason(*held, Some(*last)),
+            Self::HoldTimeout { held, last } => hold_reason(*held, *last),
             Self::Guard { reason, .. } => reason.clone(),
         }
     }
@@ -644,10 +641,13 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         };
         let held = self.count(fault) && controlling;
         self.held = if held { self.held + cycle.period } else { 0.0 };
-        if self.held > self.cfg.max_hold {
-            let code = fault.map_or(ProcessFault::HoldTimeout, hold_code);
+        // Only a fault holds the command (`count`), so a hold that lasted has one.
+        if self.held > self.cfg.max_hold
+            && let Some(last) = fault
+        {
+            let code = hold_code(last);
             let held = self.held;
-            let why = || hold_reason(held, fault);
+            let why = || hold_reason(held, last);
             self.process.latch(code, why, cmd, lift, floor);
             self.held = 0.0;
         }

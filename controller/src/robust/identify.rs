@@ -12,7 +12,7 @@
 //!   the rest of its window (`refit.rs`).
 //! * Afterwards the recursive estimator ([`StiffnessEstimator`]) goes on from the fitted values, with
 //!   its excitation, dead-zone and motion gates, on the force less the identified damping. After a
-//!   re-contact that found the surface moved it waits (`moved.rs`).
+//!   re-contact that found the surface moved, or that the fast search made, it waits (`moved.rs`).
 //! * In a steady contact the slow least-squares fit ([`SteadyEstimator`]) learns from the loop's answer
 //!   to sensor noise, and once confident moves `k̂_c` to its estimate at a bounded rate.
 
@@ -59,9 +59,9 @@ pub struct Identifier {
     onset_seeded: bool,
     /// How long the current window (the touch-down's or a re-fit's) has run, s.
     onset_age: f64,
-    /// Time left during which the recursion waits after a re-contact that found the surface moved
-    /// (`moved.rs`), s.
-    moved_hold: f64,
+    /// Time left during which the recursion waits after a re-contact that found the surface moved,
+    /// or that the fast search made (`moved.rs`), s.
+    recontact_hold: f64,
 }
 
 impl Identifier {
@@ -80,7 +80,7 @@ impl Identifier {
             c_e: 0.0,
             onset_seeded: false,
             onset_age: 0.0,
-            moved_hold: 0.0,
+            recontact_hold: 0.0,
         }
     }
 
@@ -100,7 +100,7 @@ impl Identifier {
         self.refit = None;
         self.calm_surface = f64::NAN;
         self.c_e = 0.0;
-        self.moved_hold = 0.0;
+        self.recontact_hold = 0.0;
     }
 
     /// `k̂_c`, N/m.

@@ -27,7 +27,7 @@ impl Identifier {
         self.onset_age = 0.0;
         if from_approach {
             // A touch-down ends the wait after a moved surface (it runs on through a bounce).
-            self.moved_hold = 0.0;
+            self.recontact_hold = 0.0;
             self.onset.begin(x, self.est.scale(), self.p.onset_window);
         } else {
             self.onset.clear();

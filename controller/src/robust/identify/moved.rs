@@ -1,4 +1,4 @@
-//! A re-contact that found the surface elsewhere: the recursion waits.
+//! A re-contact that found the surface elsewhere, or that the fast search made: the recursion waits.
 //!
 //! After a contact is lost the search finds the surface again. If it is found further away than a
 //! still surface's penetration explains (and than `max_surface_speed` moves it over the search), the
@@ -9,9 +9,8 @@
 //! motion gate anyway. So nothing is learnt for the observer's `motion_hold`, through the bounces
 //! that follow (each found the surface a little further: B5b on 140 kN/m re-contacted five times
 //! within 0.2 s, the last 47 µm from its loss); a touch-down from the approach ends the wait. B5b's
-//! 1 mm, 1 Hz sine
-//! on 500 kN/m on P1 took `k̂_c` from 470 to 155 kN/m within 53 ms of such a re-contact, and the loop,
-//! three times too stiff, lost contact 122 times.
+//! 1 mm, 1 Hz sine on 500 kN/m on P1 took `k̂_c` from 470 to 155 kN/m within 53 ms of such a
+//! re-contact, and the loop, three times too stiff, lost contact 122 times.
 //!
 //! A re-contact the fast search made waits too: its momentum presses the surface beyond the set-point
 //! (the search stops within the force limit, not within `2·f_r`), and while the tool backs off from
@@ -37,19 +36,19 @@ impl Identifier {
     ) {
         let still = max_surface_speed * search.t_lost + 2.0 * f.max(f_r) / self.kc();
         if search.fast || (x - search.x_lost).abs() > still {
-            self.moved_hold = hold;
+            self.recontact_hold = hold;
         }
     }
 
-    /// Whether the recursion waits after a re-contact that found the surface moved.
+    /// Whether the recursion waits after a re-contact (see [`recontact`](Self::recontact)).
     pub fn held(&self) -> bool {
-        self.moved_hold > 0.0
+        self.recontact_hold > 0.0
     }
 
     /// Count a step of the wait down; whether it still runs.
     pub(super) fn hold_step(&mut self, dt: f64) -> bool {
         let held = self.held();
-        self.moved_hold = (self.moved_hold - dt).max(0.0);
+        self.recontact_hold = (self.recontact_hold - dt).max(0.0);
         held
     }
 }
