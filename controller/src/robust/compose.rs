@@ -132,6 +132,7 @@ impl RobustLaw {
             && !moving
             && !self.identify.fitting()
             && !self.identify.held()
+            && !self.observer.drifted()
             && self.observer.still();
         let excursion = self.identify.excursion(off, calm, persist, dt);
         if excursion || (calm && self.observer.jump_on_still_surface()) {
