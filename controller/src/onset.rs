@@ -159,6 +159,10 @@ pub struct OnsetFit {
     scale: f64,
     /// Time left in the onset window, s (0: not identifying).
     left: f64,
+    /// The window's samples as a surface of the slope `b` (N per unit of `u`) and damping `c_e`
+    /// (N·s/m) moving at a constant speed, once [`also_moving`](Self::also_moving) asked for it:
+    /// `(b, c_e)`, the sums on `(t, 0, f − b·u − c_e·v)` (`t` the window's time), and that time, s.
+    moving: Option<((f64, f64), Sums, f64)>,
 }
 
 impl OnsetFit {
@@ -172,6 +176,7 @@ impl OnsetFit {
             x0: 0.0,
             scale: 1.0,
             left: 0.0,
+            moving: None,
         }
     }
 
@@ -181,6 +186,7 @@ impl OnsetFit {
         self.head = 0;
         self.sums = Sums::default();
         self.left = 0.0;
+        self.moving = None;
     }
 
     /// Remember a raw sample out of contact: position `x` (m), force `f` (N), velocity `v` (m/s); the
@@ -216,6 +222,7 @@ impl OnsetFit {
         self.scale = scale;
         self.sums = Sums::default();
         self.left = window;
+        self.moving = None;
         let start = (self.head + CAPACITY - self.len) % CAPACITY;
         let at = |i: usize| self.buf[(start + i) % CAPACITY];
         // Suffix sums from the newest sample back; the prefix carries f² as its residual.
@@ -252,9 +259,34 @@ impl OnsetFit {
         }
         self.left -= dt;
         if x.is_finite() && f.is_finite() && v.is_finite() {
-            self.sums.add((x - self.x0) / self.scale, v / self.scale, f);
+            let (u, w) = ((x - self.x0) / self.scale, v / self.scale);
+            self.sums.add(u, w, f);
+            if let Some(((b, c_e), sums, t)) = &mut self.moving {
+                sums.add(*t, 0.0, f - *b * u - *c_e * v);
+            }
+        }
+        if let Some((_, _, t)) = &mut self.moving {
+            *t += dt;
         }
         self.left > 0.0
+    }
+
+    /// Fit the window's samples from now on also as the known spring on a surface moving at a
+    /// constant speed: `f = b·u + c_e·v + a − r·t`, with the slope `b` (N per unit of `u`) and the
+    /// damping `c_e` (N·s/m) known, only the surface's start and speed free — the alternative to a
+    /// changed stiffness when the force leaves its band on a surface that may have started to move
+    /// (see [`moving_sse`](Self::moving_sse)). The damping is not fitted again: a loop settling
+    /// exponentially moves the tool along its own velocity, and a free damping would fit a changed
+    /// stiffness as well.
+    pub fn also_moving(&mut self, b: f64, c_e: f64) {
+        self.moving = Some(((b, c_e), Sums::default(), 0.0));
+    }
+
+    /// The residual sum of squares of that fit, N² (`None` unless asked for, or undetermined).
+    pub fn moving_sse(&self) -> Option<f64> {
+        self.moving
+            .and_then(|(_, sums, _)| sums.solve())
+            .map(|m| m.sse)
     }
 
     /// Whether position `x` (m) is behind the surface the fit so far puts its line's zero at (its
@@ -427,5 +459,46 @@ mod tests {
         // Through a surface 10 µm off the line leaves a residual.
         let off = o.fit_through(xc + 1e-5, 0.0).unwrap().0.sse;
         assert!(off > 1e-3, "{off}");
+    }
+
+    /// A window of the tool settling (a loop's answer: not at a constant speed) into a surface of
+    /// stiffness `k` at `xc(t)`.
+    fn settling(o: &mut OnsetFit, k: f64, xc: impl Fn(f64) -> f64) {
+        let dt = 4e-3;
+        for i in 0..75 {
+            let t = i as f64 * dt;
+            let x = 0.0101 + 5e-5 * (1.0 - (-t / 0.05).exp());
+            let v = 5e-5 / 0.05 * (-t / 0.05).exp();
+            o.add(x, k * (x - xc(t)), v, dt);
+        }
+    }
+
+    #[test]
+    fn a_moving_surface_and_a_changed_stiffness_are_told_apart() {
+        let (k, s) = (200_000.0, 1e-4);
+        // The stale stiffness on a surface moving at 0.15 mm/s: the moving fit explains the window,
+        // the stiffness line does not.
+        let mut o = OnsetFit::new();
+        o.begin(0.0101, s, 1.0);
+        o.also_moving(k * s, 0.0);
+        settling(&mut o, k, |t| 0.010 + 1.5e-4 * t);
+        let moving = o.moving_sse().unwrap();
+        let line = o.fit(0.0).unwrap().sse;
+        assert!(moving < 1e-9, "{moving}");
+        assert!(line > 1e3 * moving.max(1e-12), "{line}");
+        // The stiffness halved on a still surface: the other way round.
+        let mut o = OnsetFit::new();
+        o.begin(0.0101, s, 1.0);
+        o.also_moving(k * s, 0.0);
+        settling(&mut o, 0.5 * k, |_| 0.010);
+        let moving = o.moving_sse().unwrap();
+        let (through, _) = o.fit_through(0.010, 0.0).unwrap();
+        assert!(through.sse < 1e-9, "{}", through.sse);
+        assert!(moving > 1e-2, "{moving}");
+        // Not asked for: none.
+        let mut o = OnsetFit::new();
+        o.begin(0.0101, s, 1.0);
+        settling(&mut o, k, |_| 0.010);
+        assert!(o.moving_sse().is_none());
     }
 }

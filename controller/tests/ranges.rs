@@ -476,7 +476,8 @@ fn noise_corners() {
 /// the commit before the re-contact's wait and the drift test: 132 faults, 56 off, 17 lossy; before
 /// `identify.max_refit_change` 93, 38, 22; before the fast search's re-contact waited 72, 23, 22
 /// (towards it: 101, 30, 17); before a drifting surface kept re-fits from opening 69, 17, 22 (98, 32,
-/// 17); now 67, 17, 21 (towards it: 98, 32, 16).
+/// 17); before a re-fit weighed a moving surface against a stiffness change 67, 17, 21 (98, 32, 16);
+/// now 65, 18, 22 (towards it: 93, 34, 16): seven trips fewer, three of them now ending off or lossy.
 #[test]
 #[ignore = "1080 closed-loop runs: the known limits' figures, not a criterion"]
 fn moving_surfaces() {
@@ -484,9 +485,9 @@ fn moving_surfaces() {
     let rows = [
         (10e3, 0, 0, 0),
         (30e3, 1, 9, 0),
-        (100e3, 15, 7, 1),
-        (300e3, 57, 12, 19),
-        (500e3, 92, 21, 17),
+        (100e3, 14, 7, 1),
+        (300e3, 57, 13, 19),
+        (500e3, 86, 23, 18),
     ];
     let (mut faults_all, mut off_all, mut lossy_all) = (0, 0, 0);
     for (k_c, faults_measured, off_measured, lossy_measured) in rows {
@@ -537,6 +538,33 @@ fn a_surface_receding_slowly_is_no_stiffness_change() {
     let m = r.metrics(0.0, f64::INFINITY);
     assert!(m.peak_force <= 2.0 * 20.0, "peak {} N", m.peak_force);
     assert!(m.kc_rel_error <= 0.1, "k̂_c off by {}", m.kc_rel_error);
+}
+
+/// A surface starting to move slowly (0.2 mm at 0.5 Hz: 0.63 mm/s, under `max_surface_speed`) under a
+/// steady 20 N contact on 200 kN/m on P2: the force left its band and opened a re-fit, whose samples —
+/// the tool following the surface — lay on a line through the surface before of 88 kN/m, within
+/// `identify.max_refit_change`. With that `k̂_c` the surface predictor ran the command away: 172 N
+/// before the 60 N trip (`forcecell sim` over the default wires too). The re-fit now weighs the other
+/// explanation of its window, the stale stiffness on a surface moving at a constant speed, and
+/// takes no stiffness change that explains no better (`robust::identify::refit`).
+#[test]
+fn a_slowly_moving_surface_is_no_softer_surface() {
+    let r = run(&sine(200e3, 0.2e-3, 0.5), &CELLS[1], &tuning(20.0)).expect("no fault");
+    let m = r.metrics(0.0, f64::INFINITY);
+    assert!(m.peak_force <= 1.5 * 20.0, "peak {} N", m.peak_force);
+    assert!(m.kc_rel_error <= 0.1, "k̂_c off by {}", m.kc_rel_error);
+}
+
+/// The same on 500 kN/m: with the re-fit refused but left open, the law answered the slow surface as
+/// an unresolved jump for the whole window (half speed, no feed-forward), the force reached the limit
+/// and the contact bounced into a 60 N trip (fault 2 at 5.5 s, 84 N). A window the moving surface
+/// explains conclusively better now ends there: no trip, the peak 42 N (36 N over the default wires).
+/// The force still wanders far off the set-point on this slow, stiff surface (README, known limits).
+#[test]
+fn a_slowly_moving_stiff_surface_ends_its_re_fit() {
+    let r = run(&sine(500e3, 0.2e-3, 0.5), &CELLS[1], &tuning(20.0)).expect("no fault");
+    let m = r.metrics(0.0, f64::INFINITY);
+    assert!(m.peak_force <= 2.5 * 20.0, "peak {} N", m.peak_force);
 }
 
 /// The tool's own stopping time after a fast re-contact, the figures behind the search's speed bound

@@ -121,6 +121,8 @@ impl Identifier {
     pub fn refit(&mut self, x: f64, f: f64, early: f64) {
         self.onset.clear();
         self.onset.begin(x, self.est.scale(), self.p.refit_window);
+        self.onset
+            .also_moving(self.est.kc() * self.est.scale(), self.c_e);
         self.onset_age = 0.0;
         self.refit = Some(Refit {
             x0: x,

@@ -11,6 +11,17 @@
 //! meanwhile): once the loop has answered the jump, every step until it is conclusive, and at the
 //! window's end for the last time. Waiting out the window with a stale `k̂_c` costs the contact on a
 //! soft surface at a small set-point (a doubled stiffness under the stale gain rings).
+//!
+//! A surface that started to move slowly (below `max_surface_speed`) opens a re-fit too, and with the
+//! tool following it the window's samples lie on a consistent line of `k_c·(1 − v_surface/v_tool)`
+//! (0.63 mm/s on 200 kN/m at 20 N on P2: 88 kN/m through the surface before; the predictor then ran
+//! the command into a 172 N trip). So the window is fitted as that too: the stale stiffness and
+//! identified damping on a surface moving at a constant speed ([`OnsetFit::also_moving`]). A change
+//! is taken only where it explains the window better than that by more than `pivot_gate`² noise
+//! variances; where the moving surface explains it better by as much, the re-fit ends at once (the
+//! law's caution while a rise is unresolved — half speed, no feed-forward — lagged a slow surface on
+//! 500 kN/m into a trip). A loop's answer to a real change is no constant speed: the moving fit leaves
+//! its curvature as residual.
 
 use super::Identifier;
 use crate::onset::{LineFit, OnsetFit};
@@ -114,9 +125,16 @@ impl Identifier {
         // A change beyond `max_refit_change` (widened by what `k̂_c` is unsure of) is no stiffness
         // change the law believes: a surface moving slowly fits such a line too.
         let trust = self.p.max_refit_change * (1.0 + 3.0 * self.kc_rel_sd());
-        let fit = choose(&self.onset, pivot, pivot_var, noise_var, r, gate).filter(|fit| {
+        // The stale spring on a surface moving at a constant speed, the other explanation (module
+        // docs): a change must beat it by more than the noise; a window it beats as clearly ends.
+        let moving = self.onset.moving_sse().unwrap_or(f64::INFINITY);
+        let margin = gate * gate * r;
+        let chosen = choose(&self.onset, pivot, pivot_var, noise_var, r, gate);
+        let surface_moved = !refit.refine && chosen.is_some_and(|fit| moving + margin < fit.sse);
+        let fit = chosen.filter(|fit| {
             let sd = fit.var_b.sqrt();
-            let believed = fit.b <= trust * stale && fit.b * trust >= stale;
+            let explained = moving <= fit.sse + margin;
+            let believed = fit.b <= trust * stale && fit.b * trust >= stale && !explained;
             let conclusive = sd <= precision * fit.b
                 || (open && sd <= rel * fit.b && (fit.b - stale).abs() > gate * sd);
             fit.b > 0.0
@@ -125,6 +143,8 @@ impl Identifier {
                 && (refit.refine || (fit.b / scale - self.est.kc()).abs() > rel * self.est.kc())
                 && fit.residual_var - r <= rel * fit.force_var
         });
+        // A moving surface ends the window as its end would (`k̂_c` kept, the recursion restarted).
+        let open = open && !surface_moved;
         if fit.is_some() && open {
             refit.refine = true;
             self.refit = Some(refit);
