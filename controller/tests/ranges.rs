@@ -26,7 +26,8 @@ use sim::InnerLoopModel;
 //   small set-point or the cycle is slow: `noise_corners` (ignored; `--ignored` runs it) counts the
 //   seeds 1–199 that fail the touch-down criteria — f_r 2 N on 10 kN/m, P1: 1 at σ 0.82 N, 2 at 1
 //   N (on the mean error at the end); on the 12 ms cell at σ 1 N: f_r 5 N on 50 kN/m 37, f_r 2 N on
-//   10 kN/m 62 (the mean error but for four impacts). They were 8, 10, 55 and 86 while the integral
+//   10 kN/m 61 (62, the mean error but for four impacts, before the caution of an unresolved rise
+//   kept a feed-forward that backs off). They were 8, 10, 55 and 86 while the integral
 //   kept its full gain inside the noise and random-walked on it
 //   (`a_noisy_hold_at_a_small_set_point_does_not_wander_on_its_integral`). Before that: the
 //   helper branch alone measured 9, 12, 0, 67 and 89 (breakdown there: at f_r 5 N 58 on the mean
@@ -457,7 +458,7 @@ fn noise_corners() {
         (2.0, 10e3, 0, 1.0, 2),
         (20.0, 500e3, 1, 1.0, 0),
         (5.0, 50e3, 2, 1.0, 37),
-        (2.0, 10e3, 2, 1.0, 62),
+        (2.0, 10e3, 2, 1.0, 61),
     ];
     for (f_r, k_c, cell_i, noise, measured) in corners {
         let failing = (1..200u64)
@@ -477,7 +478,8 @@ fn noise_corners() {
 /// `identify.max_refit_change` 93, 38, 22; before the fast search's re-contact waited 72, 23, 22
 /// (towards it: 101, 30, 17); before a drifting surface kept re-fits from opening 69, 17, 22 (98, 32,
 /// 17); before a re-fit weighed a moving surface against a stiffness change 67, 17, 21 (98, 32, 16);
-/// now 65, 18, 22 (towards it: 93, 34, 16): seven trips fewer, three of them now ending off or lossy.
+/// with it 65, 18, 22 (93, 34, 16); now, with a feed-forward that backs off kept under the caution of
+/// an unresolved rise, 61, 17, 21 (towards it: 78, 18, 21).
 #[test]
 #[ignore = "1080 closed-loop runs: the known limits' figures, not a criterion"]
 fn moving_surfaces() {
@@ -485,9 +487,9 @@ fn moving_surfaces() {
     let rows = [
         (10e3, 0, 0, 0),
         (30e3, 1, 9, 0),
-        (100e3, 14, 7, 1),
-        (300e3, 57, 13, 19),
-        (500e3, 86, 23, 18),
+        (100e3, 12, 6, 1),
+        (300e3, 49, 7, 21),
+        (500e3, 77, 13, 20),
     ];
     let (mut faults_all, mut off_all, mut lossy_all) = (0, 0, 0);
     for (k_c, faults_measured, off_measured, lossy_measured) in rows {
@@ -555,16 +557,18 @@ fn a_slowly_moving_surface_is_no_softer_surface() {
     assert!(m.kc_rel_error <= 0.1, "k̂_c off by {}", m.kc_rel_error);
 }
 
-/// The same on 500 kN/m: with the re-fit refused but left open, the law answered the slow surface as
-/// an unresolved jump for the whole window (half speed, no feed-forward), the force reached the limit
-/// and the contact bounced into a 60 N trip (fault 2 at 5.5 s, 84 N). A window the moving surface
-/// explains conclusively better now ends there: no trip, the peak 42 N (36 N over the default wires).
-/// The force still wanders far off the set-point on this slow, stiff surface (README, known limits).
+/// The same slow surface on 500 kN/m: each rise of the force opened a re-fit, and while it was
+/// unresolved the law's caution (the stiffer hypothesis) fed no surface motion forward at all, so the
+/// approaching surface pressed the force into a 60 N trip (fault 2 at 5.5 s, 84 N; with the moving fit
+/// alone no trip, but 36 N over the default wires, 42 N in process, and the recursion, restarted after
+/// each window, took `k̂_c` to 393 kN/m). The caution now keeps a feed-forward that backs off: 25 N
+/// at most, `k̂_c` exact.
 #[test]
-fn a_slowly_moving_stiff_surface_ends_its_re_fit() {
+fn a_slowly_approaching_stiff_surface_is_fed_forward_under_caution() {
     let r = run(&sine(500e3, 0.2e-3, 0.5), &CELLS[1], &tuning(20.0)).expect("no fault");
     let m = r.metrics(0.0, f64::INFINITY);
-    assert!(m.peak_force <= 2.5 * 20.0, "peak {} N", m.peak_force);
+    assert!(m.peak_force <= 1.5 * 20.0, "peak {} N", m.peak_force);
+    assert!(m.kc_rel_error <= 0.1, "k̂_c off by {}", m.kc_rel_error);
 }
 
 /// The tool's own stopping time after a fast re-contact, the figures behind the search's speed bound

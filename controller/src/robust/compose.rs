@@ -62,15 +62,19 @@ impl RobustLaw {
         // higher explains (within the noise) is a surface that came nearer or a stiffer one, and
         // until the re-fit tells, the correction takes the stiffer: the other retreats too far (a
         // doubling under the stale gain rings into a lost contact). A larger rise is a surface step.
-        // The surface is the still one the re-fit opened on meanwhile: what the stale `k̂_c` makes of
-        // the slower retreat is no surface motion to feed forward.
+        // Meanwhile only a feed-forward that backs off is kept. A stiffer surface seen through the
+        // stale `k̂_c` makes the tool's retreat look like the surface going away (`(1 − k_c/k̂_c)·ẋ`),
+        // whose feed-forward would press in; a surface that came nearer and goes on coming is seen
+        // approaching, and its feed-forward backs off as the caution does (a slow surface approaching
+        // 500 kN/m at 20 N on P2 opened one re-fit after another, each without feed-forward, and the
+        // force went to 36 N).
         let (caution, scale) = (self.p.response.jump_caution, view.force_scale);
         let sig = contact::SIGNIFICANCE * view.noise_var.sqrt();
         let rise = match self.identify.unresolved_jump() {
             Some(f0) if f0 > scale && f0 - sig <= caution * scale => (f0 / scale).min(caution),
             _ => 1.0,
         };
-        let (k_gain, still) = (k * rise, if rise > 1.0 { 0.0 } else { 1.0 });
+        let (k_gain, cautious) = (k * rise, rise > 1.0);
         let (proportional, integral) =
             self.response
                 .correction(s.ff, k_gain, view.noise_var, view.force_scale, dt);
@@ -89,10 +93,9 @@ impl RobustLaw {
         // The set-point's own motion, fed forward over the loop's lead time: a ramp is followed, not
         // chased (the force lags the command by the inner loop's lag and delay and the conditioning).
         let ramp = self.response.rate() / k * (cell.lag + cell.delay);
-        s.xf + proportional
-            + still * (ff.weight * ff.predicted + (1.0 - ff.weight) * ff.fallback)
-            + integral
-            + ramp
+        let ff = ff.weight * ff.predicted + (1.0 - ff.weight) * ff.fallback;
+        let ff = if cautious { ff.min(0.0) } else { ff };
+        s.xf + proportional + ff + integral + ramp
     }
 
     /// Identification at a contact declared at the raw `(x, f)`: a re-contact tells it how the search

@@ -18,10 +18,8 @@
 //! the command into a 172 N trip). So the window is fitted as that too: the stale stiffness and
 //! identified damping on a surface moving at a constant speed ([`OnsetFit::also_moving`]). A change
 //! is taken only where it explains the window better than that by more than `pivot_gate`² noise
-//! variances; where the moving surface explains it better by as much, the re-fit ends at once (the
-//! law's caution while a rise is unresolved — half speed, no feed-forward — lagged a slow surface on
-//! 500 kN/m into a trip). A loop's answer to a real change is no constant speed: the moving fit leaves
-//! its curvature as residual.
+//! variances. A loop's answer to a real change is no constant speed: the moving fit leaves its
+//! curvature as residual.
 
 use super::Identifier;
 use crate::onset::{LineFit, OnsetFit};
@@ -126,14 +124,11 @@ impl Identifier {
         // change the law believes: a surface moving slowly fits such a line too.
         let trust = self.p.max_refit_change * (1.0 + 3.0 * self.kc_rel_sd());
         // The stale spring on a surface moving at a constant speed, the other explanation (module
-        // docs): a change must beat it by more than the noise; a window it beats as clearly ends.
+        // docs): a change must explain the window better by more than the noise.
         let moving = self.onset.moving_sse().unwrap_or(f64::INFINITY);
-        let margin = gate * gate * r;
-        let chosen = choose(&self.onset, pivot, pivot_var, noise_var, r, gate);
-        let surface_moved = !refit.refine && chosen.is_some_and(|fit| moving + margin < fit.sse);
-        let fit = chosen.filter(|fit| {
+        let fit = choose(&self.onset, pivot, pivot_var, noise_var, r, gate).filter(|fit| {
             let sd = fit.var_b.sqrt();
-            let explained = moving <= fit.sse + margin;
+            let explained = moving <= fit.sse + gate * gate * r;
             let believed = fit.b <= trust * stale && fit.b * trust >= stale && !explained;
             let conclusive = sd <= precision * fit.b
                 || (open && sd <= rel * fit.b && (fit.b - stale).abs() > gate * sd);
@@ -143,8 +138,6 @@ impl Identifier {
                 && (refit.refine || (fit.b / scale - self.est.kc()).abs() > rel * self.est.kc())
                 && fit.residual_var - r <= rel * fit.force_var
         });
-        // A moving surface ends the window as its end would (`k̂_c` kept, the recursion restarted).
-        let open = open && !surface_moved;
         if fit.is_some() && open {
             refit.refine = true;
             self.refit = Some(refit);
