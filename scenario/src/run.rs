@@ -89,9 +89,28 @@ impl Run {
     }
 }
 
+/// An in-process run up to its end, with what ended it early, if anything.
+#[derive(Debug)]
+pub struct Ended {
+    /// Every step up to the end (the last one before a fault), with the truth.
+    pub run: Run,
+    /// The loop's error that ended the run early (a fault, backed off), or `None`.
+    pub fault: Option<anyhow::Error>,
+}
+
 /// Run `scenario` on `plant` with `tuning` (the scenario's overrides and the plant's cell model
-/// applied), in process.
+/// applied), in process; a fault that ends the loop is an error.
 pub fn run(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) -> Result<Run> {
+    let ended = run_to_end(scenario, plant, tuning)?;
+    match ended.fault {
+        Some(e) => Err(e),
+        None => Ok(ended.run),
+    }
+}
+
+/// [`run`], keeping the steps of a run that a fault ended (what led to it, its peak force); an error
+/// only when the law cannot be built.
+pub fn run_to_end(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) -> Result<Ended> {
     let mut tuning = tuning.clone();
     tuning.law.apply(&scenario.controller);
     tuning.law.set_cell(cell_model(plant));
@@ -116,24 +135,31 @@ pub fn run(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) -> Resu
     );
     let steps = (scenario.duration / plant.period).round().max(1.0) as usize;
     let mut rows = Vec::with_capacity(steps);
+    let mut fault = None;
     for _ in 0..steps {
         // A robot program ends the run when it ends (as `forcecell sim` does).
         if sim::world::lock(&world).program().is_some_and(|p| p.done()) {
             break;
         }
-        let r = lp
-            .cycle()
-            .map_err(|e| anyhow!("the loop ended after {} steps: {e}", rows.len()))?;
-        rows.push(Row::from_report(&r, r.set_point));
+        match lp.cycle() {
+            Ok(r) => rows.push(Row::from_report(&r, r.set_point)),
+            Err(e) => {
+                fault = Some(anyhow!("the loop ended after {} steps: {e}", rows.len()));
+                break;
+            }
+        }
     }
     let counters = lp.law().counters();
     let stats = lp.stats();
     drop(lp);
     let truth = sim::world::lock(&world).truth_log();
     fill_truth(&mut rows, &truth, plant.period);
-    Ok(Run {
-        rows,
-        counters,
-        stats,
+    Ok(Ended {
+        run: Run {
+            rows,
+            counters,
+            stats,
+        },
+        fault,
     })
 }
