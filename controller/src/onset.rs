@@ -159,10 +159,21 @@ pub struct OnsetFit {
     scale: f64,
     /// Time left in the onset window, s (0: not identifying).
     left: f64,
-    /// The window's samples as a surface of the slope `b` (N per unit of `u`) and damping `c_e`
-    /// (N·s/m) moving at a constant speed, once [`also_moving`](Self::also_moving) asked for it:
-    /// `(b, c_e)`, the sums on `(t, 0, f − b·u − c_e·v)` (`t` the window's time), and that time, s.
-    moving: Option<((f64, f64), Sums, f64)>,
+    /// The window's samples as a known spring on a moving surface, once
+    /// [`also_moving`](Self::also_moving) asked for it.
+    moving: Option<Moving>,
+}
+
+/// The window's samples as the spring of slope `b` (N per unit of `u`) and damping `c_e` (N·s/m) on a
+/// surface moving at a constant speed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Moving {
+    b: f64,
+    c_e: f64,
+    /// Sums on `(t, 0, f − b·u − c_e·v)`.
+    sums: Sums,
+    /// The window's time, s.
+    t: f64,
 }
 
 impl OnsetFit {
@@ -261,12 +272,12 @@ impl OnsetFit {
         if x.is_finite() && f.is_finite() && v.is_finite() {
             let (u, w) = ((x - self.x0) / self.scale, v / self.scale);
             self.sums.add(u, w, f);
-            if let Some(((b, c_e), sums, t)) = &mut self.moving {
-                sums.add(*t, 0.0, f - *b * u - *c_e * v);
+            if let Some(m) = &mut self.moving {
+                m.sums.add(m.t, 0.0, f - m.b * u - m.c_e * v);
             }
         }
-        if let Some((_, _, t)) = &mut self.moving {
-            *t += dt;
+        if let Some(m) = &mut self.moving {
+            m.t += dt;
         }
         self.left > 0.0
     }
@@ -279,14 +290,17 @@ impl OnsetFit {
     /// exponentially moves the tool along its own velocity, and a free damping would fit a changed
     /// stiffness as well.
     pub fn also_moving(&mut self, b: f64, c_e: f64) {
-        self.moving = Some(((b, c_e), Sums::default(), 0.0));
+        self.moving = Some(Moving {
+            b,
+            c_e,
+            sums: Sums::default(),
+            t: 0.0,
+        });
     }
 
     /// The residual sum of squares of that fit, N² (`None` unless asked for, or undetermined).
     pub fn moving_sse(&self) -> Option<f64> {
-        self.moving
-            .and_then(|(_, sums, _)| sums.solve())
-            .map(|m| m.sse)
+        self.moving.and_then(|m| m.sums.solve()).map(|s| s.sse)
     }
 
     /// Whether position `x` (m) is behind the surface the fit so far puts its line's zero at (its
@@ -302,6 +316,9 @@ impl OnsetFit {
     pub fn pass(&mut self, dt: f64) {
         if self.left > 0.0 {
             self.left -= dt;
+            if let Some(m) = &mut self.moving {
+                m.t += dt;
+            }
         }
     }
 
@@ -500,5 +517,25 @@ mod tests {
         o.begin(0.0101, s, 1.0);
         settling(&mut o, k, |_| 0.010);
         assert!(o.moving_sse().is_none());
+    }
+
+    /// A sample passed (a bounce in the window) still counts the moving surface's time.
+    #[test]
+    fn a_passed_sample_keeps_the_moving_fit_s_clock() {
+        let (k, s, dt) = (200_000.0, 1e-4, 4e-3);
+        let mut o = OnsetFit::new();
+        o.begin(0.0101, s, 1.0);
+        o.also_moving(k * s, 0.0);
+        for i in 0..75 {
+            let t = i as f64 * dt;
+            let x = 0.0101 + 5e-5 * (1.0 - (-t / 0.05).exp());
+            if (30..35).contains(&i) {
+                o.pass(dt);
+            } else {
+                o.add(x, k * (x - 0.010 - 1.5e-4 * t), 0.0, dt);
+            }
+        }
+        let moving = o.moving_sse().unwrap();
+        assert!(moving < 1e-9, "{moving}");
     }
 }
