@@ -494,39 +494,48 @@ fn moving_surfaces() {
         (300e3, 42, 7, 21, 3.04),
         (500e3, 72, 8, 20, 2.79),
     ];
-    let (mut faults_all, mut off_all, mut lossy_all) = (0, 0, 0);
+    // [away from the tool, towards it] × [faults, k̂_c off, lossy], over all stiffnesses.
+    let mut all = [[0usize; 3]; 2];
     for (k_c, faults_measured, off_measured, lossy_measured, worst_measured) in rows {
-        let (mut faults, mut off, mut lossy) = (0, 0, 0);
+        let mut counts = [[0usize; 3]; 2];
         // The highest true force of a run a fault ended, over its force limit.
         let mut worst = 0.0f64;
         for f_r in [2.0, 5.0, 20.0, 50.0] {
             for plant in &CELLS {
                 for amplitude in [-1e-3, -0.5e-3, -0.2e-3, 0.2e-3, 0.5e-3, 1e-3] {
+                    let way = usize::from(amplitude < 0.0);
                     for frequency in [0.25, 0.5, 1.0] {
                         let s = sine(k_c, amplitude, frequency);
                         let t = tuning(f_r);
                         let ended = run_to_end(&s, plant, &t).expect("a valid tuning");
                         if ended.fault.is_some() {
-                            faults += 1;
+                            counts[way][0] += 1;
                             let peak = ended.run.metrics(0.0, f64::INFINITY).peak_force;
                             worst = worst.max(peak / t.loop_cfg.process.max_force);
                             continue;
                         }
                         let m = ended.run.metrics(3.0, f64::INFINITY);
                         if m.kc_rel_error > 0.15 {
-                            off += 1;
+                            counts[way][1] += 1;
                         } else if m.contact_losses > 0.0 {
-                            lossy += 1;
+                            counts[way][2] += 1;
                         }
                     }
                 }
             }
         }
+        let [away, towards] = counts;
+        let [faults, off, lossy] = [0, 1, 2].map(|i| away[i] + towards[i]);
         println!(
             "{k_c} N/m: {faults} faults (the highest force {worst:.2} × the limit), {off} k̂_c off > \
-             15 %, {lossy} lossy after 3 s, of 216"
+             15 %, {lossy} lossy after 3 s, of 216 (faults / off / lossy starting away from the tool \
+             {away:?}, towards it {towards:?})"
         );
-        (faults_all, off_all, lossy_all) = (faults_all + faults, off_all + off, lossy_all + lossy);
+        for (way, c) in counts.iter().enumerate() {
+            for (i, n) in c.iter().enumerate() {
+                all[way][i] += n;
+            }
+        }
         assert!(
             faults <= faults_measured,
             "{faults} faults > {faults_measured}"
@@ -538,7 +547,8 @@ fn moving_surfaces() {
             "{worst} × the limit > {worst_measured}"
         );
     }
-    println!("all: {faults_all} faults, {off_all} off, {lossy_all} lossy, of 1080");
+    let [away, towards] = all;
+    println!("all, of 540 each way: away from the tool {away:?}, towards it {towards:?}");
 }
 
 /// A surface receding at 0.31 mm/s (0.2 mm at 0.25 Hz, under `max_surface_speed`) on 500 kN/m at
