@@ -480,9 +480,13 @@ fn noise_corners() {
 /// 17); before a re-fit weighed a moving surface against a stiffness change 67, 17, 21 (98, 32, 16);
 /// with it 65, 18, 22 (93, 34, 16); with a feed-forward that backs off kept under the caution of an
 /// unresolved rise 61, 17, 21 (78, 18, 21); now, with the recursion's `k̂_c` falling at most 10/s
-/// instead of 30/s, 55, 6, 21 (towards it: 70, 20, 21). Also printed and bounded: the highest true
-/// force of a faulted run (the trip's back-off included, [`run_to_end`]) over its force limit — with
-/// the fall at 30/s 4.36 at 500 kN/m (262 N at f_r 20 N on the 12 ms cell), 3.03 at 300 kN/m.
+/// instead of 30/s, 55, 6, 21 (towards it: 70, 20, 21); now, with the slow surfaces' feed-forward
+/// (`observer.feedforward_speed`), 49, 3, 11 (towards it: 53, 19, 11). Also printed and bounded: the
+/// highest true force of a faulted run (the trip's back-off included, [`run_to_end`]) over its force
+/// limit — with the fall at 30/s 4.36 at 500 kN/m (262 N at f_r 20 N on the 12 ms cell), 3.03 at 300
+/// kN/m — and how well the runs without a fault hold the force: the 90th percentile of their RMS error
+/// after 3 s over the set-point, 0.264 before the slow surfaces' feed-forward, 0.077 with it (median
+/// 0.0165 and 0.0075).
 #[test]
 #[ignore = "1080 closed-loop runs: the known limits' figures, not a criterion"]
 fn moving_surfaces() {
@@ -490,10 +494,13 @@ fn moving_surfaces() {
     let rows = [
         (10e3, 0, 0, 0, 0.0),
         (30e3, 1, 5, 0, 0.21),
-        (100e3, 10, 6, 1, 1.46),
-        (300e3, 42, 7, 21, 3.04),
-        (500e3, 72, 8, 20, 2.79),
+        (100e3, 9, 6, 1, 1.46),
+        (300e3, 34, 6, 10, 3.04),
+        (500e3, 58, 5, 11, 2.79),
     ];
+    // The RMS error after 3 s over the set-point of every run without a fault, its 90th percentile
+    // measured.
+    let (mut rel, rel_p90_measured) = (Vec::new(), 0.077);
     // [away from the tool, towards it] × [faults, k̂_c off, lossy], over all stiffnesses.
     let mut all = [[0usize; 3]; 2];
     for (k_c, faults_measured, off_measured, lossy_measured, worst_measured) in rows {
@@ -515,6 +522,7 @@ fn moving_surfaces() {
                             continue;
                         }
                         let m = ended.run.metrics(3.0, f64::INFINITY);
+                        rel.push(m.rms_error / f_r);
                         if m.kc_rel_error > 0.15 {
                             counts[way][1] += 1;
                         } else if m.contact_losses > 0.0 {
@@ -549,6 +557,15 @@ fn moving_surfaces() {
     }
     let [away, towards] = all;
     println!("all, of 540 each way: away from the tool {away:?}, towards it {towards:?}");
+    rel.sort_by(f64::total_cmp);
+    let at = |q: f64| rel[((rel.len() - 1) as f64 * q).round() as usize];
+    let (median, p90) = (at(0.5), at(0.9));
+    println!(
+        "RMS error after 3 s over the set-point, {} runs without a fault: median {median:.4}, 90th \
+         percentile {p90:.4}",
+        rel.len()
+    );
+    assert!(p90 <= rel_p90_measured, "{p90} > {rel_p90_measured}");
 }
 
 /// A surface receding at 0.31 mm/s (0.2 mm at 0.25 Hz, under `max_surface_speed`) on 500 kN/m at
@@ -599,6 +616,45 @@ fn a_slowly_moving_surface_is_no_softer_surface() {
 #[test]
 fn a_slowly_approaching_stiff_surface_is_fed_forward_under_caution() {
     holds_a_sine_at_20_n(500e3, 0.2e-3, 0.5, &CELLS[1], 1.5);
+}
+
+/// The same slow surface (0.2 mm at 0.5 Hz, 0.63 mm/s) on 500 kN/m at f_r 20 N, on P1 and P2: the
+/// surface predictor's motion test counted it as still below `max_surface_speed` (1 mm/s), so nothing
+/// of its motion was fed forward, and the force swung with it, 15–25 N on P2 (RMS error after 3 s
+/// 1.69 N on P1 and 2.57 N on P2, over the default wires). The feed-forward now has its own speed,
+/// `observer.feedforward_speed` (0.1 mm/s, and never within the noise); the identification still
+/// takes such a surface for a still one.
+#[test]
+fn a_slow_surface_on_a_stiff_material_is_fed_forward() {
+    for plant in &CELLS[..2] {
+        let s = sine(500e3, 0.2e-3, 0.5);
+        let r = run(&s, plant, &tuning(20.0)).expect("no fault");
+        let m = r.metrics(3.0, f64::INFINITY);
+        assert!(m.rms_error <= 0.5, "RMS error {} N", m.rms_error);
+        assert!(m.kc_rel_error <= 0.02, "k̂_c off by {}", m.kc_rel_error);
+    }
+}
+
+/// A noisy damped doubling at a small set-point on the 12 ms cell (found by 1000 `stiffness_changes`
+/// cases with the slow surfaces' feed-forward): under the stale `k̂_c` the loop rang, and its ringing
+/// showed an apparent surface motion above `observer.feedforward_speed` that the motion test passed
+/// for a few samples at a time. Fed forward, it rang into three lost contacts. The slow surfaces'
+/// test now confirms a motion over the loop's lead time, within which the ringing turns.
+#[test]
+fn a_loop_ringing_after_a_doubling_is_no_slow_surface() {
+    let (f_r, k_c, at) = (2.49112030369369, 77173.92474520428, 2.796917972276051);
+    let s = cell(
+        at + 2.0,
+        k_c,
+        67.452,
+        Some((at, 2.0)),
+        None,
+        0.35598832487743154,
+        391,
+    );
+    let r = run(&s, &CELLS[2], &tuning(f_r)).expect("no fault");
+    let m = r.metrics(at, f64::INFINITY);
+    assert_eq!(m.contact_losses, 0.0, "lost contacts");
 }
 
 /// A surface approaching at 1.3 mm/s (0.2 mm at 1 Hz) under a 20 N contact on 500 kN/m on the 12 ms

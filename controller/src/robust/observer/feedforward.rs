@@ -74,7 +74,8 @@ impl SurfaceObserver {
         if !jumped {
             // A jump says nothing about motion either way.
             let thr = threshold(max_surface_speed, &p, v_std);
-            self.motion.observe(&p, v, s.v_raw, thr, dt);
+            let thr_ff = threshold(p.feedforward_speed.min(max_surface_speed), &p, v_std);
+            self.motion.observe(&p, v, s.v_raw, [thr, thr_ff], lead, dt);
         }
         let sv = p.motion_significance * v_std;
         let sa = p.motion_significance * self.pred.acceleration_std();

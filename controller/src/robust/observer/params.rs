@@ -37,6 +37,11 @@ pub struct ObserverParams {
     /// Significance, in standard deviations, at which the fed-forward motion gets half its weight, and
     /// below which a surface velocity is no motion whatever `max_surface_speed` says (noise).
     pub motion_significance: f64,
+    /// The speed above which the predictor's surface motion is fed forward (the motion test's other
+    /// conditions and its noise bound kept), m/s; `estimator.max_surface_speed` if that is lower. Only
+    /// the feed-forward: the identification still takes a slower surface than `max_surface_speed`
+    /// for a still one (`robust/motion.rs`).
+    pub feedforward_speed: f64,
     /// Smallest dead-band on the fallback feed-forward velocity, m/s.
     pub deadband_floor: f64,
     /// The fallback feed-forward's dead-band is at least this many times the velocity scale of the
@@ -64,6 +69,7 @@ impl Default for ObserverParams {
             motion_confirm: 0.008,
             opposed_confirm: 0.01,
             motion_significance: 3.0,
+            feedforward_speed: 0.0001,
             deadband_floor: 0.0001,
             deadband_significance: 2.0,
             damping: 0.8,
@@ -82,6 +88,7 @@ impl ObserverParams {
         positive("observer.motion_confirm", self.motion_confirm)?;
         positive("observer.opposed_confirm", self.opposed_confirm)?;
         positive("observer.motion_significance", self.motion_significance)?;
+        positive("observer.feedforward_speed", self.feedforward_speed)?;
         positive("observer.deadband_floor", self.deadband_floor)?;
         non_negative("observer.deadband_significance", self.deadband_significance)?;
         positive("observer.damping", self.damping)
