@@ -20,6 +20,9 @@ cargo fmt --all --check
 step "cargo clippy --all-targets -- -D warnings"
 cargo clippy --workspace --all-targets --release -- -D warnings
 
+step "cargo doc (no broken or private intra-doc links)"
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --release
+
 step "cargo test (unit, integration, loopback UDP, in-memory CAN; release build: closed-loop simulations are long)"
 cargo test --workspace --release
 

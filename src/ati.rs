@@ -255,7 +255,7 @@ fn print_info(info: &DeviceInfo) {
 }
 
 /// Poll until the driver has its first sample (start-up ends before the first poll), at most
-/// [`POLLS`] polls, each bounded by the request deadline. `Err` says why no sample came.
+/// `POLLS` polls, each bounded by the request deadline. `Err` says why no sample came.
 pub fn first_sample<T: CanTransport>(driver: &mut Driver<T>) -> Result<()> {
     if !poll_until(driver, |h| h != Health::Waiting)? {
         bail!(

@@ -35,15 +35,15 @@ pub struct Row {
     /// The robot program's path segment (RSI `FcCmd`), `None` when the link carries no process
     /// command (or the trace predates process columns).
     pub segment: Option<i64>,
-    /// The commanded process mode ([`hal::ProcessMode::code`]: 0 off, 1 press, 2 release, other
+    /// The commanded process mode (`hal::ProcessMode::code`: 0 off, 1 press, 2 release, other
     /// numbers as sent), `None` without a process command.
     pub mode: Option<i64>,
     /// The commanded process force, N (NaN without a process command).
     pub f_cmd: f64,
-    /// The force process's phase as reported to the robot ([`hal::ProcessPhase::code`]), `None` in a
+    /// The force process's phase as reported to the robot (`hal::ProcessPhase::code`), `None` in a
     /// trace that predates process columns.
     pub phase: Option<u8>,
-    /// The force process's latched fault ([`hal::ProcessFault::code`]), `None` in a trace that
+    /// The force process's latched fault (`hal::ProcessFault::code`), `None` in a trace that
     /// predates process columns.
     pub process_fault: Option<u8>,
     /// Path position along the workpiece, m (simulation only: NaN on a real cell and in files).

@@ -3,7 +3,7 @@
 //! It uses the driver's codec for the opposite direction (writes `<Rob>`, parses `<Sen>`) from the
 //! same Ethernet config, judges every reply (parses, SENTYPE, IPOC, deadline), keeps the `Delay`
 //! counter, applies HOLDON per element, breaks off after `Timeout` late replies, clamps with POSCORR,
-//! stops on POSCORRMON and on `Stop`, and moves a [`Mechanism`] (the shared [`World`] in a cell
+//! stops on POSCORRMON and on `Stop`, and moves a [`Mechanism`] (the shared [`World`](crate::World) in a cell
 //! simulation) with the correction it accepted. Fault injection covers what networks and peers do.
 //!
 //! The decisions live in [`KrcCore`], which does no I/O and reads no clock (unit-tested without sockets);

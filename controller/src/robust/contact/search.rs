@@ -45,7 +45,7 @@ impl ContactMachine {
     /// (N) and `limit` (N: the force limit less what the force may reach before a contact is
     /// certainly seen, one raw sample at `strong`): the approach and the search near the lost contact
     /// no faster than the cell stops within `2·f_r` at `k`, the fast search no faster than it stops
-    /// within `limit` at `k` [`TRIP_CONFIDENCE`] deviations stiffer ([`Stopping`]).
+    /// within `limit` at `k` `TRIP_CONFIDENCE` deviations stiffer ([`Stopping`]).
     pub fn speeds(&self, k: f64, k_sd: f64, f_r: f64, limit: f64, stop: &Stopping) -> Speeds {
         let c = &self.p;
         let k_trip = k * (1.0 + TRIP_CONFIDENCE * k_sd.max(0.0));
