@@ -638,6 +638,32 @@ fn a_slow_surface_on_a_stiff_material_is_fed_forward() {
     }
 }
 
+/// A damped halving at a small set-point under noise on the 12 ms cell (f_r 2.06 N, 89.8 → 44.9 kN/m,
+/// σ 0.26 N, 101 N·s/m; drawn by `stiffness_changes`, where its information allows no 10 % and nothing
+/// was asserted): the re-fit found 48.5 kN/m (±3.3 %), but the other explanation of its window, the
+/// stale stiffness on a surface moving at a constant speed, was within `pivot_gate`² noise variances
+/// of it, and the margin went to the stale `k̂_c`, which stayed 98 % off. The better explanation is
+/// taken now: `k̂_c` within four deviations of what the change tells (51 %; it ends 8.5 % off).
+#[test]
+fn a_damped_halving_under_noise_is_no_moving_surface() {
+    let (f_r, k_c, at, noise) = (
+        2.064646842136853,
+        89753.88605904543,
+        2.376788133324876,
+        0.2556,
+    );
+    let s = cell(at + 2.0, k_c, 100.746, Some((at, 0.5)), None, noise, 647);
+    let r = run(&s, &CELLS[2], &tuning(f_r)).expect("no fault");
+    let m = r.metrics(at, f64::INFINITY);
+    let bound = 4.0 * change_bound(f_r, 0.5, noise, &CELLS[2]);
+    assert!(
+        m.kc_rel_error <= bound,
+        "k̂_c off by {} (bound {bound})",
+        m.kc_rel_error
+    );
+    assert_eq!(m.contact_losses, 0.0, "lost contacts");
+}
+
 /// A noisy damped doubling at a small set-point on the 12 ms cell (found by 1000 `stiffness_changes`
 /// cases with the slow surfaces' feed-forward): under the stale `k̂_c` the loop rang, and its ringing
 /// showed an apparent surface motion above `observer.feedforward_speed` that the motion test passed

@@ -17,9 +17,11 @@
 //! (0.63 mm/s on 200 kN/m at 20 N on P2: 88 kN/m through the surface before; the predictor then ran
 //! the command into a 172 N trip). So the window is fitted as that too: the stale stiffness and
 //! identified damping on a surface moving at a constant speed ([`OnsetFit::also_moving`]). A change
-//! is taken only where it explains the window better than that by more than `pivot_gate`² noise
-//! variances. A loop's answer to a real change is no constant speed: the moving fit leaves its
-//! curvature as residual.
+//! is taken only where it explains the window better than that. A loop's answer to a real change is
+//! no constant speed: the moving fit leaves its curvature as residual. Under noise the two can explain
+//! a window almost alike, and the better one is taken: with a margin of `pivot_gate`² noise variances
+//! in the stale stiffness's favour, a damped halving at f_r 2 N on the 12 ms cell under σ 0.26 N (the
+//! change better by 3.6 variances) kept the stale `k̂_c`, 98 % off.
 
 use super::Identifier;
 use crate::onset::{LineFit, OnsetFit};
@@ -124,11 +126,11 @@ impl Identifier {
         // change the law believes: a surface moving slowly fits such a line too.
         let trust = self.p.max_refit_change * (1.0 + 3.0 * self.kc_rel_sd());
         // The stale spring on a surface moving at a constant speed, the other explanation (module
-        // docs): a change must explain the window better by more than the noise.
+        // docs): a change must explain the window better.
         let moving = self.onset.moving_sse().unwrap_or(f64::INFINITY);
         let fit = choose(&self.onset, pivot, pivot_var, noise_var, r, gate).filter(|fit| {
             let sd = fit.var_b.sqrt();
-            let explained = moving <= fit.sse + gate * gate * r;
+            let explained = moving <= fit.sse;
             let believed = fit.b <= trust * stale && fit.b * trust >= stale && !explained;
             let conclusive = sd <= precision * fit.b
                 || (open && sd <= rel * fit.b && (fit.b - stale).abs() > gate * sd);
