@@ -22,9 +22,11 @@ use sim::InnerLoopModel;
 //   490 kN/m, σ 0.43 N, 12.1 % off against a bound of 3.2 % (11.3 % before the re-fit ran its whole
 //   window; with the re-fit's refinement and without the cautious answer to a rise, all 200 cases
 //   passed at three, and 1000 cases found a contact loss — the caution was chosen). Where it is not
-//   asserted the law may not re-learn at all: asserting four deviations there too, 200 cases found a
-//   damped halving (f_r 2.06 N, 89.8 → 44.9 kN/m, σ 0.26 N, 101 N·s/m, 12 ms) that kept the stale
-//   `k̂_c`, 98 % off against 51 %;
+//   asserted `k̂_c` can end outside even four deviations: asserting them there too, 200 cases found a
+//   damped halving that kept the stale `k̂_c`, 98 % off against 51 % (fixed,
+//   `a_damped_halving_under_noise_is_no_moving_surface`), then an undamped halving (f_r 3.9 N, 35.9 →
+//   17.9 kN/m, σ 0.42 N, 12 ms, seed 143) 53 % off against 44 %, `k̂_c` 23 % low before the change
+//   and the moving surface the better explanation with it (not solved);
 // * the touch-down under noise still fails at its corners, where the noise is a large part of a
 //   small set-point or the cycle is slow: `noise_corners` (ignored; `--ignored` runs it) counts the
 //   seeds 1–199 that fail the touch-down criteria — f_r 2 N on 10 kN/m, P1: 1 at σ 0.82 N, 2 at 1
