@@ -67,6 +67,13 @@ use sim::InnerLoopModel;
 //   Neither is done. Before the noise was measured from the first samples and a single raw sample
 //   had to stand out of the raw noise, they were 94, 158, 183 and 198, and f_r 20 N on 500 kN/m,
 //   P2, σ 1 N failed 106 (now 0). The 200 cases drawn here pass;
+// * every touch-down the 3000 cases draw (`FORCECELL_RANGE_CASES=3000`, each assertion counted, not
+//   stopped at the first): the true force's spread at the end above 0.02·f_r + 0.5·σ twice (f_r 43 N
+//   on 12.6 kN/m on P2 under σ 0.68 N rings 34–51 N at 2.4 Hz with `k̂_c` 27 kN/m, the surface taken
+//   for a moving one throughout; f_r 3.1 N on 54 kN/m, 12 ms, σ 0.95 N: 0.554 against 0.54 N), the
+//   mean error seven times (small set-points under noise, mostly on the 12 ms cell), the impact twice
+//   (P2, f_r 2.3 and 3.7 N on 330–380 kN/m under σ 0.57–0.95 N: 17.9 against 16.6 N, 18.6 against
+//   18.0 N), and one fault: [`a_contact_declared_on_noise_does_not_dash_into_a_stiff_surface`];
 // * with 3000 cases (`FORCECELL_RANGE_CASES=3000`; `FORCECELL_RANGE_SHRINK=0` shows them as drawn)
 //   `stiffness_changes` misses its mean error under noise at a small set-point on P2 (f_r 2.5 N,
 //   78 → 39 kN/m, σ 0.47 N, 135 N·s/m: 0.161 N against 0.097 N); 1000 pass. With 1000 cases
@@ -322,6 +329,17 @@ fn touch_down(
     );
     if noise == 0.0 {
         prop_assert!(all.settle_time <= 1.0, "settle {} s", all.settle_time);
+    }
+    // B6 carried over: the true force's spread at the end is the loop's answer to the noise, a share
+    // of it (at most 0.43 σ measured over 1000 cases but one), not a ringing of its own.
+    prop_assert!(
+        end.true_force_std <= 0.02 * f_r + 0.5 * noise,
+        "the true force's std {} N at the end",
+        end.true_force_std
+    );
+    // B8 carried over: the touch-down identifies `k̂_c` (noise-free within 2.2 % measured).
+    if noise == 0.0 {
+        prop_assert!(end.kc_rel_error <= 0.1, "k̂_c off by {}", end.kc_rel_error);
     }
     Ok(())
 }
@@ -664,6 +682,23 @@ fn a_damped_halving_under_noise_is_no_moving_surface() {
         m.kc_rel_error
     );
     assert_eq!(m.contact_losses, 0.0, "lost contacts");
+}
+
+/// A touch-down the 3000 range cases draw (f_r 38.6 N on 454 kN/m on the 12 ms cell under σ 0.8 N,
+/// seed 421): contact was declared on noise 290 µm short of the surface, the onset fit of that noise
+/// gave `k̂_c` 33 kN/m at once, which ended the landing's approach-speed bound, and the command
+/// stepped at the loop's 0.5 mm a cycle into the surface: 296 N, fault 2, backed off. Not solved.
+#[test]
+#[ignore = "known limit, not solved: a contact declared on noise and a k̂_c fitted to it drive into a stiff surface (296 N)"]
+fn a_contact_declared_on_noise_does_not_dash_into_a_stiff_surface() {
+    let (f_r, k_c) = (38.61952439190985, 454117.21694586956);
+    let s = cell(3.0, k_c, 0.0, None, None, 0.7975178058515975, 421);
+    let t = tuning(f_r);
+    let limit = 2.0 * f_r + floor(k_c, 0.002, &CELLS[2]);
+    let ended = run_to_end(&s, &CELLS[2], &t).expect("a valid tuning");
+    let peak = ended.run.metrics(0.0, f64::INFINITY).peak_force;
+    assert!(ended.fault.is_none(), "the run ended on a fault");
+    assert!(peak <= limit, "impact {peak} N > {limit} N");
 }
 
 /// A noisy damped doubling at a small set-point on the 12 ms cell (found by 1000 `stiffness_changes`
