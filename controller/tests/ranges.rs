@@ -30,7 +30,8 @@ use sim::InnerLoopModel;
 // * the touch-down under noise still fails at its corners, where the noise is a large part of a
 //   small set-point or the cycle is slow: `noise_corners` (ignored; `--ignored` runs it) counts the
 //   seeds 1–199 that fail the touch-down criteria — f_r 2 N on 10 kN/m, P1: 1 at σ 0.82 N, 2 at 1
-//   N (on the mean error at the end); on the 12 ms cell at σ 1 N: f_r 5 N on 50 kN/m 37, f_r 2 N on
+//   N (on the mean error at the end); on the 12 ms cell at σ 1 N: f_r 5 N on 50 kN/m 42 (37 before the
+//   true force's spread at the end was asserted: five seeds spread 0.60–1.16 N), f_r 2 N on
 //   10 kN/m 61 (62, the mean error but for four impacts, before the caution of an unresolved rise
 //   kept a feed-forward that backs off). They were 8, 10, 55 and 86 while the integral
 //   kept its full gain inside the noise and random-walked on it
@@ -480,7 +481,7 @@ fn noise_corners() {
         (2.0, 10e3, 0, 0.82, 1),
         (2.0, 10e3, 0, 1.0, 2),
         (20.0, 500e3, 1, 1.0, 0),
-        (5.0, 50e3, 2, 1.0, 37),
+        (5.0, 50e3, 2, 1.0, 42),
         (2.0, 10e3, 2, 1.0, 61),
     ];
     for (f_r, k_c, cell_i, noise, measured) in corners {
