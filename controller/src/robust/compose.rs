@@ -197,9 +197,17 @@ impl RobustLaw {
             None => {
                 let want = self.in_contact(s, cycle, dt);
                 let window = self.p.identify.onset_window;
-                let touching = s.ff >= th.contact;
-                self.contact
-                    .land(want, self.limiter.command(), &speeds, window, touching, dt)
+                let confirm = self.signals.step_time(cycle);
+                self.contact.land(
+                    want,
+                    self.limiter.command(),
+                    &speeds,
+                    window,
+                    s.ff,
+                    th,
+                    confirm,
+                    dt,
+                )
             }
         }
     }

@@ -69,8 +69,14 @@ pub struct ContactMachine {
     slow: bool,
     /// The search's last command was faster than what stops within `2·f_r` (the fast search).
     fast: bool,
-    /// A touch-down from the approach whose stiffness is not identified yet.
+    /// A touch-down from the approach whose stiffness is not identified yet, or whose force has not
+    /// shown the contact yet (for as long as a step takes to pass the conditioning, or beyond what a
+    /// noise spike reaches).
     landing: bool,
+    /// The touch-down's stiffness is identified.
+    fitted: bool,
+    /// How long the conditioned force has shown contact without a break since it was declared, s.
+    touched: f64,
 }
 
 impl ContactMachine {
@@ -91,6 +97,8 @@ impl ContactMachine {
             slow: false,
             fast: false,
             landing: false,
+            fitted: false,
+            touched: 0.0,
         };
         m.reset();
         m
@@ -116,6 +124,8 @@ impl ContactMachine {
         self.slow = false;
         self.fast = false;
         self.landing = false;
+        self.fitted = false;
+        self.touched = 0.0;
     }
 
     /// Whether the contact has lasted longer than a bounce (a steady contact), s.
@@ -172,6 +182,8 @@ impl ContactMachine {
                         ((s.x - self.x_lost) / self.t_lost.max(dt)).max(0.0)
                     };
                     self.landing = from_approach;
+                    self.fitted = false;
+                    self.touched = 0.0;
                     self.state = ContactState::Contact;
                     self.below = 0.0;
                     self.below_samples = 0;
@@ -186,9 +198,9 @@ impl ContactMachine {
                     self.below_samples += 1;
                     if self.below >= c.lift_time && self.below_samples >= th.samples {
                         if self.landing && self.in_contact < c.bounce_time {
-                            // A touch-down lost before its stiffness was identified, within a
-                            // bounce: nothing was learnt of a surface (a noise spike in free air
-                            // looks like this). The approach goes on, and the next contact is a
+                            // A touch-down lost before its stiffness was identified and shown by
+                            // the force, within a bounce: nothing was learnt of a surface (a noise
+                            // spike in free air looks like this). The approach goes on, and the next contact is a
                             // touch-down again, fitted.
                             self.state = ContactState::Approach;
                             self.landing = false;

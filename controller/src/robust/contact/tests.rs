@@ -58,6 +58,7 @@ fn contact_lift_off_after_lift_time_and_force_limit() {
         }
     );
     m.identified();
+    m.land(0.010, 0.010, &SP, 0.1, 1.1, &TH, 0.0, 1e-3);
     // One low sample is not a lift-off; `lift_time` of them is.
     assert_eq!(
         m.step(&sig(0.0, 1.0), &TH, 60.0, 0.0, 1e-3),
@@ -234,20 +235,32 @@ fn a_touch_down_goes_on_at_approach_speed_until_the_stiffness_is_identified() {
     m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
     assert_eq!(m.state(), ContactState::Contact);
     // A guess too soft wants 1 mm in; the landing goes on at 2 mm/s.
-    let capped = m.land(0.011, 0.010, &SP, 0.1, true, 1e-3);
+    let capped = m.land(0.011, 0.010, &SP, 0.1, 1.1, &TH, 0.004, 1e-3);
     assert!((capped - (0.010 + 0.002e-3)).abs() < 1e-15, "{capped}");
     // Backing off is never held.
-    assert_eq!(m.land(0.009, 0.010, &SP, 0.1, true, 1e-3), 0.009);
-    // Past the window, or once identified, the law's command goes through.
+    assert_eq!(m.land(0.009, 0.010, &SP, 0.1, 1.1, &TH, 0.004, 1e-3), 0.009);
+    // Past the window the law's command goes through.
     m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 0.2);
-    assert_eq!(m.land(0.011, 0.010, &SP, 0.1, true, 1e-3), 0.011);
+    assert_eq!(m.land(0.011, 0.010, &SP, 0.1, 1.1, &TH, 0.004, 1e-3), 0.011);
+    // Identified, the landing goes on until the force has shown the contact for `confirm` (4 ms)
+    // without a break: a contact declared on a noise spike, with a `k̂_c` fitted to that noise, does
+    // not drive in at the force error over that stiffness.
     let mut m = ContactMachine::new(params());
     m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
     m.identified();
-    assert_eq!(m.land(0.011, 0.010, &SP, 0.1, true, 1e-3), 0.011);
-    // …unless the force shows no touch: then no faster than stops within 2·f_r.
-    let untouched = m.land(0.011, 0.010, &SP, 0.1, false, 1e-3);
+    for ff in [1.1, 1.1, 0.5, 1.1, 1.1, 1.1] {
+        let capped = m.land(0.011, 0.010, &SP, 0.1, ff, &TH, 0.004, 1e-3);
+        assert!((capped - (0.010 + 0.002e-3)).abs() < 1e-15, "{capped}");
+    }
+    assert_eq!(m.land(0.011, 0.010, &SP, 0.1, 1.1, &TH, 0.004, 1e-3), 0.011);
+    // …and then, while the force shows no touch, no faster than stops within 2·f_r.
+    let untouched = m.land(0.011, 0.010, &SP, 0.1, 0.5, &TH, 0.004, 1e-3);
     assert!((untouched - (0.010 + SP.near * 1e-3)).abs() < 1e-15);
+    // A force no noise spike reaches (`strong`) shows the contact at once.
+    let mut m = ContactMachine::new(params());
+    m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
+    m.identified();
+    assert_eq!(m.land(0.011, 0.010, &SP, 0.1, 3.5, &TH, 0.004, 1e-3), 0.011);
 }
 
 #[test]
