@@ -9,9 +9,9 @@
 //! the estimator off the moving surface. Both count a surface as still below `max_surface_speed`.
 //!
 //! The first test runs a second time down to `observer.feedforward_speed` (never within the noise),
-//! confirmed over the loop's lead time: that one holds the feed-forward alone. A slow surface on a stiff material is fed forward as a fast
-//! one is (0.2 mm at 0.5 Hz, 0.63 mm/s, on 500 kN/m at f_r 20 N swung 15–25 N without it), and the
-//! identification still takes it for a still one.
+//! confirmed over the loop's lead time: that one holds the feed-forward alone. A slow surface on a
+//! stiff material is fed forward as a fast one is (0.2 mm at 0.5 Hz, 0.63 mm/s, on 500 kN/m at f_r
+//! 20 N swung 15–25 N without it), and the identification still takes it for a still one.
 
 use super::observer::ObserverParams;
 use crate::estimator::surface_moving;

@@ -200,8 +200,8 @@ impl ContactMachine {
                         if self.landing && self.in_contact < c.bounce_time {
                             // A touch-down lost before its stiffness was identified and shown by
                             // the force, within a bounce: nothing was learnt of a surface (a noise
-                            // spike in free air looks like this). The approach goes on, and the next contact is a
-                            // touch-down again, fitted.
+                            // spike in free air looks like this). The approach goes on, and the
+                            // next contact is a touch-down again, fitted.
                             self.state = ContactState::Approach;
                             self.landing = false;
                             return Transition::LiftOff;

@@ -94,7 +94,8 @@ impl IdentifyParams {
     }
 }
 
-/// What the law knows of a contact step besides its sample (see [`Identifier::step`](super::Identifier::step)).
+/// What the law knows of a contact step besides its sample (see
+/// [`Identifier::step`](super::Identifier::step)).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct StepState {
     /// The surface moves: no stiffness to learn (a re-fit is judged by its own consistency instead,
