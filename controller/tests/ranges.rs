@@ -71,8 +71,7 @@ use sim::InnerLoopModel;
 //   Neither is done. Before the noise was measured from the first samples and a single raw sample
 //   had to stand out of the raw noise, they were 94, 158, 183 and 198, and f_r 20 N on 500 kN/m,
 //   P2, σ 1 N failed 106 (now 0). The 200 cases drawn here pass;
-// * every touch-down the 3000 cases draw (`FORCECELL_RANGE_CASES=3000`, each assertion counted, not
-//   stopped at the first): the true force's spread at the end above 0.02·f_r + 0.5·σ twice (f_r 43 N
+// * every touch-down the 3000 cases draw, each miss counted (`touch_down_census`, ignored): the true force's spread at the end above 0.02·f_r + 0.5·σ twice (f_r 43 N
 //   on 12.6 kN/m on P2 under σ 0.68 N rings 34–51 N at 2.4 Hz with `k̂_c` 27 kN/m, the surface taken
 //   for a moving one throughout; f_r 3.1 N on 54 kN/m, 12 ms, σ 0.95 N: 0.554 against 0.54 N), the
 //   mean error seven times (small set-points under noise, mostly on the 12 ms cell), the impact twice
@@ -310,44 +309,77 @@ fn touch_down(
     noise: f64,
     seed: u64,
 ) -> Result<(), TestCaseError> {
+    match touch_down_misses(f_r, k_c, plant, noise, seed)
+        .into_iter()
+        .next()
+    {
+        Some(miss) => Err(TestCaseError::fail(miss)),
+        None => Ok(()),
+    }
+}
+
+/// Every criterion of [`touch_down`] the run misses, in the order it asserts them (none: it holds).
+fn touch_down_misses(
+    f_r: f64,
+    k_c: f64,
+    plant: &InnerLoopModel,
+    noise: f64,
+    seed: u64,
+) -> Vec<String> {
     let s = cell(3.0, k_c, 0.0, None, None, noise, seed);
-    let r = run(&s, plant, &tuning(f_r)).map_err(|e| TestCaseError::fail(e.to_string()))?;
+    let r = match run(&s, plant, &tuning(f_r)) {
+        Ok(r) => r,
+        Err(e) => return vec![e.to_string()],
+    };
     let all = r.metrics(0.0, f64::INFINITY);
+    if !all.first_contact.is_finite() {
+        return vec!["no contact".to_string()];
+    }
+    let mut misses = Vec::new();
+    let mut check = |holds: bool, miss: String| {
+        if !holds {
+            misses.push(miss);
+        }
+    };
     let limit = 2.0 * f_r + floor(k_c, 0.002, plant);
-    prop_assert!(all.first_contact.is_finite(), "no contact");
-    prop_assert!(
+    check(
         all.peak_force <= limit,
-        "impact {} N > {limit} N",
-        all.peak_force
+        format!("impact {} N > {limit} N", all.peak_force),
     );
     let hold = r.metrics(all.first_contact + 0.5, f64::INFINITY);
-    prop_assert!(
+    check(
         hold.contact_losses == 0.0,
-        "{} contact losses",
-        hold.contact_losses
+        format!("{} contact losses", hold.contact_losses),
     );
     let end = r.metrics(2.5, f64::INFINITY);
     let mean_err = mean_error(&r.rows, 2.5);
-    prop_assert!(
+    check(
         mean_err <= 0.02 * f_r + 0.1 * noise,
-        "mean error {mean_err} N at the end (ripple {})",
-        end.ss_ripple
+        format!(
+            "mean error {mean_err} N at the end (ripple {})",
+            end.ss_ripple
+        ),
     );
     if noise == 0.0 {
-        prop_assert!(all.settle_time <= 1.0, "settle {} s", all.settle_time);
+        check(
+            all.settle_time <= 1.0,
+            format!("settle {} s", all.settle_time),
+        );
     }
     // B6 carried over: the true force's spread at the end is the loop's answer to the noise, a share
     // of it (at most 0.43 σ measured over 1000 cases but one), not a ringing of its own.
-    prop_assert!(
+    check(
         end.true_force_std <= 0.02 * f_r + 0.5 * noise,
-        "the true force's std {} N at the end",
-        end.true_force_std
+        format!("the true force's std {} N at the end", end.true_force_std),
     );
     // B8 carried over: the touch-down identifies `k̂_c` (noise-free within 2.2 % measured).
     if noise == 0.0 {
-        prop_assert!(end.kc_rel_error <= 0.1, "k̂_c off by {}", end.kc_rel_error);
+        check(
+            end.kc_rel_error <= 0.1,
+            format!("k̂_c off by {}", end.kc_rel_error),
+        );
     }
-    Ok(())
+    misses
 }
 
 /// Contact was declared no sooner than the tool touched the surface: the observed surface exists
@@ -495,6 +527,61 @@ fn noise_corners() {
             .count();
         println!("f_r {f_r} N, {k_c} N/m, cell {cell_i}, σ {noise} N: {failing} of 199 fail");
         assert!(failing <= measured, "{failing} > {measured}");
+    }
+}
+
+/// Every touch-down [`touch_down_and_hold`] draws (the same seeded cases: 3000, or
+/// `FORCECELL_RANGE_CASES`), each miss printed and counted by its criterion, not stopped at the first
+/// failing case as the property test is; no more than measured with 3000 cases (the known limits
+/// list them): the true force's spread twice, the mean error eight times, the impact twice, nothing
+/// else.
+#[test]
+#[ignore = "3000 closed-loop touch-downs: the known limits' figures, not a criterion"]
+fn touch_down_census() {
+    let cases = (
+        2.0f64..50.0,
+        stiffness(10e3, 500e3),
+        0usize..3,
+        prop_oneof![Just(0.0), 0.0f64..=1.0],
+        1u64..1000,
+    );
+    let kinds = [
+        "impact",
+        "contact losses",
+        "mean error",
+        "settle",
+        "std",
+        "k̂_c",
+        "loop ended",
+    ];
+    let counts = std::cell::RefCell::new([0usize; 7]);
+    let mut runner = proptest::test_runner::TestRunner::new(config(3000));
+    runner
+        .run(&cases, |(f_r, k_c, cell_i, noise, seed)| {
+            for miss in touch_down_misses(f_r, k_c, &CELLS[cell_i], noise, seed) {
+                println!("f_r {f_r:.2} N, {k_c:.0} N/m, cell {cell_i}, σ {noise:.3} N, seed {seed}: {miss}");
+                if let Some(i) = kinds.iter().position(|k| miss.contains(k)) {
+                    counts.borrow_mut()[i] += 1;
+                }
+            }
+            Ok(())
+        })
+        .expect("the census itself asserts nothing");
+    let counts = counts.into_inner();
+    let by: Vec<String> = kinds
+        .iter()
+        .zip(counts)
+        .map(|(k, n)| format!("{k} {n}"))
+        .collect();
+    println!("misses by criterion: {}", by.join(", "));
+    // No more than measured with 3000 cases: two impacts, eight mean errors, two spreads, no fault.
+    if env_or("FORCECELL_RANGE_CASES", 3000) == 3000 {
+        let measured = [2, 0, 8, 0, 2, 0, 0];
+        assert!(
+            counts.iter().zip(measured).all(|(n, m)| *n <= m),
+            "{} (measured {measured:?})",
+            by.join(", ")
+        );
     }
 }
 

@@ -83,6 +83,8 @@ pub struct StiffnessEstimator {
 
 /// Covariance given to the intercept and the surface-velocity term at each contact onset.
 const INTERCEPT_UNCERTAINTY: f64 = 100.0;
+/// Ceiling of any diagonal covariance entry of the recursion (its square: the steady estimator's).
+const COV_MAX: f64 = 1.0e4;
 
 impl StiffnessEstimator {
     /// An estimator at `k̂_c(0)` with position scale `scale` (m, typically `f_r/k̂_c(0)`).

@@ -1,6 +1,6 @@
 //! The steady contact's least squares under sensor noise.
 
-use super::update::COV_MAX;
+use super::COV_MAX;
 
 /// Least squares of a steady contact under sensor noise: `f = θ₀·(x − x₀)/s + θ₁ + θ₂·t/T`, with
 /// forgetting over `T` (s) and the measured noise as the measurement variance.

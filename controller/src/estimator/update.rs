@@ -1,7 +1,7 @@
 //! The recursion's step: the excitation gate, the forgetting least-squares update, the rate limit and
 //! the projection.
 
-use super::{StiffnessEstimator, Update};
+use super::{COV_MAX, StiffnessEstimator, Update};
 
 /// Multiple of `excitation` above which a force transient is informative on a moving surface too.
 const STRONG_EXCITATION: f64 = 10.0;
@@ -19,8 +19,6 @@ pub(super) const MAX_RATE: f64 = 30.0;
 /// 48 ms of delay with `k̂_c(0)` 200 kN/m faulted at 480 N with both rates at 5/s); and a fall at
 /// 5/s left a noisy touch-down on 12.6 kN/m at f_r 43 N on P2 ringing with `k̂_c` still 36 kN/m.
 pub(super) const MAX_FALL_RATE: f64 = 10.0;
-/// Ceiling of any diagonal covariance entry.
-pub(super) const COV_MAX: f64 = 1.0e4;
 
 impl StiffnessEstimator {
     /// One update in contact with measured `x` (m), raw measured force `f` (N), step `dt` (s), and
