@@ -517,9 +517,9 @@ fn noise_corners() {
     let corners = [
         (2.0, 10e3, 0, 0.82, 1),
         (2.0, 10e3, 0, 1.0, 2),
-        (20.0, 500e3, 1, 1.0, 1),
+        (20.0, 500e3, 1, 1.0, 0),
         (5.0, 50e3, 2, 1.0, 42),
-        (2.0, 10e3, 2, 1.0, 59),
+        (2.0, 10e3, 2, 1.0, 58),
     ];
     for (f_r, k_c, cell_i, noise, measured) in corners {
         let failing = (1..200u64)
@@ -598,7 +598,9 @@ fn touch_down_census() {
 /// unresolved rise 61, 17, 21 (78, 18, 21); now, with the recursion's `k̂_c` falling at most 10/s
 /// instead of 30/s, 55, 6, 21 (towards it: 70, 20, 21); now, with the slow surfaces' feed-forward
 /// (`observer.feedforward_speed`), 49, 3, 11 (towards it: 53, 19, 11); now, with a landing that
-/// ends only once the force shows the contact, 49, 4, 11 (54, 18, 11). Also printed and bounded: the
+/// ends only once the force shows the contact, 49, 4, 11 (54, 18, 11); now, with a touch-down whose
+/// force never showed the contact searched for at approach speed, 49, 4, 11 (53, 19, 11: one run on
+/// 500 kN/m ends 15 % off instead of on a fault). Also printed and bounded: the
 /// highest true force of a faulted run (the trip's back-off included, [`run_to_end`]) over its force
 /// limit — with the fall at 30/s 4.36 at 500 kN/m (262 N at f_r 20 N on the 12 ms cell), 3.03 at 300
 /// kN/m — and how well the runs without a fault hold the force: the 90th percentile of their RMS error
@@ -613,7 +615,7 @@ fn moving_surfaces() {
         (30e3, 1, 6, 0, 0.21),
         (100e3, 9, 6, 1, 1.46),
         (300e3, 34, 6, 10, 3.04),
-        (500e3, 59, 4, 11, 2.79),
+        (500e3, 58, 5, 11, 2.79),
     ];
     // The RMS error after 3 s over the set-point of every run without a fault, its 90th percentile
     // measured.
@@ -791,6 +793,23 @@ fn a_contact_declared_on_noise_does_not_dash_into_a_stiff_surface() {
     let t = tuning(f_r);
     let limit = 2.0 * f_r + floor(k_c, 0.002, &CELLS[2]);
     let ended = run_to_end(&s, &CELLS[2], &t).expect("a valid tuning");
+    let peak = ended.run.metrics(0.0, f64::INFINITY).peak_force;
+    assert!(ended.fault.is_none(), "the run ended on a fault");
+    assert!(peak <= limit, "impact {peak} N > {limit} N");
+}
+
+/// The σ 1 N corner of `noise_corners` on P2 (f_r 20 N, 500 kN/m, seed 112): contact was declared on
+/// noise 0.87 mm short of the surface, and no fit concluded. Past the onset window the landing's
+/// approach-speed bound ended, and the command went on at the speed that stops within 2·f_r at the
+/// tuning's guess of `k̂_c` (50 kN/m): 45 mm/s into the surface, a 2.6 times too soft fit of that
+/// impact, and a ringing into 102 N, fault 2. A touch-down whose force has not shown the contact
+/// goes on at approach speed however long it lasts, and its loss is no contact (`robust::contact`).
+#[test]
+fn a_contact_declared_on_noise_far_short_of_a_stiff_surface_approaches_on() {
+    let (f_r, k_c) = (20.0, 500e3);
+    let s = cell(3.0, k_c, 0.0, None, None, 1.0, 112);
+    let limit = 2.0 * f_r + floor(k_c, 0.002, &CELLS[1]);
+    let ended = run_to_end(&s, &CELLS[1], &tuning(f_r)).expect("a valid tuning");
     let peak = ended.run.metrics(0.0, f64::INFINITY).peak_force;
     assert!(ended.fault.is_none(), "the run ended on a fault");
     assert!(peak <= limit, "impact {peak} N > {limit} N");

@@ -98,10 +98,14 @@ impl RobustLaw {
         s.xf + proportional + ff + integral + ramp
     }
 
-    /// Identification at a contact declared at the raw `(x, f)`: a re-contact tells it how the search
-    /// went (a surface found moved, or the fast search's momentum, holds the recursion).
-    pub(super) fn begin_contact(&mut self, x: f64, f: f64, from_approach: bool) {
+    /// A contact declared at the raw `(s.x, s.f)`: identification begins (a re-contact tells it how
+    /// the search went: a surface found moved, or the fast search's momentum, holds the recursion),
+    /// the observers restart at the surface `k̂_c` puts there, the integral at zero.
+    pub(super) fn begin_contact(&mut self, s: &Signals, from_approach: bool) {
+        let (x, f) = (s.x, s.f);
         self.identify.begin_contact(x, f, from_approach);
+        self.observer.restart(s.xf - s.ff / self.identify.kc());
+        self.response.begin_contact();
         if !from_approach {
             let (v, hold) = (
                 self.p.estimator.max_surface_speed,

@@ -212,9 +212,7 @@ impl ForceLaw for RobustLaw {
             Transition::None => {}
             Transition::ForceLimit => ev.force_limit = true,
             Transition::Contact { from_approach } => {
-                self.begin_contact(x, f, from_approach);
-                self.observer.restart(s.xf - s.ff / self.identify.kc());
-                self.response.begin_contact();
+                self.begin_contact(&s, from_approach);
                 ev.contact = true;
             }
             Transition::LiftOff => {

@@ -97,14 +97,15 @@ impl ContactMachine {
     ) -> f64 {
         let touching = ff >= th.contact;
         self.touched = if touching { self.touched + dt } else { 0.0 };
-        let shown = self.touched >= confirm || ff >= th.strong;
-        if self.landing && self.fitted && shown {
+        self.shown |= self.touched >= confirm || ff >= th.strong || self.mean_shown;
+        if self.landing && self.fitted && self.shown {
             self.landing = false;
         }
         if self.landing && self.in_contact < window {
             want.min(u + sp.approach * dt)
         } else if !touching {
-            want.min(u + sp.near * dt)
+            let speed = if self.landing { sp.approach } else { sp.near };
+            want.min(u + speed * dt)
         } else {
             want
         }

@@ -24,6 +24,7 @@ const TH: Thresholds = Thresholds {
     strong: 3.0,
     lift: 0.3,
     samples: 2,
+    noise: 0.0,
 };
 const SP: Speeds = Speeds {
     approach: 0.002,
@@ -130,14 +131,21 @@ fn thresholds_scale_with_set_point_and_noise_and_speeds_with_stiffness() {
     );
 }
 
+/// A steady contact at 5 N for 0.6 s, identified and shown by the force, as the law steps it.
+fn hold(m: &mut ContactMachine, s: &Signals) {
+    m.step(s, &TH, 60.0, 0.0, 1e-3);
+    m.identified();
+    for _ in 0..600 {
+        m.step(s, &TH, 60.0, 0.0, 1e-3);
+        m.land(s.x, s.x, &SP, 0.1, s.ff, &TH, 0.004, 1e-3);
+    }
+}
+
 /// A steady contact at `x`, lost: the machine searches from there.
 fn lost_at(x: f64) -> ContactMachine {
     let mut m = ContactMachine::new(params());
     let at = |f: f64| Signals { x, ..sig(f, f) };
-    m.step(&at(5.0), &TH, 60.0, 0.0, 1e-3);
-    for _ in 0..600 {
-        m.step(&at(5.0), &TH, 60.0, 0.0, 1e-3);
-    }
+    hold(&mut m, &at(5.0));
     while m.step(&at(0.0), &TH, 60.0, 0.0, 1e-3) != Transition::LiftOff {}
     m
 }
@@ -200,10 +208,7 @@ fn the_search_is_fast_back_to_where_contact_was_lost() {
         v_x,
         ..sig(f, f)
     };
-    m.step(&at(5.0, 0.0), &TH, 60.0, 0.0, 1e-3);
-    for _ in 0..600 {
-        m.step(&at(5.0, 0.0), &TH, 60.0, 0.0, 1e-3);
-    }
+    hold(&mut m, &at(5.0, 0.0));
     while m.step(&at(0.0, -0.01), &TH, 60.0, 0.0, 1e-3) != Transition::LiftOff {}
     // The delay line took the tool 2 mm back.
     let mut u = 0.008;
@@ -239,8 +244,16 @@ fn a_touch_down_goes_on_at_approach_speed_until_the_stiffness_is_identified() {
     assert!((capped - (0.010 + 0.002e-3)).abs() < 1e-15, "{capped}");
     // Backing off is never held.
     assert_eq!(m.land(0.009, 0.010, &SP, 0.1, 1.1, &TH, 0.004, 1e-3), 0.009);
-    // Past the window the law's command goes through.
+    // Past the window the law's command goes through once the force has shown the contact (for
+    // `confirm`, 4 ms); until then the landing goes on at approach speed: a contact declared on
+    // noise short of the surface whose fit never concluded went on at the speed that stops within
+    // 2·f_r at the tuning's guess of `k̂_c` (f_r 20 N, 500 kN/m, P2, σ 1 N: 45 mm/s, into 102 N).
     m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 0.2);
+    let unshown = m.land(0.011, 0.010, &SP, 0.1, 0.5, &TH, 0.004, 1e-3);
+    assert!((unshown - (0.010 + 0.002e-3)).abs() < 1e-15, "{unshown}");
+    for _ in 0..3 {
+        m.land(0.011, 0.010, &SP, 0.1, 1.1, &TH, 0.004, 1e-3);
+    }
     assert_eq!(m.land(0.011, 0.010, &SP, 0.1, 1.1, &TH, 0.004, 1e-3), 0.011);
     // Identified, the landing goes on until the force has shown the contact for `confirm` (4 ms)
     // without a break: a contact declared on a noise spike, with a `k̂_c` fitted to that noise, does
@@ -281,4 +294,46 @@ fn a_touch_down_lost_before_it_is_identified_is_no_contact() {
             from_approach: true
         }
     );
+    // A touch-down whose force never showed the contact, lost after longer than a bounce, is no
+    // contact either: no fast search from where the noise declared it. Raw noise about zero, σ 0.5 N.
+    let th = Thresholds { noise: 0.5, ..TH };
+    for i in 1..=600 {
+        let f = if i % 2 == 0 { 0.5 } else { -0.5 };
+        m.step(&sig(f, 0.5), &th, 60.0, 0.0, 1e-3);
+        m.land(0.011, 0.010, &SP, 0.1, 0.5, &th, 0.004, 1e-3);
+    }
+    m.step(&sig(0.0, 0.5), &th, 60.0, 0.0, 1e-3);
+    assert_eq!(
+        m.step(&sig(0.0, 0.5), &th, 60.0, 0.0, 1e-3),
+        Transition::LiftOff
+    );
+    assert_eq!(m.state(), ContactState::Approach);
+}
+
+#[test]
+fn a_held_contact_shows_in_the_mean_where_the_threshold_is_beyond_the_set_point() {
+    // f_r 2 N under σ 1 N: the conditioned force's threshold (2.4 N) lies beyond the set-point, so
+    // the conditioned force alone never shows the contact; the raw mean does within a few samples.
+    let th = Thresholds {
+        contact: 2.4,
+        strong: 12.0,
+        lift: 0.72,
+        samples: 7,
+        noise: 1.0,
+    };
+    let mut m = ContactMachine::new(params());
+    m.step(&sig(2.5, 2.5), &th, 60.0, 0.0, 1e-3);
+    m.identified();
+    let mut shown_after = None;
+    for i in 0..50 {
+        m.step(&sig(2.0, 2.0), &th, 60.0, 0.0, 1e-3);
+        // Landed: past the approach speed (at the near search's, the conditioned force below its
+        // threshold).
+        let u = m.land(0.011, 0.010, &SP, 0.1, 2.0, &th, 0.004, 1e-3);
+        if u > 0.010 + 1.5 * SP.approach * 1e-3 && shown_after.is_none() {
+            shown_after = Some(i + 1);
+        }
+    }
+    // 2 N ≥ 4·1 N/√n from n = 4 on.
+    assert_eq!(shown_after, Some(4));
 }

@@ -15,6 +15,9 @@ pub struct Thresholds {
     /// Consecutive samples below `lift` a lift-off needs (never one: a single bad or zero sample, or
     /// the first sample after a dropout, is not a lift-off; more under noise).
     pub samples: u32,
+    /// The raw force's measured noise, standard deviation, N: how far a mean of raw samples must
+    /// stand out to show a contact.
+    pub noise: f64,
 }
 
 /// Standard deviations of a signal's noise that a contact must stand out by.
@@ -46,6 +49,7 @@ impl ContactMachine {
             strong: c.strong_contact * contact.max(SIGNIFICANCE * sigma),
             lift,
             samples: (2.0 + extra).max(in_a_row.ceil()).min(64.0) as u32,
+            noise: sigma,
         }
     }
 }
