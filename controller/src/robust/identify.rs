@@ -62,6 +62,9 @@ pub struct Identifier {
     /// Time left during which the recursion waits after a re-contact that found the surface moved,
     /// or that the fast search made (`moved.rs`), s.
     recontact_hold: f64,
+    /// The estimator and the identified damping as they were before the current touch-down, kept
+    /// for [`forget_touch_down`](Self::forget_touch_down).
+    before_touch_down: Option<(StiffnessEstimator, f64)>,
 }
 
 impl Identifier {
@@ -81,6 +84,7 @@ impl Identifier {
             onset_seeded: false,
             onset_age: 0.0,
             recontact_hold: 0.0,
+            before_touch_down: None,
         }
     }
 
@@ -101,6 +105,7 @@ impl Identifier {
         self.calm_surface = f64::NAN;
         self.c_e = 0.0;
         self.recontact_hold = 0.0;
+        self.before_touch_down = None;
     }
 
     /// `k̂_c`, N/m.

@@ -217,6 +217,10 @@ impl ForceLaw for RobustLaw {
             }
             Transition::LiftOff => {
                 self.identify.lost();
+                if self.contact.state() == ContactState::Approach {
+                    // A touch-down taken back: nothing was learnt of a surface.
+                    self.identify.forget_touch_down();
+                }
                 self.signals.reset_force(f);
                 ev.lift_off = true;
             }

@@ -5,7 +5,8 @@
 //! the cell can stop near it, then at what stops within `2·f_r`: `search.rs`) → `Contact` … and from
 //! anywhere `Retract` when the conditioned force exceeds the force limit and the raw one confirms it.
 //! A touch-down from the approach lost within a bounce before its stiffness was identified, or lost
-//! before its force ever showed the contact, goes back to `Approach`.
+//! before its force ever showed the contact, goes back to `Approach` (and the law forgets what it
+//! identified there).
 
 use super::signals::Signals;
 use crate::law::ContactState;

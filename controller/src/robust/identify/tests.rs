@@ -218,6 +218,33 @@ fn a_contact_declared_on_noise_is_not_fitted() {
 }
 
 #[test]
+fn a_touch_down_taken_back_forgets_what_it_identified() {
+    let mut id = Identifier::new(IdentifyParams::default(), est(), 5.0 / 50_000.0);
+    // A touch-down on 20 kN/m, fitted: `k̂_c` leaves the tuning's guess.
+    let (k, mut x) = (20_000.0, 0.0099);
+    for _ in 0..100 {
+        id.remember(x, (k * (x - 0.010)).max(0.0), 2e-3, 1e-3);
+        x += 2e-6;
+    }
+    id.begin_contact(x, k * (x - 0.010), true);
+    let mut seeded = false;
+    for i in 0..100 {
+        x += 2e-6;
+        let f = k * (x - 0.010);
+        let first = StepState {
+            first: i == 0,
+            ..StepState::default()
+        };
+        seeded |= id.step(x, f, 2e-3, f, 1e-3, first, 0.0, 0.02).seeded;
+    }
+    assert!(seeded && (id.kc() - k).abs() < 0.05 * k, "k̂ {}", id.kc());
+    // Taken back (the contact machine found it was no contact): the guess again.
+    id.forget_touch_down();
+    assert_eq!(id.kc(), 50_000.0);
+    assert!(!id.fitting());
+}
+
+#[test]
 fn a_surface_in_doubt_gives_the_line_through_it_no_preference() {
     // A transient on 100 kN/m with a ±0.05 N wobble, through the surface: known, or in doubt by 10 µm.
     let (k, xc, s) = (100_000.0, 0.010, 1e-4);
