@@ -71,9 +71,11 @@ use sim::InnerLoopModel;
 //   Neither is done. Before the noise was measured from the first samples and a single raw sample
 //   had to stand out of the raw noise, they were 94, 158, 183 and 198, and f_r 20 N on 500 kN/m,
 //   P2, σ 1 N failed 106 (now 0). The 200 cases drawn here pass;
-// * every touch-down the 3000 cases draw, each miss counted (`touch_down_census`, ignored): the true force's spread at the end above 0.02·f_r + 0.5·σ twice (f_r 43 N
-//   on 12.6 kN/m on P2 under σ 0.68 N rings 34–51 N at 2.4 Hz with `k̂_c` 27 kN/m, the surface taken
-//   for a moving one throughout; f_r 3.1 N on 54 kN/m, 12 ms, σ 0.95 N: 0.554 against 0.54 N), the
+// * every touch-down the 3000 cases draw, each miss counted (`touch_down_census`, ignored): the true
+//   force's spread at the end above 0.02·f_r + 0.5·σ once (f_r 3.1 N on 54 kN/m, 12 ms, σ 0.95 N:
+//   0.554 against 0.54 N; f_r 43 N on 12.6 kN/m on P2 under σ 0.68 N rang 34–51 N until a
+//   touch-down's window outlasted the motion its guess shows,
+//   [`a_soft_surface_under_a_stiff_guess_is_identified_before_the_landing_ends`]), the
 //   mean error seven times (small set-points under noise, mostly on the 12 ms cell), the impact twice
 //   (P2, f_r 2.3 and 3.7 N on 330–380 kN/m under σ 0.57–0.95 N: 17.9 against 16.6 N, 18.6 against
 //   18.0 N), and one fault, fixed since ([`a_contact_declared_on_noise_does_not_dash_into_a_stiff_surface`];
@@ -533,7 +535,7 @@ fn noise_corners() {
 /// Every touch-down [`touch_down_and_hold`] draws (the same seeded cases: 3000, or
 /// `FORCECELL_RANGE_CASES`), each miss printed and counted by its criterion, not stopped at the first
 /// failing case as the property test is; no more than measured with 3000 cases (the known limits
-/// list them): the true force's spread twice, the mean error eight times, the impact twice, nothing
+/// list them): the true force's spread once, the mean error eight times, the impact twice, nothing
 /// else.
 #[test]
 #[ignore = "3000 closed-loop touch-downs: the known limits' figures, not a criterion"]
@@ -574,9 +576,9 @@ fn touch_down_census() {
         .map(|(k, n)| format!("{k} {n}"))
         .collect();
     println!("misses by criterion: {}", by.join(", "));
-    // No more than measured with 3000 cases: two impacts, eight mean errors, two spreads, no fault.
+    // No more than measured with 3000 cases: two impacts, eight mean errors, one spread, no fault.
     if env_or("FORCECELL_RANGE_CASES", 3000) == 3000 {
-        let measured = [2, 0, 8, 0, 2, 0, 0];
+        let measured = [2, 0, 8, 0, 1, 0, 0];
         assert!(
             counts.iter().zip(measured).all(|(n, m)| *n <= m),
             "{} (measured {measured:?})",
@@ -823,6 +825,23 @@ fn a_contact_declared_on_noise_far_short_of_a_stiff_surface_approaches_on() {
 #[test]
 fn a_touch_down_taken_back_leaves_no_fit_of_its_noise() {
     touch_down(5.0, 50e3, &CELLS[2], 1.0, 112).unwrap();
+}
+
+/// A touch-down the 1000 range cases draw (f_r 43 N on 12.6 kN/m on P2 under σ 0.68 N, seed 354):
+/// seen through the tuning's guess (50 kN/m), the tool's own motion looked like the surface's, the
+/// motion test ended the onset window before its fit, the landing ended on the guess, the command
+/// ran in at 30 mm/s into 51 N, and the fit of that left `k̂_c` at 27 kN/m: the force rang at 34–51 N
+/// for the whole run. A touch-down's window now outlasts motion until its fit is significant.
+#[test]
+fn a_soft_surface_under_a_stiff_guess_is_identified_before_the_landing_ends() {
+    touch_down(
+        42.94746419391765,
+        12564.613878935359,
+        &CELLS[1],
+        0.684243801378516,
+        354,
+    )
+    .unwrap();
 }
 
 /// A noisy damped doubling at a small set-point on the 12 ms cell (found by 1000 `stiffness_changes`

@@ -200,13 +200,13 @@ impl RobustLaw {
             Some(u) => u,
             None => {
                 let want = self.in_contact(s, cycle, dt);
-                let window = self.p.identify.onset_window;
+                let open = self.identify.onset_open();
                 let confirm = self.signals.step_time(cycle);
                 self.contact.land(
                     want,
                     self.limiter.command(),
                     &speeds,
-                    window,
+                    open,
                     s.ff,
                     th,
                     confirm,

@@ -141,6 +141,12 @@ impl Identifier {
         self.steady_var0 = f64::INFINITY;
     }
 
+    /// Whether a contact onset's window is open (stretched by `onset_patience` while its fit is not
+    /// significant).
+    pub fn onset_open(&self) -> bool {
+        self.onset.active() && self.refit.is_none()
+    }
+
     /// Whether a transient is being fitted.
     pub fn fitting(&self) -> bool {
         self.onset.active() || self.refit.is_some()
@@ -176,7 +182,10 @@ impl Identifier {
         if self.hold_step(dt) {
             return Identified::default();
         }
-        if moving && self.refit.is_none() {
+        // A surface seen moving ends a window, but not a touch-down's before its fit is significant:
+        // the surface is seen through `k̂_c`, and the tuning's guess shows the tool's own motion as
+        // the surface's (on 12.6 kN/m, four times softer than the guess, three quarters of it).
+        if moving && self.refit.is_none() && self.onset_seeded {
             self.onset.stop();
         }
         let onset = self.onset.active();

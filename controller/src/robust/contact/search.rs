@@ -71,25 +71,31 @@ impl ContactMachine {
         self.fitted = true;
     }
 
-    /// The command in contact `want` during a touch-down (s since contact below `window`): until
-    /// `k̂_c` is the surface's and not the tuning's guess, and the conditioned force `ff` has shown the
-    /// contact (above `th.contact` for `confirm` s without a break, or once above `th.strong`), the
-    /// command goes on in at no more than the approach speed from the last command `u` (a guess too
-    /// soft would command a step deep into the surface; the approach's speed is what the impact
-    /// bound is made of). A contact declared on a noise spike short of the surface, whose onset fit
-    /// of that noise gave a `k̂_c` at once, ended the landing there, and the command stepped at the
-    /// loop's 0.5 mm a cycle into the surface (f_r 38.6 N on 454 kN/m on the 12 ms cell under σ 0.8
-    /// N: 296 N). Later, while the force shows no touch (the conditioned force below the contact
-    /// threshold), no faster than stops within `2·f_r`: a contact declared on noise short of the
-    /// surface, with the `k̂_c` of a fit of noise, would otherwise drive in at the force error over
-    /// that stiffness per cycle (on the 12 ms cell 27 mm/s, into 44 N).
+    /// The command in contact `want` during a touch-down, while its onset window is `open` (the
+    /// identification's, stretched by its patience while the fit is not significant): until `k̂_c` is
+    /// the surface's and not the tuning's guess, and the force has shown the contact (the
+    /// conditioned `ff` above `th.contact` for `confirm` s without a break, or once above `th.strong`,
+    /// or the raw mean since the declaration, see `mean_shows`), the command goes on in at no more
+    /// than the approach speed from the last command `u` (a guess too soft would command a step deep
+    /// into the surface; the approach's speed is what the impact bound is made of). A contact
+    /// declared on a noise spike short of the surface, whose onset fit of that noise gave a `k̂_c` at
+    /// once, ended the landing there, and the command stepped at the loop's 0.5 mm a cycle into the
+    /// surface (f_r 38.6 N on 454 kN/m on the 12 ms cell under σ 0.8 N: 296 N). A window that closed
+    /// at its 0.1 s while the fit waited on its patience let the tuning's guess through: on 12.6 kN/m
+    /// at f_r 43 N on P2 under σ 0.68 N the command ran at 30 mm/s into 51 N, and the fit of that
+    /// run-in left `k̂_c` twice too stiff and the loop ringing. Later, while the force shows no
+    /// touch (the conditioned force below the contact threshold), no faster than stops within
+    /// `2·f_r`, or than the approach while the landing is not over: a contact declared on noise short
+    /// of the surface, with the `k̂_c` of a fit of noise or the tuning's guess, would otherwise drive
+    /// in at the force error over that stiffness per cycle (on the 12 ms cell 27 mm/s, into 44 N; on
+    /// P2 45 mm/s into a 500 kN/m surface, 102 N).
     #[allow(clippy::too_many_arguments)]
     pub fn land(
         &mut self,
         want: f64,
         u: f64,
         sp: &Speeds,
-        window: f64,
+        open: bool,
         ff: f64,
         th: &Thresholds,
         confirm: f64,
@@ -101,7 +107,7 @@ impl ContactMachine {
         if self.landing && self.fitted && self.shown {
             self.landing = false;
         }
-        if self.landing && self.in_contact < window {
+        if self.landing && open {
             want.min(u + sp.approach * dt)
         } else if !touching {
             let speed = if self.landing { sp.approach } else { sp.near };

@@ -64,6 +64,47 @@ fn the_onset_of_a_contact_from_the_approach_is_fitted() {
     assert_eq!(id.kc_rel_sd(), est().initial_uncertainty);
 }
 
+/// A touch-down on a surface four times softer than the tuning's guess: seen through the guess, the
+/// tool's own motion looks like the surface's (the observer's surface `x − f/k̂_c` moves with three
+/// quarters of it), and the motion test calls it moving from the first step. That ended the window
+/// before its fit (f_r 43 N on 12.6 kN/m on P2 under σ 0.68 N: the landing ended on the guess, the
+/// command ran in at 30 mm/s, and `k̂_c` ended twice too stiff with the force ringing 34–51 N). A
+/// touch-down's window is not ended by motion before its fit is significant; after, it is.
+#[test]
+fn a_touch_down_window_outlasts_motion_seen_through_the_guess() {
+    let mut id = Identifier::new(IdentifyParams::default(), est(), 43.0 / 50_000.0);
+    let (k, mut x) = (12_565.0, 0.0095);
+    for _ in 0..250 {
+        id.remember(x, (k * (x - 0.010)).max(0.0), 2e-3, 4e-3);
+        x += 8e-6;
+    }
+    id.begin_contact(x, k * (x - 0.010), true);
+    let mut seeded = false;
+    for i in 0..10 {
+        x += 8e-6;
+        let f = k * (x - 0.010);
+        let state = StepState {
+            first: i == 0,
+            moving: true,
+            ..StepState::default()
+        };
+        seeded |= id.step(x, f, 2e-3, f, 4e-3, state, 0.0, 0.02).seeded;
+        if seeded {
+            break;
+        }
+    }
+    assert!(seeded, "the window ended on the motion the guess shows");
+    assert!((id.kc() - k).abs() < 0.05 * k, "k̂ {}", id.kc());
+    // Fitted, the surface is seen through the surface's own stiffness: motion ends the window.
+    let f = k * (x + 8e-6 - 0.010);
+    let moving = StepState {
+        moving: true,
+        ..StepState::default()
+    };
+    id.step(x + 8e-6, f, 2e-3, f, 4e-3, moving, 0.0, 0.02);
+    assert!(!id.onset_open());
+}
+
 /// A touch-down on the 12 ms cell that bounces within the onset window (f_r 2.6 N on 355 kN/m, the
 /// samples of `surface_steps`' 1000-case find, mm): the sample off the surface is on the hinge's flat
 /// part, not on the line; fitted as on it, it took `k̂_c` from 340 to 164 kN/m.
