@@ -70,38 +70,56 @@ fn the_onset_of_a_contact_from_the_approach_is_fitted() {
 /// before its fit (f_r 43 N on 12.6 kN/m on P2 under σ 0.68 N: the landing ended on the guess, the
 /// command ran in at 30 mm/s, and `k̂_c` ended twice too stiff with the force ringing 34–51 N). A
 /// touch-down's window is not ended by motion before its fit is significant; after, it is.
-#[test]
-fn a_touch_down_window_outlasts_motion_seen_through_the_guess() {
-    let mut id = Identifier::new(IdentifyParams::default(), est(), 43.0 / 50_000.0);
-    let (k, mut x) = (12_565.0, 0.0095);
-    for _ in 0..250 {
-        id.remember(x, (k * (x - 0.010)).max(0.0), 2e-3, 4e-3);
-        x += 8e-6;
+/// A noise-free touch-down on a spring of stiffness `k` (N/m) at 10 mm, approached at `v` (m/s) on a
+/// cycle `dt` (s), the tuning's guess 50 kN/m at set-point `f_r`: the approach is remembered, contact
+/// is declared at 1 N, and the contact goes on in at `v` for at most `steps` steps (with the motion
+/// test calling the surface `moving`) until the fit sets `k̂_c`. Whether it did, and the last position.
+fn touch_down_on(
+    k: f64,
+    f_r: f64,
+    v: f64,
+    dt: f64,
+    steps: usize,
+    moving: bool,
+) -> (Identifier, bool, f64) {
+    let mut id = Identifier::new(IdentifyParams::default(), est(), f_r / 50_000.0);
+    let force = |x: f64| (k * (x - 0.010)).max(0.0);
+    let mut x = 0.0099;
+    while force(x) < 1.0 {
+        id.remember(x, force(x), v, dt);
+        x += v * dt;
     }
-    id.begin_contact(x, k * (x - 0.010), true);
-    let mut seeded = false;
-    for i in 0..10 {
-        x += 8e-6;
-        let f = k * (x - 0.010);
+    id.begin_contact(x, force(x), true);
+    for i in 0..steps {
         let state = StepState {
             first: i == 0,
-            moving: true,
+            moving,
             ..StepState::default()
         };
-        seeded |= id.step(x, f, 2e-3, f, 4e-3, state, 0.0, 0.02).seeded;
-        if seeded {
-            break;
+        if id
+            .step(x, force(x), v, force(x), dt, state, 0.0, 0.02)
+            .seeded
+        {
+            return (id, true, x);
         }
+        x += v * dt;
     }
+    (id, false, x)
+}
+
+#[test]
+fn a_touch_down_window_outlasts_motion_seen_through_the_guess() {
+    let k = 12_565.0;
+    let (mut id, seeded, x) = touch_down_on(k, 43.0, 2e-3, 4e-3, 10, true);
     assert!(seeded, "the window ended on the motion the guess shows");
     assert!((id.kc() - k).abs() < 0.05 * k, "k̂ {}", id.kc());
     // Fitted, the surface is seen through the surface's own stiffness: motion ends the window.
-    let f = k * (x + 8e-6 - 0.010);
+    let (x, f) = (x + 8e-6, k * (x + 8e-6 - 0.010));
     let moving = StepState {
         moving: true,
         ..StepState::default()
     };
-    id.step(x + 8e-6, f, 2e-3, f, 4e-3, moving, 0.0, 0.02);
+    id.step(x, f, 2e-3, f, 4e-3, moving, 0.0, 0.02);
     assert!(!id.onset_open());
 }
 
@@ -260,24 +278,9 @@ fn a_contact_declared_on_noise_is_not_fitted() {
 
 #[test]
 fn a_touch_down_taken_back_forgets_what_it_identified() {
-    let mut id = Identifier::new(IdentifyParams::default(), est(), 5.0 / 50_000.0);
     // A touch-down on 20 kN/m, fitted: `k̂_c` leaves the tuning's guess.
-    let (k, mut x) = (20_000.0, 0.0099);
-    for _ in 0..100 {
-        id.remember(x, (k * (x - 0.010)).max(0.0), 2e-3, 1e-3);
-        x += 2e-6;
-    }
-    id.begin_contact(x, k * (x - 0.010), true);
-    let mut seeded = false;
-    for i in 0..100 {
-        x += 2e-6;
-        let f = k * (x - 0.010);
-        let first = StepState {
-            first: i == 0,
-            ..StepState::default()
-        };
-        seeded |= id.step(x, f, 2e-3, f, 1e-3, first, 0.0, 0.02).seeded;
-    }
+    let k = 20_000.0;
+    let (mut id, seeded, _) = touch_down_on(k, 5.0, 2e-3, 1e-3, 100, false);
     assert!(seeded && (id.kc() - k).abs() < 0.05 * k, "k̂ {}", id.kc());
     // Taken back (the contact machine found it was no contact): the guess again.
     id.forget_touch_down();
