@@ -165,21 +165,74 @@ proptest! {
         c_e in prop_oneof![Just(0.0), 0.0f64..200.0],
         seed in 1u64..1000,
     ) {
-        let plant = CELLS[cell_i];
-        let factor = if double { 2.0 } else { 0.5 };
-        let s = cell(at + 2.0, k_c, c_e, Some((at, factor)), None, noise, seed);
-        let r = run(&s, &plant, &tuning(f_r)).unwrap();
-        let after = r.metrics(at, f64::INFINITY);
-        prop_assert!(after.contact_losses == 0.0, "{} contact losses", after.contact_losses);
-        let mean_err = mean_error(&r.rows, at + 1.5);
-        prop_assert!(mean_err <= 0.02 * f_r + 0.1 * noise, "mean error {mean_err} N at the end");
-        if noise == 0.0 && c_e == 0.0 {
-            prop_assert!(after.settle_time <= 0.5, "back in ±2 % after {} s", after.settle_time);
-        }
-        if 4.0 * change_bound(f_r, factor, noise, &plant) <= 0.1 {
-            prop_assert!(after.kc_rel_error <= 0.1, "k̂ off by {}", after.kc_rel_error);
+        let change = Change { f_r, k_c, double, at, cell_i, noise, c_e, seed };
+        if let Some(miss) = change_misses(&change).into_iter().next() {
+            return Err(TestCaseError::fail(miss));
         }
     }
+}
+
+/// One case of [`stiffness_changes`]: set-point (N), stiffness (N/m), doubled or halved, at (s), cell,
+/// sensor noise (N), surface damping (N·s/m), seed.
+#[derive(Clone, Copy, Debug)]
+struct Change {
+    f_r: f64,
+    k_c: f64,
+    double: bool,
+    at: f64,
+    cell_i: usize,
+    noise: f64,
+    c_e: f64,
+    seed: u64,
+}
+
+/// Every criterion of [`stiffness_changes`] the case misses, in the order it asserts them (none: it
+/// holds).
+fn change_misses(c: &Change) -> Vec<String> {
+    let plant = CELLS[c.cell_i];
+    let factor = if c.double { 2.0 } else { 0.5 };
+    let s = cell(
+        c.at + 2.0,
+        c.k_c,
+        c.c_e,
+        Some((c.at, factor)),
+        None,
+        c.noise,
+        c.seed,
+    );
+    let r = match run(&s, &plant, &tuning(c.f_r)) {
+        Ok(r) => r,
+        Err(e) => return vec![e.to_string()],
+    };
+    let after = r.metrics(c.at, f64::INFINITY);
+    let mut misses = Vec::new();
+    let mut check = |holds: bool, miss: String| {
+        if !holds {
+            misses.push(miss);
+        }
+    };
+    check(
+        after.contact_losses == 0.0,
+        format!("{} contact losses", after.contact_losses),
+    );
+    let mean_err = mean_error(&r.rows, c.at + 1.5);
+    check(
+        mean_err <= 0.02 * c.f_r + 0.1 * c.noise,
+        format!("mean error {mean_err} N at the end"),
+    );
+    if c.noise == 0.0 && c.c_e == 0.0 {
+        check(
+            after.settle_time <= 0.5,
+            format!("settle: back in ±2 % after {} s", after.settle_time),
+        );
+    }
+    if 4.0 * change_bound(c.f_r, factor, c.noise, &plant) <= 0.1 {
+        check(
+            after.kc_rel_error <= 0.1,
+            format!("k̂_c off by {}", after.kc_rel_error),
+        );
+    }
+    misses
 }
 
 // 200 seeded cases for the surface steps too (24 while more found the fast search's re-contact above
@@ -556,12 +609,82 @@ fn touch_down_census() {
         "k̂_c",
         "loop ended",
     ];
-    let counts = std::cell::RefCell::new([0usize; 7]);
+    // No more than measured with 3000 cases: two impacts, eight mean errors, one spread, no fault.
+    census(
+        cases,
+        &kinds,
+        &[2, 0, 8, 0, 1, 0, 0],
+        |(f_r, k_c, cell_i, noise, seed)| {
+            (
+                format!("f_r {f_r:.2} N, {k_c:.0} N/m, cell {cell_i}, σ {noise:.3} N, seed {seed}"),
+                touch_down_misses(f_r, k_c, &CELLS[cell_i], noise, seed),
+            )
+        },
+    );
+}
+
+/// Every stiffness change [`stiffness_changes`] draws (the same seeded cases: 3000, or
+/// `FORCECELL_RANGE_CASES`), each miss printed and counted by its criterion; no more than measured
+/// with 3000 cases (the known limits list them): the mean error four times (small set-points under
+/// noise), nothing else. Before a jump's first sample was no excitation, also `k̂_c` once
+/// ([`a_jump_s_first_sample_is_no_excitation`]).
+#[test]
+#[ignore = "3000 closed-loop stiffness changes: the known limits' figures, not a criterion"]
+fn stiffness_changes_census() {
+    let cases = (
+        2.0f64..50.0,
+        stiffness(20e3, 250e3),
+        any::<bool>(),
+        2.0f64..3.0,
+        0usize..3,
+        prop_oneof![Just(0.0), 0.0f64..0.5],
+        prop_oneof![Just(0.0), 0.0f64..200.0],
+        1u64..1000,
+    );
+    let kinds = [
+        "contact losses",
+        "mean error",
+        "settle",
+        "k̂_c",
+        "loop ended",
+    ];
+    census(
+        cases,
+        &kinds,
+        &[0, 4, 0, 0, 0],
+        |(f_r, k_c, double, at, cell_i, noise, c_e, seed)| {
+            let c = Change {
+                f_r,
+                k_c,
+                double,
+                at,
+                cell_i,
+                noise,
+                c_e,
+                seed,
+            };
+            (format!("{c:?}"), change_misses(&c))
+        },
+    );
+}
+
+/// Run the seeded `cases` (3000, or `FORCECELL_RANGE_CASES`) through `misses` (a case's label and
+/// the criteria it misses), print every miss and count it by the first of `kinds` it names, not
+/// stopped at the first failing case as a property test is; with 3000 cases, no more of each kind
+/// than `measured`.
+fn census<S: Strategy>(
+    cases: S,
+    kinds: &[&str],
+    measured: &[usize],
+    misses: impl Fn(S::Value) -> (String, Vec<String>),
+) {
+    let counts = std::cell::RefCell::new(vec![0usize; kinds.len()]);
     let mut runner = proptest::test_runner::TestRunner::new(config(3000));
     runner
-        .run(&cases, |(f_r, k_c, cell_i, noise, seed)| {
-            for miss in touch_down_misses(f_r, k_c, &CELLS[cell_i], noise, seed) {
-                println!("f_r {f_r:.2} N, {k_c:.0} N/m, cell {cell_i}, σ {noise:.3} N, seed {seed}: {miss}");
+        .run(&cases, |case| {
+            let (label, missed) = misses(case);
+            for miss in missed {
+                println!("{label}: {miss}");
                 if let Some(i) = kinds.iter().position(|k| miss.contains(k)) {
                     counts.borrow_mut()[i] += 1;
                 }
@@ -572,15 +695,13 @@ fn touch_down_census() {
     let counts = counts.into_inner();
     let by: Vec<String> = kinds
         .iter()
-        .zip(counts)
+        .zip(&counts)
         .map(|(k, n)| format!("{k} {n}"))
         .collect();
     println!("misses by criterion: {}", by.join(", "));
-    // No more than measured with 3000 cases: two impacts, eight mean errors, one spread, no fault.
     if env_or("FORCECELL_RANGE_CASES", 3000) == 3000 {
-        let measured = [2, 0, 8, 0, 1, 0, 0];
         assert!(
-            counts.iter().zip(measured).all(|(n, m)| *n <= m),
+            counts.iter().zip(measured).all(|(n, m)| n <= m),
             "{} (measured {measured:?})",
             by.join(", ")
         );
@@ -602,7 +723,9 @@ fn touch_down_census() {
 /// (`observer.feedforward_speed`), 49, 3, 11 (towards it: 53, 19, 11); now, with a landing that
 /// ends only once the force shows the contact, 49, 4, 11 (54, 18, 11); now, with a touch-down whose
 /// force never showed the contact searched for at approach speed, 49, 4, 11 (53, 19, 11: one run on
-/// 500 kN/m ends 15 % off instead of on a fault). Also printed and bounded: the
+/// 500 kN/m ends 15 % off instead of on a fault); now, with a jump's first sample no excitation for
+/// the recursion, 49, 5, 11 (53, 19, 11: one fault moved from 300 to 500 kN/m, one more run off at
+/// 500 kN/m, the worst trip at 300 kN/m 3.03 → 3.05). Also printed and bounded: the
 /// highest true force of a faulted run (the trip's back-off included, [`run_to_end`]) over its force
 /// limit — with the fall at 30/s 4.36 at 500 kN/m (262 N at f_r 20 N on the 12 ms cell), 3.03 at 300
 /// kN/m — and how well the runs without a fault hold the force: the 90th percentile of their RMS error
@@ -616,8 +739,8 @@ fn moving_surfaces() {
         (10e3, 0, 0, 0, 0.0),
         (30e3, 1, 6, 0, 0.21),
         (100e3, 9, 6, 1, 1.46),
-        (300e3, 34, 6, 10, 3.04),
-        (500e3, 58, 5, 11, 2.79),
+        (300e3, 33, 6, 10, 3.05),
+        (500e3, 59, 6, 11, 2.79),
     ];
     // The RMS error after 3 s over the set-point of every run without a fault, its 90th percentile
     // measured.
@@ -842,6 +965,28 @@ fn a_soft_surface_under_a_stiff_guess_is_identified_before_the_landing_ends() {
         354,
     )
     .unwrap();
+}
+
+/// A damped halving the 3000 `stiffness_changes` cases draw behind their first miss (f_r 40 N, 26.6
+/// → 13.3 kN/m, 194 N·s/m, σ 0.18 N, the 12 ms cell, seed 258): the recursion learnt from the
+/// jump's first sample, before the conditioned force left its band and the re-fit opened, and took
+/// `k̂_c` 36 % up, the wrong way, in that one step (its rise limit on a 12 ms step); the loop and the
+/// re-fit then worked against that, and `k̂_c` ended 19 % off where the change's information allows
+/// 10 %. A raw force out of its band in a calm contact is no excitation now; `k̂_c` ends 0.6 % off.
+#[test]
+fn a_jump_s_first_sample_is_no_excitation() {
+    let (f_r, k_c, at) = (39.97872569606507, 26593.57595707148, 2.025879857904099);
+    let (noise, c_e) = (0.1817387478895071, 193.50865806883607);
+    let s = cell(at + 2.0, k_c, c_e, Some((at, 0.5)), None, noise, 258);
+    assert!(4.0 * change_bound(f_r, 0.5, noise, &CELLS[2]) <= 0.1);
+    let r = run(&s, &CELLS[2], &tuning(f_r)).unwrap();
+    let after = r.metrics(at, f64::INFINITY);
+    assert_eq!(after.contact_losses, 0.0);
+    assert!(
+        after.kc_rel_error <= 0.1,
+        "k̂_c off by {}",
+        after.kc_rel_error
+    );
 }
 
 /// A noisy damped doubling at a small set-point on the 12 ms cell (found by 1000 `stiffness_changes`

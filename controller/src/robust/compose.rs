@@ -149,6 +149,9 @@ impl RobustLaw {
             self.identify.refit(s.x, s.f, early);
         }
         let disturbed = self.observer.disturbed();
+        let jumped = calm
+            && (s.f - self.response.set_point()).abs()
+                > (0.2 * self.force_scale()).max(5.0 * self.noise.std());
         let id = self.identify.step(
             s.x,
             s.f,
@@ -161,6 +164,7 @@ impl RobustLaw {
                 first: ev.contact,
                 lifted: s.f < lift,
                 disturbed,
+                jumped,
             },
             self.noise.var(),
             self.p.response.noise_floor,

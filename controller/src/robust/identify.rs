@@ -178,6 +178,7 @@ impl Identifier {
             first,
             lifted,
             disturbed,
+            jumped,
         } = state;
         if self.hold_step(dt) {
             return Identified::default();
@@ -224,8 +225,11 @@ impl Identifier {
                 }
             }
             // While a re-fit runs the recursion waits for it: fed the transient with a stale `k̂_c`
-            // it jumps, and the observed surface `x − f/k̂_c` jumps with it (taken for motion).
-            None if self.refit.is_some() => Identified::default(),
+            // it jumps, and the observed surface `x − f/k̂_c` jumps with it (taken for motion). So it
+            // does on a jump's first sample, before the re-fit opens: no excitation (a damped halving
+            // on the 12 ms cell took `k̂_c` 36 % the wrong way in that one step, the re-fit judged
+            // against it, and `k̂_c` ended 19 % off).
+            None if self.refit.is_some() || jumped => Identified::default(),
             None => {
                 // The spring's force: the identified damping's share taken out.
                 let f_spring = f - self.c_e * v;

@@ -111,4 +111,7 @@ pub struct StepState {
     pub lifted: bool,
     /// Something moved or jumped lately.
     pub disturbed: bool,
+    /// The raw force left its band in a calm contact this step (beyond what its noise reaches): a
+    /// jump's first sample, which the conditioned force the band test reads shows only later.
+    pub jumped: bool,
 }
