@@ -166,7 +166,7 @@ proptest! {
         seed in 1u64..1000,
     ) {
         let change = Change { f_r, k_c, double, at, cell_i, noise, c_e, seed };
-        if let Some(miss) = change_misses(&change).into_iter().next() {
+        if let Some(miss) = change_misses(&change, false).into_iter().next() {
             return Err(TestCaseError::fail(miss));
         }
     }
@@ -187,8 +187,9 @@ struct Change {
 }
 
 /// Every criterion of [`stiffness_changes`] the case misses, in the order it asserts them (none: it
-/// holds).
-fn change_misses(c: &Change) -> Vec<String> {
+/// holds); with `beyond`, also a `k̂_c` that is not asserted (the change's information allows no 10 %)
+/// but ends beyond four deviations of that information.
+fn change_misses(c: &Change, beyond: bool) -> Vec<String> {
     let plant = CELLS[c.cell_i];
     let factor = if c.double { 2.0 } else { 0.5 };
     let s = cell(
@@ -226,10 +227,19 @@ fn change_misses(c: &Change) -> Vec<String> {
             format!("settle: back in ±2 % after {} s", after.settle_time),
         );
     }
-    if 4.0 * change_bound(c.f_r, factor, c.noise, &plant) <= 0.1 {
+    let information = 4.0 * change_bound(c.f_r, factor, c.noise, &plant);
+    if information <= 0.1 {
         check(
             after.kc_rel_error <= 0.1,
             format!("k̂_c off by {}", after.kc_rel_error),
+        );
+    } else if beyond {
+        check(
+            after.kc_rel_error <= information,
+            format!(
+                "k̂_c off by {} beyond its information's {information} (not asserted)",
+                after.kc_rel_error
+            ),
         );
     }
     misses
@@ -627,7 +637,10 @@ fn touch_down_census() {
 /// `FORCECELL_RANGE_CASES`), each miss printed and counted by its criterion; no more than measured
 /// with 3000 cases (the known limits list them): the mean error four times (small set-points under
 /// noise), nothing else. Before a jump's first sample was no excitation, also `k̂_c` once
-/// ([`a_jump_s_first_sample_is_no_excitation`]).
+/// ([`a_jump_s_first_sample_is_no_excitation`]). Also counted, not asserted by the property test: a
+/// `k̂_c` beyond four deviations of what the change's information allows, where that allows no 10 %
+/// — twice (damped changes at f_r 2.5 N); four times before a halving was no crawling surface
+/// ([`a_halving_is_no_crawling_surface`]; at f_r 3.9 N on the 12 ms cell 53 % off, now 12 %).
 #[test]
 #[ignore = "3000 closed-loop stiffness changes: the known limits' figures, not a criterion"]
 fn stiffness_changes_census() {
@@ -645,13 +658,14 @@ fn stiffness_changes_census() {
         "contact losses",
         "mean error",
         "settle",
+        "beyond its information",
         "k̂_c",
         "loop ended",
     ];
     census(
         cases,
         &kinds,
-        &[0, 4, 0, 0, 0],
+        &[0, 4, 0, 2, 0, 0],
         |(f_r, k_c, double, at, cell_i, noise, c_e, seed)| {
             let c = Change {
                 f_r,
@@ -663,7 +677,7 @@ fn stiffness_changes_census() {
                 c_e,
                 seed,
             };
-            (format!("{c:?}"), change_misses(&c))
+            (format!("{c:?}"), change_misses(&c, true))
         },
     );
 }
@@ -979,6 +993,27 @@ fn a_jump_s_first_sample_is_no_excitation() {
     let (noise, c_e) = (0.1817387478895071, 193.50865806883607);
     let s = cell(at + 2.0, k_c, c_e, Some((at, 0.5)), None, noise, 258);
     assert!(4.0 * change_bound(f_r, 0.5, noise, &CELLS[2]) <= 0.1);
+    let r = run(&s, &CELLS[2], &tuning(f_r)).unwrap();
+    let after = r.metrics(at, f64::INFINITY);
+    assert_eq!(after.contact_losses, 0.0);
+    assert!(
+        after.kc_rel_error <= 0.1,
+        "k̂_c off by {}",
+        after.kc_rel_error
+    );
+}
+
+/// A damped halving the 3000 `stiffness_changes` cases draw where `k̂_c` is not asserted (f_r 4.8 N,
+/// 74.6 → 37.3 kN/m, 80 N·s/m, σ 0.47 N, the 12 ms cell, seed 886: the change's information allows
+/// 40 %): the re-fit through the surface found 36.5 ± 1.1 kN/m, but the stale stiffness on a surface
+/// crawling at 0.09 mm/s explained the window better (the tool advancing steadily, time and position
+/// nearly collinear), and `k̂_c` was kept, 89 % off. A moving surface is no slower than the slowest
+/// motion the law acts on (`observer.feedforward_speed`); `k̂_c` now ends 4 % off.
+#[test]
+fn a_halving_is_no_crawling_surface() {
+    let (f_r, k_c, at) = (4.847431351152553, 74596.8085901484, 2.473893068108747);
+    let (noise, c_e) = (0.47163677404470283, 79.96571327926478);
+    let s = cell(at + 2.0, k_c, c_e, Some((at, 0.5)), None, noise, 886);
     let r = run(&s, &CELLS[2], &tuning(f_r)).unwrap();
     let after = r.metrics(at, f64::INFINITY);
     assert_eq!(after.contact_losses, 0.0);

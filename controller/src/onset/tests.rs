@@ -64,16 +64,17 @@ fn a_moving_surface_and_a_changed_stiffness_are_told_apart() {
     // the stiffness line does not.
     let mut o = OnsetFit::new();
     o.begin(0.0101, s, 1.0);
-    o.also_moving(k * s, 0.0);
+    o.also_moving(k * s, 0.0, 1e-4);
     settling(&mut o, k, |t| 0.010 + 1.5e-4 * t);
     let moving = o.moving_sse().unwrap();
     let line = o.fit(0.0).unwrap().sse;
     assert!(moving < 1e-9, "{moving}");
     assert!(line > 1e3 * moving.max(1e-12), "{line}");
-    // The stiffness halved on a still surface: the other way round.
+    // The stiffness halved on a still surface: the other way round (whatever speed the moving fit
+    // puts on the surface).
     let mut o = OnsetFit::new();
     o.begin(0.0101, s, 1.0);
-    o.also_moving(k * s, 0.0);
+    o.also_moving(k * s, 0.0, 0.0);
     settling(&mut o, 0.5 * k, |_| 0.010);
     let moving = o.moving_sse().unwrap();
     let (through, _) = o.fit_through(0.010, 0.0).unwrap();
@@ -84,6 +85,17 @@ fn a_moving_surface_and_a_changed_stiffness_are_told_apart() {
     o.begin(0.0101, s, 1.0);
     settling(&mut o, k, |_| 0.010);
     assert!(o.moving_sse().is_none());
+    // A surface crawling at 0.05 mm/s, below the slowest motion the law acts on (0.1 mm/s): no
+    // moving surface, however well it fits.
+    let crawl = |slowest: f64| {
+        let mut o = OnsetFit::new();
+        o.begin(0.0101, s, 1.0);
+        o.also_moving(k * s, 0.0, slowest);
+        settling(&mut o, k, |t| 0.010 + 5e-5 * t);
+        o.moving_sse()
+    };
+    assert!(crawl(0.0).is_some_and(|sse| sse < 1e-9));
+    assert_eq!(crawl(1e-4), None);
 }
 
 /// A sample passed (a bounce in the window) still counts the moving surface's time.
@@ -92,7 +104,7 @@ fn a_passed_sample_keeps_the_moving_fit_s_clock() {
     let (k, s, dt) = (200_000.0, 1e-4, 4e-3);
     let mut o = OnsetFit::new();
     o.begin(0.0101, s, 1.0);
-    o.also_moving(k * s, 0.0);
+    o.also_moving(k * s, 0.0, 1e-4);
     for i in 0..75 {
         let t = i as f64 * dt;
         let x = 0.0101 + 5e-5 * (1.0 - (-t / 0.05).exp());

@@ -146,7 +146,8 @@ impl RobustLaw {
             // The loop answers the jump within its lead time and the conditioning's step time.
             let c = &self.p.cell;
             let early = c.lag + c.delay + self.signals.delay(cycle) + self.signals.step_time(cycle);
-            self.identify.refit(s.x, s.f, early);
+            let slowest = self.p.observer.feedforward_speed;
+            self.identify.refit(s.x, s.f, early, slowest);
         }
         let disturbed = self.observer.disturbed();
         let jumped = calm

@@ -21,7 +21,10 @@
 //! no constant speed: the moving fit leaves its curvature as residual. Under noise the two can explain
 //! a window almost alike, and the better one is taken: with a margin of `pivot_gate`² noise variances
 //! in the stale stiffness's favour, a damped halving at f_r 2 N on the 12 ms cell under σ 0.26 N (the
-//! change better by 3.6 variances) kept the stale `k̂_c`, 98 % off.
+//! change better by 3.6 variances) kept the stale `k̂_c`, 98 % off. A surface slower than the slowest
+//! motion the law acts on (`observer.feedforward_speed`) is no moving surface: with the tool advancing
+//! steadily, a crawl tilts the stale line into almost any slope (f_r 3.9 N on the 12 ms cell under σ
+//! 0.42 N: a halving explained by 0.07 mm/s, 53 % off; now 12 %).
 
 use super::Identifier;
 use crate::onset::{LineFit, OnsetFit};

@@ -197,7 +197,7 @@ fn change_judged(k: f64, k2: f64, xc2: f64, c_e: f64, early: f64) -> f64 {
         id.kc()
     );
     let x_end = xc2 + f_r / k2;
-    id.refit(x, k2 * (x - xc2), early);
+    id.refit(x, k2 * (x - xc2), early, 1e-4);
     for _ in 0..1000 {
         let v = (x_end - x) / 0.020;
         x += v * dt;
