@@ -11,6 +11,13 @@ impl RobustLaw {
         self.response.set_point().max(self.p.contact.contact_force)
     }
 
+    /// The band a force of noise deviation `sigma` (N) keeps about the set-point in a steady contact:
+    /// a fifth of the set-point, at least five deviations, N. Leaving it opens a re-fit (the
+    /// conditioned force) or holds the recursion for the step (the raw force).
+    pub(super) fn band(&self, sigma: f64) -> f64 {
+        (0.2 * self.force_scale()).max(5.0 * sigma)
+    }
+
     /// The contact detector's thresholds now: scaled to the active set-point and the measured noise
     /// (the conditioned force's noise from the raw one through the conditioning's noise bandwidth).
     /// Until the noise has been measured for as long as a step takes to pass the conditioning, the
@@ -131,9 +138,9 @@ impl RobustLaw {
         // The environment changed under a steady contact on a still surface: the observed
         // surface jumped, or the force left its band (a stiffness change the observer follows
         // smoothly). Re-identify from the transient that follows.
-        let band =
-            (0.2 * self.force_scale()).max(5.0 * self.noise.std() * self.signals.noise_gain(cycle));
-        let off = (s.ff - self.response.set_point()).abs() > band;
+        let sigma = self.noise.std();
+        let off = (s.ff - self.response.set_point()).abs()
+            > self.band(sigma * self.signals.noise_gain(cycle));
         let persist = 0.5 * self.signals.step_time(cycle);
         let calm = self.contact.steady()
             && !moving
@@ -150,9 +157,7 @@ impl RobustLaw {
             self.identify.refit(s.x, s.f, early, slowest);
         }
         let disturbed = self.observer.disturbed();
-        let jumped = calm
-            && (s.f - self.response.set_point()).abs()
-                > (0.2 * self.force_scale()).max(5.0 * self.noise.std());
+        let jumped = calm && (s.f - self.response.set_point()).abs() > self.band(sigma);
         let id = self.identify.step(
             s.x,
             s.f,
