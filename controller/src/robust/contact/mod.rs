@@ -10,6 +10,7 @@
 
 use super::signals::Signals;
 use crate::law::ContactState;
+use evidence::Evidence;
 
 /// What a step of the state machine did.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -76,35 +77,11 @@ pub struct ContactMachine {
     landing: bool,
     /// The touch-down's stiffness is identified.
     fitted: bool,
-    /// How long the conditioned force has shown contact without a break since it was declared, s.
-    touched: f64,
-    /// The force has shown the contact since it was declared (see [`land`](Self::land)).
-    shown: bool,
-    /// The raw force summed over the samples since contact was declared, N, and their number: a
-    /// contact shows in their mean where the conditioned force's threshold is beyond the set-point.
-    sum_f: f64,
-    n_f: u32,
-    /// That mean shows the contact (this step's, folded into `shown` by [`land`](Self::land)).
-    mean_shown: bool,
+    /// What the force has shown since contact was declared.
+    evidence: Evidence,
 }
 
 impl ContactMachine {
-    /// Count raw force `f` (N) towards the mean since contact was declared; whether that mean shows
-    /// the contact: at least two samples, above the lift force and [`SIGNIFICANCE`] standard errors
-    /// of the raw noise. At a small set-point under noise the conditioned force's threshold
-    /// (`SIGNIFICANCE` of its deviations) can lie beyond the set-point itself (f_r 2 N under σ 1 N on
-    /// the 12 ms cell): a held contact shows in the mean within a few samples, a contact declared on a
-    /// noise spike in free air does not.
-    fn mean_shows(&mut self, f: f64, th: &Thresholds) -> bool {
-        if !f.is_finite() {
-            return false;
-        }
-        self.sum_f += f;
-        self.n_f += 1;
-        let n = f64::from(self.n_f);
-        self.n_f >= 2 && self.sum_f / n >= th.lift.max(SIGNIFICANCE * th.noise / n.sqrt())
-    }
-
     /// A machine approaching.
     pub fn new(p: ContactParams) -> Self {
         let mut m = Self {
@@ -123,11 +100,7 @@ impl ContactMachine {
             fast: false,
             landing: false,
             fitted: false,
-            touched: 0.0,
-            shown: false,
-            sum_f: 0.0,
-            n_f: 0,
-            mean_shown: false,
+            evidence: Evidence::default(),
         };
         m.reset();
         m
@@ -154,11 +127,7 @@ impl ContactMachine {
         self.fast = false;
         self.landing = false;
         self.fitted = false;
-        self.touched = 0.0;
-        self.shown = false;
-        self.sum_f = 0.0;
-        self.n_f = 0;
-        self.mean_shown = false;
+        self.evidence.reset();
     }
 
     /// Whether the contact has lasted longer than a bounce (a steady contact), s.
@@ -216,11 +185,7 @@ impl ContactMachine {
                     };
                     self.landing = from_approach;
                     self.fitted = false;
-                    self.touched = 0.0;
-                    self.shown = false;
-                    self.sum_f = 0.0;
-                    self.n_f = 0;
-                    self.mean_shown = false;
+                    self.evidence.reset();
                     self.state = ContactState::Contact;
                     self.below = 0.0;
                     self.below_samples = 0;
@@ -230,14 +195,12 @@ impl ContactMachine {
             }
             ContactState::Contact => {
                 self.in_contact += dt;
-                if !self.mean_shown {
-                    self.mean_shown = self.mean_shows(s.f, th);
-                }
+                self.evidence.raw(s.f, th);
                 if s.f < th.lift {
                     self.below += dt;
                     self.below_samples += 1;
                     if self.below >= c.lift_time && self.below_samples >= th.samples {
-                        let shown = self.shown || self.mean_shown;
+                        let shown = self.evidence.shown();
                         if self.landing && (self.in_contact < c.bounce_time || !shown) {
                             // A touch-down lost before its stiffness was identified and shown by
                             // the force, within a bounce, or whose force never showed the contact:
@@ -281,6 +244,7 @@ impl ContactMachine {
     }
 }
 
+mod evidence;
 mod params;
 mod search;
 #[cfg(test)]

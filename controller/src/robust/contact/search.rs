@@ -75,7 +75,7 @@ impl ContactMachine {
     /// identification's, stretched by its patience while the fit is not significant): until `k̂_c` is
     /// the surface's and not the tuning's guess, and the force has shown the contact (the
     /// conditioned `ff` above `th.contact` for `confirm` s without a break, or once above `th.strong`,
-    /// or the raw mean since the declaration, see `mean_shows`), the command goes on in at no more
+    /// or the raw mean since the declaration: `evidence.rs`), the command goes on in at no more
     /// than the approach speed from the last command `u` (a guess too soft would command a step deep
     /// into the surface; the approach's speed is what the impact bound is made of). A contact
     /// declared on a noise spike short of the surface, whose onset fit of that noise gave a `k̂_c` at
@@ -101,10 +101,8 @@ impl ContactMachine {
         confirm: f64,
         dt: f64,
     ) -> f64 {
-        let touching = ff >= th.contact;
-        self.touched = if touching { self.touched + dt } else { 0.0 };
-        self.shown |= self.touched >= confirm || ff >= th.strong || self.mean_shown;
-        if self.landing && self.fitted && self.shown {
+        let touching = self.evidence.conditioned(ff, th, confirm, dt);
+        if self.landing && self.fitted && self.evidence.shown() {
             self.landing = false;
         }
         if self.landing && open {

@@ -99,6 +99,30 @@ pub(super) fn damping(fit: &LineFit, r: f64, gate: f64) -> f64 {
 }
 
 impl Identifier {
+    /// The force jumped in a steady contact on a still surface at `(x, f)`: the environment changed
+    /// (a stiffness change, a surface step). Fit the transient that follows, as at a contact onset: the
+    /// samples lie on the new spring line whatever moved. The recursion restarts there, agile. The fit
+    /// may be taken before the window's end once `early` s have passed (the loop's answer to the jump)
+    /// and it is conclusive. `slowest`: the slowest surface speed the law counts as motion, m/s (the
+    /// moving surface the window is also fitted as is no slower).
+    pub fn refit(&mut self, x: f64, f: f64, early: f64, slowest: f64) {
+        self.onset.clear();
+        self.onset.begin(x, self.est.scale(), self.p.refit_window);
+        self.onset
+            .also_moving(self.est.kc() * self.est.scale(), self.c_e, slowest);
+        self.onset_age = 0.0;
+        self.refit = Some(Refit {
+            x0: x,
+            f0: f,
+            pivot: self.calm_surface,
+            pivot_var: self.pivot_variance(x),
+            early,
+            refine: false,
+        });
+        self.steady.stop();
+        self.steady_var0 = f64::INFINITY;
+    }
+
     /// The re-fit's fit if it is conclusive now: significant, different from `k̂_c`, and one still
     /// spring — what the plane leaves beyond the noise is at most `steady_confidence` of the
     /// transient's variance (a surface that started to move leaves the force unexplained by the
