@@ -83,7 +83,8 @@ use sim::InnerLoopModel;
 //   against 0.168 N);
 // * with 3000 cases (`FORCECELL_RANGE_CASES=3000`; `FORCECELL_RANGE_SHRINK=0` shows them as drawn)
 //   `stiffness_changes` misses its mean error under noise at a small set-point on P2 (f_r 2.5 N,
-//   78 → 39 kN/m, σ 0.47 N, 135 N·s/m: 0.161 N against 0.097 N); 1000 pass. With 1000 cases
+//   78 → 39 kN/m, σ 0.47 N, 135 N·s/m: 0.103 N against 0.097 N, 0.161 N before its re-fit was
+//   taken); 1000 pass. With 1000 cases
 //   `touch_down_and_hold` misses its mean error under σ 0.43 N at f_r 2.46 N on the 12 ms cell
 //   (0.146 N against 0.093 N, the corners below); it found and we fixed a contact the law took back
 //   counted as lost (`a_contact_taken_back_at_the_start_is_not_a_lost_one`). `surface_steps` passes 5000 cases; 20000 find a
@@ -650,8 +651,10 @@ fn touch_down_census() {
 /// noise), nothing else. Before a jump's first sample was no excitation, also `k̂_c` once
 /// ([`a_jump_s_first_sample_is_no_excitation`]). Also counted, not asserted by the property test: a
 /// `k̂_c` beyond four deviations of what the change's information allows, where that allows no 10 %
-/// — twice (damped changes at f_r 2.5 N); four times before a halving was no crawling surface
-/// ([`a_halving_is_no_crawling_surface`]; at f_r 3.9 N on the 12 ms cell 53 % off, now 12 %).
+/// — once (a damped doubling at f_r 2.5 N on the 12 ms cell); four times before a halving was no
+/// crawling surface ([`a_halving_is_no_crawling_surface`]; at f_r 3.9 N on the 12 ms cell 53 % off,
+/// now 12 %), twice before a window that rejects the stale stiffness was no hold
+/// ([`a_window_that_rejects_the_stale_stiffness_is_no_hold`]).
 #[test]
 #[ignore = "3000 closed-loop stiffness changes: the known limits' figures, not a criterion"]
 fn stiffness_changes_census() {
@@ -676,7 +679,7 @@ fn stiffness_changes_census() {
     census(
         cases,
         &kinds,
-        &[0, 4, 0, 2, 0, 0],
+        &[0, 4, 0, 1, 0, 0],
         |(f_r, k_c, double, at, cell_i, noise, c_e, seed)| {
             let c = Change {
                 f_r,
@@ -1032,6 +1035,36 @@ fn a_halving_is_no_crawling_surface() {
         c_e: 79.96571327926478,
         seed: 886,
     });
+}
+
+/// A damped halving on P2 at a small set-point under noise (f_r 2.5 N, 78.4 → 39.2 kN/m, 135 N·s/m,
+/// σ 0.47 N, seed 983; the first of the 3000 `stiffness_changes` cases to miss, on its mean error):
+/// the re-fit's free line had 28 ± 11 kN/m, short of three deviations above zero, so the window was
+/// taken for a hold that says nothing, although the same line put the stale 94 kN/m six deviations
+/// off and the line through the surface said 45 ± 1.6 kN/m. `k̂_c` was kept, 139 % off (its
+/// information allows 51 %), and the loop, 2.4 times too stiff in its model, left 0.16 N of mean
+/// error. A window whose free line rejects the stale stiffness says something now: `k̂_c` ends
+/// within its information, the mean error 0.103 N (against 0.097 N: still the known miss).
+#[test]
+fn a_window_that_rejects_the_stale_stiffness_is_no_hold() {
+    let c = Change {
+        f_r: 2.509072495832505,
+        k_c: 78420.31737805235,
+        double: false,
+        at: 2.12866173718441,
+        cell_i: 1,
+        noise: 0.4655689792269648,
+        c_e: 134.71756146313928,
+        seed: 983,
+    };
+    let information = 4.0 * change_bound(c.f_r, 0.5, c.noise, &CELLS[1]);
+    let after = c.run().unwrap().metrics(c.at, f64::INFINITY);
+    assert_eq!(after.contact_losses, 0.0);
+    assert!(
+        after.kc_rel_error <= information,
+        "k̂_c off by {} beyond {information}",
+        after.kc_rel_error
+    );
 }
 
 /// The change `c` holds the contact and ends with `k̂_c` within 10 % (whatever its information allows).

@@ -50,8 +50,8 @@ pub(super) struct Refit {
 /// The fit of the window in `onset`: through the surface `pivot` (m, known to variance `pivot_var`,
 /// m²) unless that costs more than `gate` standard deviations of residual over the free line's or the
 /// surface's uncertainty makes it less precise than the free line; none when the free line's slope is
-/// not `gate` deviations above zero. `noise_var` (N²) the measured noise, `r` (N²) the same with its
-/// floor.
+/// neither `gate` deviations above zero nor `gate` deviations from the stale slope `stale` (N per
+/// unit of `u`). `noise_var` (N²) the measured noise, `r` (N²) the same with its floor.
 pub(super) fn choose(
     onset: &OnsetFit,
     pivot: f64,
@@ -59,6 +59,7 @@ pub(super) fn choose(
     noise_var: f64,
     r: f64,
     gate: f64,
+    stale: f64,
 ) -> Option<LineFit> {
     let free = onset.fit(noise_var);
     let through = if pivot.is_finite() {
@@ -75,8 +76,13 @@ pub(super) fn choose(
         .unwrap_or(0.0);
     let through = through.map(|(t, _)| t);
     // Without a spring transient of its own (the free slope within `gate` deviations of none: noise
-    // in a hold) the window says nothing the pivot did not.
-    let free = free.filter(|f| f.b > gate * f.var_b.sqrt())?;
+    // in a hold) the window says nothing the pivot did not — unless it rejects the stale slope (a
+    // damped halving at f_r 2.5 N on P2 under σ 0.47 N: free 28 ± 11 kN/m against a stale 94; kept,
+    // `k̂_c` ended 139 % off).
+    let free = free.filter(|f| {
+        let sd = f.var_b.sqrt();
+        f.b > gate * sd || (f.b > 0.0 && (f.b - stale).abs() > gate * sd)
+    })?;
     match through {
         Some(through)
             if through.sse - free.sse <= gate * gate * free.residual_var.max(r)
@@ -155,7 +161,7 @@ impl Identifier {
         // The stale spring on a surface moving at a constant speed, the other explanation (module
         // docs): a change must explain the window better.
         let moving = self.onset.moving_sse().unwrap_or(f64::INFINITY);
-        let fit = choose(&self.onset, pivot, pivot_var, noise_var, r, gate).filter(|fit| {
+        let fit = choose(&self.onset, pivot, pivot_var, noise_var, r, gate, stale).filter(|fit| {
             let sd = fit.var_b.sqrt();
             let explained = moving <= fit.sse;
             let believed = fit.b <= trust * stale && fit.b * trust >= stale && !explained;

@@ -300,8 +300,8 @@ fn a_surface_in_doubt_gives_the_line_through_it_no_preference() {
         o.add(x, k * (x - xc) + wobble, 0.0, 1e-3);
     }
     let (pivot, r) = (xc, 0.05 * 0.05);
-    let sure = refit::choose(&o, pivot, 0.0, r, r, 3.0).unwrap();
-    let doubt = refit::choose(&o, pivot, 1e-10, r, r, 3.0).unwrap();
+    let sure = refit::choose(&o, pivot, 0.0, r, r, 3.0, f64::INFINITY).unwrap();
+    let doubt = refit::choose(&o, pivot, 1e-10, r, r, 3.0, f64::INFINITY).unwrap();
     let free = o.fit(r).unwrap();
     assert!(
         sure.var_b < free.var_b,
