@@ -964,6 +964,7 @@ fn a_contact_declared_on_noise_far_short_of_a_stiff_surface_approaches_on() {
     let limit = 2.0 * f_r + floor(k_c, 0.002, &CELLS[1]);
     let ended = run_to_end(&s, &CELLS[1], &tuning(f_r)).expect("a valid tuning");
     let peak = ended.run.metrics(0.0, f64::INFINITY).peak_force;
+    println!("peak {peak:.1} N (bound {limit:.1} N)");
     assert!(ended.fault.is_none(), "the run ended on a fault");
     assert!(peak <= limit, "impact {peak} N > {limit} N");
 }
@@ -1014,7 +1015,7 @@ fn a_jump_s_first_sample_is_no_excitation() {
         seed: 258,
     };
     assert!(4.0 * change_bound(c.f_r, 0.5, c.noise, &CELLS[2]) <= 0.1);
-    identified_within_10_percent(&c);
+    identified_within(&c, 0.1);
 }
 
 /// A damped halving the 3000 `stiffness_changes` cases draw where `k̂_c` is not asserted (f_r 4.8 N,
@@ -1025,7 +1026,7 @@ fn a_jump_s_first_sample_is_no_excitation() {
 /// motion the law acts on (`observer.feedforward_speed`); `k̂_c` now ends 4 % off.
 #[test]
 fn a_halving_is_no_crawling_surface() {
-    identified_within_10_percent(&Change {
+    let damped = Change {
         f_r: 4.847431351152553,
         k_c: 74596.8085901484,
         double: false,
@@ -1034,7 +1035,22 @@ fn a_halving_is_no_crawling_surface() {
         noise: 0.47163677404470283,
         c_e: 79.96571327926478,
         seed: 886,
-    });
+    };
+    identified_within(&damped, 0.1);
+    // Undamped, at f_r 3.9 N under σ 0.42 N (seed 143): 53 % off against the 44 % its information
+    // allows; now within that.
+    let undamped = Change {
+        f_r: 3.92880919831548,
+        k_c: 35854.59425840925,
+        double: false,
+        at: 2.9636707257734654,
+        cell_i: 2,
+        noise: 0.424065370483518,
+        c_e: 0.0,
+        seed: 143,
+    };
+    let information = 4.0 * change_bound(undamped.f_r, 0.5, undamped.noise, &CELLS[2]);
+    identified_within(&undamped, information);
 }
 
 /// A damped halving on P2 at a small set-point under noise (f_r 2.5 N, 78.4 → 39.2 kN/m, 135 N·s/m,
@@ -1057,24 +1073,18 @@ fn a_window_that_rejects_the_stale_stiffness_is_no_hold() {
         c_e: 134.71756146313928,
         seed: 983,
     };
-    let information = 4.0 * change_bound(c.f_r, 0.5, c.noise, &CELLS[1]);
-    let after = c.run().unwrap().metrics(c.at, f64::INFINITY);
-    assert_eq!(after.contact_losses, 0.0);
-    assert!(
-        after.kc_rel_error <= information,
-        "k̂_c off by {} beyond {information}",
-        after.kc_rel_error
-    );
+    identified_within(&c, 4.0 * change_bound(c.f_r, 0.5, c.noise, &CELLS[1]));
 }
 
-/// The change `c` holds the contact and ends with `k̂_c` within 10 % (whatever its information allows).
-fn identified_within_10_percent(c: &Change) {
-    let r = c.run().unwrap();
-    let after = r.metrics(c.at, f64::INFINITY);
+/// The change `c` holds the contact and ends with `k̂_c` within `bound` (relative); the error is
+/// printed (`--nocapture`: the figure the README quotes).
+fn identified_within(c: &Change, bound: f64) {
+    let after = c.run().unwrap().metrics(c.at, f64::INFINITY);
+    println!("k̂_c off by {:.4} (bound {bound:.3})", after.kc_rel_error);
     assert_eq!(after.contact_losses, 0.0);
     assert!(
-        after.kc_rel_error <= 0.1,
-        "k̂_c off by {}",
+        after.kc_rel_error <= bound,
+        "k̂_c off by {} beyond {bound}",
         after.kc_rel_error
     );
 }
