@@ -97,6 +97,14 @@ impl SurfacePredictor {
         self.started = true;
     }
 
+    /// Move the position estimate by `dz` (m), keeping velocity, acceleration and covariance: the
+    /// measurement's model moved, not the surface (a no-op before the first measurement).
+    pub fn shift(&mut self, dz: f64) {
+        if self.started && dz.is_finite() {
+            self.s[0] += dz;
+        }
+    }
+
     /// Position, velocity and acceleration estimates.
     pub fn state(&self) -> [f64; 3] {
         self.s

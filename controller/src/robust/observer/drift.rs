@@ -42,6 +42,11 @@ impl Drift {
         *self = Self { slow: z, hold: 0.0 };
     }
 
+    /// The observed surface moved by `dz` (m) because `k̂_c` did: the average moves with it.
+    pub fn shift(&mut self, dz: f64) {
+        self.slow += dz;
+    }
+
     /// A step of `dt` with the observed surface at `z` (m), the set-point's penetration `depth` (m).
     pub fn step(&mut self, p: &ObserverParams, z: f64, depth: f64, dt: f64) {
         if !self.slow.is_finite() {

@@ -168,3 +168,41 @@ fn the_fallback_dead_band_is_outside_the_velocity_noise() {
     // Stiff and filtered (1 ms): the per-newton dead-band as before.
     assert_eq!(p.deadband(&r, 1.0, 0.21, 500_000.0), r.feedforward_deadband);
 }
+
+/// A still surface held at 48 N on a 12 ms cell while the recursion takes `k̂_c` down 12 % a cycle
+/// (its fastest fall, 10/s) from 298 kN/m: the observed surface `x − f/k̂_c` moves 22 µm a cycle, and
+/// that is the model changing, not the surface. Read as motion, the predictor fed forward 0.2 mm
+/// the wrong way in one cycle (a sine receding at 0.79 mm/s on 300 kN/m at f_r 50 N: the loop rang
+/// and pressed 457 N before the trip).
+#[test]
+fn a_new_stiffness_estimate_is_no_surface_motion() {
+    let (r, dt, f) = (response(), 12e-3, 48.0);
+    let mut o = SurfaceObserver::new(ObserverParams::default());
+    let mut k = 298e3;
+    let x = 0.010 + f / k;
+    o.restart(0.010);
+    let step = |o: &mut SurfaceObserver, k: f64| {
+        let s = View {
+            k,
+            force_scale: f,
+            ..view(x, f)
+        };
+        o.track(&s, 8.0, dt);
+        o.feedforward(&s, &r, 1e-3, 0.010, 0.024, dt, 0.04, dt)
+    };
+    for _ in 0..50 {
+        step(&mut o, k);
+    }
+    for _ in 0..4 {
+        k *= 1.0 - 10.0 * dt;
+        let ff = step(&mut o, k);
+        assert!(
+            ff.predicted.abs() < 1e-6 && ff.fallback.abs() < 1e-6,
+            "fed forward {} m (fallback {} m) at k̂_c {k:.0} N/m",
+            ff.predicted,
+            ff.fallback
+        );
+        assert!((o.surface() - (x - f / k)).abs() < 1e-9, "{}", o.surface());
+        assert!(o.receding() < 1e-9, "{} m/s", o.receding());
+    }
+}
