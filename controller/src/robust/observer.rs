@@ -148,6 +148,12 @@ impl SurfaceObserver {
         self.motion.still()
     }
 
+    /// Whether motion is held that began after a calm contact under the same `k̂_c`
+    /// ([`Motion::after_calm`]).
+    pub fn moving_after_calm(&self) -> bool {
+        self.motion.after_calm()
+    }
+
     /// Whether anything moved or jumped lately (the steady-contact estimator waits for calm).
     pub fn disturbed(&self) -> bool {
         !self.motion.still() || self.jump_time > 0.0 || self.pred_jump_time > 0.0
