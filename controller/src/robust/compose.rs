@@ -218,16 +218,9 @@ impl RobustLaw {
                 let want = self.in_contact(s, cycle, dt);
                 let open = self.identify.onset_open();
                 let confirm = self.signals.step_time(cycle);
-                self.contact.land(
-                    want,
-                    self.limiter.command(),
-                    &speeds,
-                    open,
-                    s.ff,
-                    th,
-                    confirm,
-                    dt,
-                )
+                let touching = self.contact.touch(s.ff, th, confirm, dt);
+                self.contact
+                    .land(want, self.limiter.command(), &speeds, open, touching, dt)
             }
         }
     }

@@ -71,11 +71,19 @@ impl ContactMachine {
         self.fitted = true;
     }
 
+    /// Whether the conditioned force `ff` (N) touches this contact step (above `th.contact`), and
+    /// what it shows of the contact: above it for `confirm` s without a break, or once above
+    /// `th.strong` (`evidence.rs`). Called once a step in contact, before [`land`](Self::land).
+    pub fn touch(&mut self, ff: f64, th: &Thresholds, confirm: f64, dt: f64) -> bool {
+        self.evidence.conditioned(ff, th, confirm, dt)
+    }
+
     /// The command in contact `want` during a touch-down, while its onset window is `open` (the
-    /// identification's, stretched by its patience while the fit is not significant): until `k̂_c` is
-    /// the surface's and not the tuning's guess, and the force has shown the contact (the
-    /// conditioned `ff` above `th.contact` for `confirm` s without a break, or once above `th.strong`,
-    /// or the raw mean since the declaration: `evidence.rs`), the command goes on in at no more
+    /// identification's, stretched by its patience while the fit is not significant) and the force
+    /// is `touching` ([`touch`](Self::touch)): until `k̂_c` is the surface's and not the tuning's
+    /// guess, and the force has shown the contact (the conditioned force above the contact threshold
+    /// for the step time without a break, or once above the strong threshold, or the raw mean since
+    /// the declaration: `evidence.rs`), the command goes on in at no more
     /// than the approach speed from the last command `u` (a guess too soft would command a step deep
     /// into the surface; the approach's speed is what the impact bound is made of). A contact
     /// declared on a noise spike short of the surface, whose onset fit of that noise gave a `k̂_c` at
@@ -89,19 +97,15 @@ impl ContactMachine {
     /// of the surface, with the `k̂_c` of a fit of noise or the tuning's guess, would otherwise drive
     /// in at the force error over that stiffness per cycle (on the 12 ms cell 27 mm/s, into 44 N; on
     /// P2 45 mm/s into a 500 kN/m surface, 102 N).
-    #[allow(clippy::too_many_arguments)]
     pub fn land(
         &mut self,
         want: f64,
         u: f64,
         sp: &Speeds,
         open: bool,
-        ff: f64,
-        th: &Thresholds,
-        confirm: f64,
+        touching: bool,
         dt: f64,
     ) -> f64 {
-        let touching = self.evidence.conditioned(ff, th, confirm, dt);
         if self.landing && self.fitted && self.evidence.shown() {
             self.landing = false;
         }

@@ -59,7 +59,7 @@ fn contact_lift_off_after_lift_time_and_force_limit() {
         }
     );
     m.identified();
-    m.land(0.010, 0.010, &SP, true, 1.1, &TH, 0.0, 1e-3);
+    land(&mut m, 0.010, 0.010, true, 1.1, 0.0);
     // One low sample is not a lift-off; `lift_time` of them is.
     assert_eq!(
         m.step(&sig(0.0, 1.0), &TH, 60.0, 0.0, 1e-3),
@@ -131,13 +131,19 @@ fn thresholds_scale_with_set_point_and_noise_and_speeds_with_stiffness() {
     );
 }
 
+/// One landing step of 1 ms as the law steps it: the force's touch, then the command.
+fn land(m: &mut ContactMachine, want: f64, u: f64, open: bool, ff: f64, confirm: f64) -> f64 {
+    let touching = m.touch(ff, &TH, confirm, 1e-3);
+    m.land(want, u, &SP, open, touching, 1e-3)
+}
+
 /// A steady contact at 5 N for 0.6 s, identified and shown by the force, as the law steps it.
 fn hold(m: &mut ContactMachine, s: &Signals) {
     m.step(s, &TH, 60.0, 0.0, 1e-3);
     m.identified();
     for _ in 0..600 {
         m.step(s, &TH, 60.0, 0.0, 1e-3);
-        m.land(s.x, s.x, &SP, true, s.ff, &TH, 0.004, 1e-3);
+        land(m, s.x, s.x, true, s.ff, 0.004);
     }
 }
 
@@ -240,31 +246,25 @@ fn a_touch_down_goes_on_at_approach_speed_until_the_stiffness_is_identified() {
     m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
     assert_eq!(m.state(), ContactState::Contact);
     // A guess too soft wants 1 mm in; the landing goes on at 2 mm/s.
-    let capped = m.land(0.011, 0.010, &SP, true, 1.1, &TH, 0.004, 1e-3);
+    let capped = land(&mut m, 0.011, 0.010, true, 1.1, 0.004);
     assert!((capped - (0.010 + 0.002e-3)).abs() < 1e-15, "{capped}");
     // Backing off is never held.
-    assert_eq!(
-        m.land(0.009, 0.010, &SP, true, 1.1, &TH, 0.004, 1e-3),
-        0.009
-    );
+    assert_eq!(land(&mut m, 0.009, 0.010, true, 1.1, 0.004), 0.009);
     // Past the window the law's command goes through once the force has shown the contact (for
     // `confirm`, 4 ms); until then the landing goes on at approach speed: a contact declared on
     // noise short of the surface whose fit never concluded went on at the speed that stops within
     // 2·f_r at the tuning's guess of `k̂_c` (f_r 20 N, 500 kN/m, P2, σ 1 N: 45 mm/s, into 102 N).
     m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 0.2);
-    let unshown = m.land(0.011, 0.010, &SP, false, 0.5, &TH, 0.004, 1e-3);
+    let unshown = land(&mut m, 0.011, 0.010, false, 0.5, 0.004);
     assert!((unshown - (0.010 + 0.002e-3)).abs() < 1e-15, "{unshown}");
     for _ in 0..3 {
-        m.land(0.011, 0.010, &SP, false, 1.1, &TH, 0.004, 1e-3);
+        land(&mut m, 0.011, 0.010, false, 1.1, 0.004);
     }
     // While the window is open (stretched by the fit's patience) the landing holds however the
     // force shows the contact: the guess is not the surface's.
-    let waiting = m.land(0.011, 0.010, &SP, true, 1.1, &TH, 0.004, 1e-3);
+    let waiting = land(&mut m, 0.011, 0.010, true, 1.1, 0.004);
     assert!((waiting - (0.010 + 0.002e-3)).abs() < 1e-15, "{waiting}");
-    assert_eq!(
-        m.land(0.011, 0.010, &SP, false, 1.1, &TH, 0.004, 1e-3),
-        0.011
-    );
+    assert_eq!(land(&mut m, 0.011, 0.010, false, 1.1, 0.004), 0.011);
     // Identified, the landing goes on until the force has shown the contact for `confirm` (4 ms)
     // without a break: a contact declared on a noise spike, with a `k̂_c` fitted to that noise, does
     // not drive in at the force error over that stiffness.
@@ -272,24 +272,18 @@ fn a_touch_down_goes_on_at_approach_speed_until_the_stiffness_is_identified() {
     m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
     m.identified();
     for ff in [1.1, 1.1, 0.5, 1.1, 1.1, 1.1] {
-        let capped = m.land(0.011, 0.010, &SP, true, ff, &TH, 0.004, 1e-3);
+        let capped = land(&mut m, 0.011, 0.010, true, ff, 0.004);
         assert!((capped - (0.010 + 0.002e-3)).abs() < 1e-15, "{capped}");
     }
-    assert_eq!(
-        m.land(0.011, 0.010, &SP, true, 1.1, &TH, 0.004, 1e-3),
-        0.011
-    );
+    assert_eq!(land(&mut m, 0.011, 0.010, true, 1.1, 0.004), 0.011);
     // …and then, while the force shows no touch, no faster than stops within 2·f_r.
-    let untouched = m.land(0.011, 0.010, &SP, true, 0.5, &TH, 0.004, 1e-3);
+    let untouched = land(&mut m, 0.011, 0.010, true, 0.5, 0.004);
     assert!((untouched - (0.010 + SP.near * 1e-3)).abs() < 1e-15);
     // A force no noise spike reaches (`strong`) shows the contact at once.
     let mut m = ContactMachine::new(params());
     m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
     m.identified();
-    assert_eq!(
-        m.land(0.011, 0.010, &SP, true, 3.5, &TH, 0.004, 1e-3),
-        0.011
-    );
+    assert_eq!(land(&mut m, 0.011, 0.010, true, 3.5, 0.004), 0.011);
 }
 
 #[test]
@@ -316,7 +310,8 @@ fn a_touch_down_lost_before_it_is_identified_is_no_contact() {
     for i in 1..=600 {
         let f = if i % 2 == 0 { 0.5 } else { -0.5 };
         m.step(&sig(f, 0.5), &th, 60.0, 0.0, 1e-3);
-        m.land(0.011, 0.010, &SP, true, 0.5, &th, 0.004, 1e-3);
+        let touching = m.touch(0.5, &th, 0.004, 1e-3);
+        m.land(0.011, 0.010, &SP, true, touching, 1e-3);
     }
     m.step(&sig(0.0, 0.5), &th, 60.0, 0.0, 1e-3);
     assert_eq!(
@@ -345,7 +340,8 @@ fn a_held_contact_shows_in_the_mean_where_the_threshold_is_beyond_the_set_point(
         m.step(&sig(2.0, 2.0), &th, 60.0, 0.0, 1e-3);
         // Landed: past the approach speed (at the near search's, the conditioned force below its
         // threshold).
-        let u = m.land(0.011, 0.010, &SP, true, 2.0, &th, 0.004, 1e-3);
+        let touching = m.touch(2.0, &th, 0.004, 1e-3);
+        let u = m.land(0.011, 0.010, &SP, true, touching, 1e-3);
         if u > 0.010 + 1.5 * SP.approach * 1e-3 && shown_after.is_none() {
             shown_after = Some(i + 1);
         }
