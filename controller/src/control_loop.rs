@@ -1,119 +1,23 @@
 //! The control loop: one robot cycle in, one newest force sample, one law step, exactly one reply out.
 //! Written against the HAL only; every device is a [`RobotLink`] and a [`ForceSensor`].
 
-use core::fmt;
-
 use hal::{
     Correction, Cycle, Error as _, ErrorKind, ForceSensor, ProcessCommand, ProcessFault, RobotLink,
     Sample,
 };
-use serde::{Deserialize, Serialize};
 
 use crate::law::{ForceLaw, Output};
 
+mod config;
+mod error;
 mod guard;
 mod process;
+pub use config::LoopConfig;
+use error::{Ending, hold_code, hold_reason};
+pub use error::{Fault, LoopError};
 use guard::Guard;
 use process::{Act, Process, Release};
 pub use process::{ProcessConfig, Refusal};
-
-/// How the loop maps devices onto the 1-DOF law and what it refuses to command.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct LoopConfig {
-    /// Multiplies the sensor's `F_z` to give the compressive normal force the law expects
-    /// (`+1` when pressing reads positive, `−1` for the usual sensor convention where it reads negative).
-    pub force_sign: f64,
-    /// Largest change of the commanded normal position from one cycle to the next, m. A larger change
-    /// is limited to this and reported as [`Fault::StepLimited`].
-    pub max_step: f64,
-    /// Largest magnitude of the commanded normal offset from the programmed path, m; beyond it the
-    /// command is limited and reported as [`Fault::EnvelopeLimited`].
-    pub max_offset: f64,
-    /// Longest robot time, s, the loop may hold its last command without a usable sample or pose (a
-    /// silent, saturated or failing sensor). Beyond it the loop retracts and ends with
-    /// [`LoopError::HoldTimeout`]: it never presses blind for longer than this.
-    pub max_hold: f64,
-    /// How far, m, the tool backs off along −z from its last command when the loop ends on a fault
-    /// (hold timeout, failed sensor), before the loop reports the fault.
-    pub retract_distance: f64,
-    /// Speed of that back-off, m/s (never faster than `max_step` per cycle).
-    pub retract_speed: f64,
-    /// The force process the robot program commands, on links that carry process channels.
-    pub process: ProcessConfig,
-}
-
-impl Default for LoopConfig {
-    fn default() -> Self {
-        Self {
-            force_sign: 1.0,
-            max_step: 1e-3,
-            max_offset: 0.005,
-            max_hold: 0.1,
-            retract_distance: 0.002,
-            retract_speed: 0.02,
-            process: ProcessConfig::default(),
-        }
-    }
-}
-
-impl LoopConfig {
-    /// Checks the values.
-    pub fn validate(&self) -> Result<(), String> {
-        if self.force_sign != 1.0 && self.force_sign != -1.0 {
-            return Err(format!(
-                "force_sign must be 1 or -1, got {}",
-                self.force_sign
-            ));
-        }
-        if !(self.max_step.is_finite() && self.max_step > 0.0) {
-            return Err(format!("max_step must be > 0 m, got {}", self.max_step));
-        }
-        if !(self.max_offset.is_finite() && self.max_offset > 0.0) {
-            return Err(format!("max_offset must be > 0 m, got {}", self.max_offset));
-        }
-        // A hold is pressing blind: beyond a second no force controller should keep a tool there.
-        if !(self.max_hold > 0.0 && self.max_hold <= 1.0) {
-            return Err(format!(
-                "max_hold must be > 0 and ≤ 1 s (holding the last command is pressing blind), got {}",
-                self.max_hold
-            ));
-        }
-        if !(self.retract_distance > 0.0 && self.retract_distance <= 0.05) {
-            return Err(format!(
-                "retract_distance must be > 0 and ≤ 0.05 m, got {}",
-                self.retract_distance
-            ));
-        }
-        if !(self.retract_speed > 0.0 && self.retract_speed <= 0.5) {
-            return Err(format!(
-                "retract_speed must be > 0 and ≤ 0.5 m/s, got {}",
-                self.retract_speed
-            ));
-        }
-        self.process.validate()
-    }
-}
-
-/// Something that went wrong in one cycle but did not end the loop.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Fault {
-    /// The sensor returned an error; the loop held its last command and did not step the law.
-    Sensor(ErrorKind),
-    /// The sensor returned a non-finite sample; held, no step.
-    NonFiniteSample,
-    /// The robot reported a non-finite pose; held, no step.
-    NonFinitePose,
-    /// The law produced a non-finite command; held.
-    NonFiniteCommand,
-    /// The command moved more than `max_step` in one cycle and was limited.
-    StepLimited,
-    /// The command left `±max_offset` and was limited.
-    EnvelopeLimited,
-    /// The loop is backing off after a fault that ends it (hold timeout, failed sensor); the law is
-    /// no longer stepped.
-    Retracting,
-}
 
 /// Counters of the loop, for diagnostics.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -159,103 +63,6 @@ pub struct CycleReport {
     pub fault: Option<Fault>,
 }
 
-/// Why the loop ended.
-#[derive(Debug)]
-pub enum LoopError<RE, SE> {
-    /// The robot link failed for good (lost, closed, misconfigured).
-    Robot(RE),
-    /// The sensor failed for good (bus-off, link lost, misconfigured); the loop has backed off first.
-    Sensor(SE),
-    /// The loop held its last command longer than `max_hold` (no usable sample or pose); it has backed
-    /// off first. `last` is the fault of the last held cycle.
-    HoldTimeout {
-        /// Robot time held, s.
-        held: f64,
-        /// Why the last held cycle was held.
-        last: Fault,
-    },
-    /// Force control tripped the guard (the force limit, a correction limit, a contact lost too
-    /// long) on a link without process channels; the loop has backed off first.
-    Guard {
-        /// The fault's code in the process contract.
-        code: ProcessFault,
-        /// Why, for the operator.
-        reason: String,
-    },
-}
-
-impl<RE, SE> LoopError<RE, SE> {
-    /// The fault's code in the process contract (`FcState.Fault`), as reported to the robot while
-    /// backing off and with `Stop`; `None` for a failed robot link (no one left to report to).
-    pub fn code(&self) -> Option<ProcessFault> {
-        match self {
-            Self::Robot(_) => None,
-            Self::Sensor(_) => Some(ProcessFault::SensorLost),
-            Self::HoldTimeout { last, .. } => Some(hold_code(*last)),
-            Self::Guard { code, .. } => Some(*code),
-        }
-    }
-}
-
-/// Why a hold of `held` s ended the loop or latched a fault, with the last cycle's fault.
-fn hold_reason(held: f64, last: Fault) -> String {
-    format!(
-        "held the last command for {:.0} ms without a usable input (last: {last:?})",
-        held * 1e3
-    )
-}
-
-/// The code of a hold that lasted too long: the sensor's, when it was the sensor that failed.
-fn hold_code(last: Fault) -> ProcessFault {
-    match last {
-        Fault::Sensor(_) | Fault::NonFiniteSample => ProcessFault::SensorLost,
-        _ => ProcessFault::HoldTimeout,
-    }
-}
-
-impl<RE: fmt::Display, SE: fmt::Display> LoopError<RE, SE> {
-    /// Why the loop ended, without the code.
-    pub fn reason(&self) -> String {
-        match self {
-            Self::Robot(e) => format!("robot link: {e}"),
-            Self::Sensor(e) => format!("force sensor: {e}"),
-            Self::HoldTimeout { held, last } => hold_reason(*held, *last),
-            Self::Guard { reason, .. } => reason.clone(),
-        }
-    }
-}
-
-impl<RE: fmt::Display, SE: fmt::Display> fmt::Display for LoopError<RE, SE> {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self.code() {
-            Some(code) => write!(
-                f,
-                "fault {} ({}): {}; the tool backed off",
-                code.code(),
-                code.name(),
-                self.reason()
-            ),
-            None => f.write_str(&self.reason()),
-        }
-    }
-}
-
-/// A fault that ends the loop once the tool has backed off: a [`LoopError`] that is never the
-/// robot's (there is a link to back off through).
-type Ending<SE> = LoopError<core::convert::Infallible, SE>;
-
-impl<SE> Ending<SE> {
-    /// The same error, typed for the loop's robot.
-    fn widen<RE>(self) -> LoopError<RE, SE> {
-        match self {
-            Self::Robot(never) => match never {},
-            Self::Sensor(e) => LoopError::Sensor(e),
-            Self::HoldTimeout { held, last } => LoopError::HoldTimeout { held, last },
-            Self::Guard { code, reason } => LoopError::Guard { code, reason },
-        }
-    }
-}
-
 /// One sensor read, classified.
 struct Reading<SE> {
     f: Option<f64>,
@@ -273,11 +80,6 @@ enum Phase<SE> {
     /// Backed off after a fault that was reported: every further cycle holds the backed-off command
     /// (or backs off further towards `target` while the tool still touches).
     Halted { target: f64 },
-}
-
-impl<RE: fmt::Debug + fmt::Display, SE: fmt::Debug + fmt::Display> std::error::Error
-    for LoopError<RE, SE>
-{
 }
 
 /// The loop: a robot, a sensor and a law.
