@@ -758,9 +758,10 @@ fn census<S: Strategy>(
 /// contradict, and the recursion learning nothing while the observer holds a motion that began
 /// after a calm contact, 44, 5, 10 (44, 3, 13: faults 102 → 88, `k̂_c` off 24 → 8, lossy 22 → 23, one more at 500
 /// kN/m; the worst trip at 300 kN/m 3.05 → 1.92, at 100 kN/m 1.46 → 1.07, RMS p90 0.077 → 0.076,
-/// median 0.0071). Of the 88, 12 start towards the tool at a speed whose floor `k_c·v·(delay +
-/// cycle)` above the set-point is beyond the force limit; the worst trip left, 2.78 × at 500 kN/m,
-/// is one of them (6.3 mm/s on the 12 ms cell). Also printed and bounded: the
+/// median 0.0071). Also printed: how many faults are forced — a surface approaching so fast that the
+/// set-point and its floor `k_c·v·(delay + cycle)` are beyond the force limit (12 of the 88; the
+/// worst trip left, 2.78 × at 500 kN/m, is one: 6.3 mm/s on the 12 ms cell) — and how many end on a
+/// contact lost for 0.5 s (fault 5: 34). Also printed and bounded: the
 /// highest true force of a faulted run (the trip's back-off included, [`run_to_end`]) over its force
 /// limit — with the fall at 30/s 4.36 at 500 kN/m (262 N at f_r 20 N on the 12 ms cell), 3.03 at 300
 /// kN/m — and how well the runs without a fault hold the force: the 90th percentile of their RMS error
@@ -782,6 +783,10 @@ fn moving_surfaces() {
     let (mut rel, rel_p90_measured) = (Vec::new(), 0.0763);
     // [away from the tool, towards it] × [faults, k̂_c off, lossy], over all stiffnesses.
     let mut all = [[0usize; 3]; 2];
+    // Of the faults: forced (a surface approaching so fast that the set-point plus its own floor
+    // `k_c·v·(delay + cycle)` is beyond the force limit: no law avoids the trip), and contacts lost
+    // for the loop's 0.5 s (fault 5).
+    let (mut forced, mut lost) = (0, 0);
     for (k_c, faults_measured, off_measured, lossy_measured, worst_measured) in rows {
         let mut counts = [[0usize; 3]; 2];
         // The highest true force of a run a fault ended, over its force limit.
@@ -796,6 +801,11 @@ fn moving_surfaces() {
                         let ended = run_to_end(&s, plant, &t).expect("a valid tuning");
                         if ended.fault.is_some() {
                             counts[way][0] += 1;
+                            let v = std::f64::consts::TAU * frequency * amplitude.abs();
+                            let limit = t.loop_cfg.process.max_force;
+                            forced +=
+                                usize::from(amplitude < 0.0 && f_r + floor(k_c, v, plant) > limit);
+                            lost += usize::from(ended.fault_code == Some(5));
                             let peak = ended.run.metrics(0.0, f64::INFINITY).peak_force;
                             worst = worst.max(peak / t.loop_cfg.process.max_force);
                             continue;
@@ -836,6 +846,11 @@ fn moving_surfaces() {
     }
     let [away, towards] = all;
     println!("all, of 540 each way: away from the tool {away:?}, towards it {towards:?}");
+    println!(
+        "of the {} faults: {forced} forced (approaching faster than the force limit allows at any \
+         law), {lost} contacts lost for 0.5 s (fault 5)",
+        away[0] + towards[0]
+    );
     rel.sort_by(f64::total_cmp);
     let at = |q: f64| rel[((rel.len() - 1) as f64 * q).round() as usize];
     let (median, p90) = (at(0.5), at(0.9));

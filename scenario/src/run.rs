@@ -96,6 +96,9 @@ pub struct Ended {
     pub run: Run,
     /// The loop's error that ended the run early (a fault, backed off), or `None`.
     pub fault: Option<anyhow::Error>,
+    /// That fault's code in the process contract (`FcState.Fault`: 2 force limit, 5 contact lost, …),
+    /// `None` without one.
+    pub fault_code: Option<i64>,
 }
 
 /// Run `scenario` on `plant` with `tuning` (the scenario's overrides and the plant's cell model
@@ -135,7 +138,7 @@ pub fn run_to_end(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) 
     );
     let steps = (scenario.duration / plant.period).round().max(1.0) as usize;
     let mut rows = Vec::with_capacity(steps);
-    let mut fault = None;
+    let (mut fault, mut fault_code) = (None, None);
     for _ in 0..steps {
         // A robot program ends the run when it ends (as `forcecell sim` does).
         if sim::world::lock(&world).program().is_some_and(|p| p.done()) {
@@ -144,6 +147,7 @@ pub fn run_to_end(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) 
         match lp.cycle() {
             Ok(r) => rows.push(Row::from_report(&r, r.set_point)),
             Err(e) => {
+                fault_code = e.code().map(|c| c.code());
                 fault = Some(anyhow!("the loop ended after {} steps: {e}", rows.len()));
                 break;
             }
@@ -161,5 +165,6 @@ pub fn run_to_end(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) 
             stats,
         },
         fault,
+        fault_code,
     })
 }
