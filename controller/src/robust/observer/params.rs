@@ -39,8 +39,9 @@ pub struct ObserverParams {
     pub motion_significance: f64,
     /// The speed above which the predictor's surface motion is fed forward (the motion test's other
     /// conditions and its noise bound kept), m/s; `estimator.max_surface_speed` if that is lower. Only
-    /// the feed-forward: the identification still takes a slower surface than `max_surface_speed`
-    /// for a still one (`robust/motion.rs`).
+    /// the feed-forward: the identification takes a slower surface than `max_surface_speed` for a
+    /// still one, but for the recursion's wait on motion that began after a calm contact
+    /// (`robust/motion.rs`).
     pub feedforward_speed: f64,
     /// Smallest dead-band on the fallback feed-forward velocity, m/s.
     pub deadband_floor: f64,
