@@ -5,7 +5,8 @@
 //! its lead over the lagging tool) in a surface of stiffness `k̂_c`. The approach stops within
 //! `2·f_r`, the fast search after a lost contact below the force limit (less what the force may
 //! reach before the contact is certainly seen: the limit is a trip); after `reacquire_distance` the
-//! search is at the speed that stops within `2·f_r`. Behind the position where contact was lost the
+//! search is at the speed that stops within `2·f_r`, on a surface seen receding that speed over the
+//! surface's. Behind the position where contact was lost the
 //! search is fast: the tool was there.
 //!
 //! The fast search cannot also stop within `2·f_r` where a lost surface is found again close by (a
@@ -144,16 +145,20 @@ impl ContactMachine {
                 // 2·f_r (after a bounce or the tool's own retreat at approach speed: the `k̂_c` the
                 // speed is bounded with may be a fit of noise), or faster when the surface was seen
                 // receding at lift-off (a receding surface outruns a slow search). After a bounce
-                // off a re-contact, a surface seen going away during the search before chases it at
-                // up to the speed that stops within 2·f_r (B5b's sine start on P2: the observer,
-                // restarted at the re-contact, saw 0.2 mm/s of the surface's 6 mm/s, and the search
-                // at approach speed caught it 0.21 s later as it turned; at the seen speed, bounded
-                // only by the fast search, it hit at 18 N).
+                // off a re-contact, a surface seen going away during the search before is chased at
+                // up to the speed that stops within 2·f_r plus the speed it was seen at: it closes on
+                // a surface that goes on receding no faster than the gentle search on a still one
+                // (B5b's sine start on P2: the observer, restarted at the re-contact, saw 0.2 mm/s of
+                // the surface's 6 mm/s, and the search at approach speed caught it 0.21 s later as it
+                // turned; at the seen speed, bounded only by the fast search, it hit at 18 N; bounded
+                // by the gentle speed alone, a stiff surface receding faster than that was never
+                // caught: f_r 2 N on 500 kN/m on P2 receding at 0.79 mm/s, fault 5).
                 let speed = if u < self.x_lost - sp.penetration {
                     sp.reacquire
                 } else if self.travelled >= c.reacquire_distance {
                     let slow = if self.slow { sp.approach } else { sp.near };
-                    let chase = (sp.approach + c.reacquire_outrun * self.v_seen).min(sp.near);
+                    let chase =
+                        (sp.approach + c.reacquire_outrun * self.v_seen).min(sp.near + self.v_seen);
                     slow.max(sp.approach + c.reacquire_outrun * self.v_lost)
                         .max(chase)
                         .min(sp.reacquire)

@@ -349,3 +349,34 @@ fn a_held_contact_shows_in_the_mean_where_the_threshold_is_beyond_the_set_point(
     // 2 N ≥ 4·1 N/√n from n = 4 on.
     assert_eq!(shown_after, Some(4));
 }
+
+/// After a bounce off a re-contact that found the surface `v_seen` further on, the search chases it
+/// at up to the speed that stops within `2·f_r` *plus* that speed: it closes on a surface receding
+/// at `v_seen` no faster than on a still one. (Bounded by the speed that stops within `2·f_r` alone,
+/// a stiff surface receding faster than that was never caught: f_r 2 N on 500 kN/m on P2, 0.5 mm at
+/// 0.25 Hz, ended on fault 5; `ranges.rs` `a_receding_surface_is_chased_at_its_own_speed`.)
+#[test]
+fn a_surface_seen_receding_is_chased_at_its_speed_over_the_gentle_one() {
+    let mut m = lost_at(0.01);
+    let at = |x: f64, f: f64| Signals { x, ..sig(f, f) };
+    // Found again 1 mm further on after 50 ms: receding at about 20 mm/s.
+    for _ in 0..50 {
+        m.step(&at(0.01, 0.0), &TH, 60.0, 0.0, 1e-3);
+    }
+    let x = 0.011;
+    assert_eq!(
+        m.step(&at(x, 5.0), &TH, 60.0, 0.0, 1e-3),
+        Transition::Contact {
+            from_approach: false
+        }
+    );
+    // A bounce: lost again at once.
+    while m.step(&at(x, 0.0), &TH, 60.0, 0.0, 1e-3) != Transition::LiftOff {}
+    let u = m.command(x, x, &SP, 0.1, 1e-3).unwrap();
+    let v = (u - x) / 1e-3;
+    let v_seen = 0.001 / 0.051;
+    assert!(
+        v > SP.near + 0.9 * v_seen && v <= SP.near + v_seen + 1e-9,
+        "{v} m/s"
+    );
+}
