@@ -1,10 +1,7 @@
 //! The control loop: one robot cycle in, one newest force sample, one law step, exactly one reply out.
 //! Written against the HAL only; every device is a [`RobotLink`] and a [`ForceSensor`].
 
-use hal::{
-    Correction, Cycle, Error as _, ErrorKind, ForceSensor, ProcessCommand, ProcessFault, RobotLink,
-    Sample,
-};
+use hal::{Correction, Cycle, Error as _, ErrorKind, ForceSensor, RobotLink, Sample};
 
 use crate::law::{ForceLaw, Output};
 
@@ -12,11 +9,12 @@ mod config;
 mod error;
 mod guard;
 mod process;
+mod process_cycle;
 pub use config::LoopConfig;
-use error::{Ending, hold_code, hold_reason};
+use error::Ending;
 pub use error::{Fault, LoopError};
 use guard::Guard;
-use process::{Act, Process, Release};
+use process::Process;
 pub use process::{ProcessConfig, Refusal};
 
 /// Counters of the loop, for diagnostics.
@@ -69,6 +67,11 @@ struct Reading<SE> {
     sample: Option<Sample>,
     fault: Option<Fault>,
     fatal: Option<SE>,
+}
+
+/// Whether the robot's pose in `cycle` and the tool's offset `x` along the normal are usable.
+fn pose_ok(cycle: &Cycle, x: f64) -> bool {
+    cycle.actual.is_finite() && cycle.programmed.is_finite() && x.is_finite()
 }
 
 /// What the loop is doing.
@@ -177,12 +180,8 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             Phase::Control => {}
             Phase::Retract { .. } | Phase::Halted { .. } => return self.retract(cycle, x),
         }
-        let pose_ok = cycle.actual.is_finite() && cycle.programmed.is_finite() && x.is_finite();
-        if pose_ok && (!self.started || cycle.new_session) {
-            if self.started {
-                self.stats.sessions += 1;
-            }
-            self.begin_session(x);
+        let pose_ok = pose_ok(&cycle, x);
+        if self.begin_session(&cycle, pose_ok, x) {
             self.law.start(x);
             self.stepped_t = None;
             self.guard.reset();
@@ -202,10 +201,8 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             (None, Some(f)) if self.started => {
                 let dt = self.law_dt(&cycle);
                 self.guard.observe(&self.cfg.process, f, dt);
-                let o = self.law.step(x, f, dt);
-                if o.x_cmd.is_finite() {
-                    out = o;
-                    cmd = self.limit(o.x_cmd, &mut fault);
+                if let Some((o, c)) = self.step_law(x, f, dt, &mut fault) {
+                    (out, cmd) = (o, c);
                     let f_r = self.law.set_point();
                     tripped = match self.guard.check(&self.cfg.process, &o, f, f_r, dt) {
                         Err(t) => Some(t),
@@ -214,8 +211,6 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
                         }
                         Ok(_) => None,
                     };
-                } else {
-                    fault = Some(Fault::NonFiniteCommand);
                 }
             }
             _ => {}
@@ -224,10 +219,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         self.held = if held { self.held + cycle.period } else { 0.0 };
 
         let command = Correction::along_z(cmd);
-        self.robot.reply(&command).map_err(LoopError::Robot)?;
-        self.stats.cycles += 1;
-        self.last_out = out;
-        self.last_cmd = cmd;
+        self.reply(&command, out)?;
         let end = match (fatal_sensor, fault, tripped) {
             (Some(e), _, _) => Some(Ending::Sensor(e)),
             (None, Some(last), _) if self.held > self.cfg.max_hold => Some(Ending::HoldTimeout {
@@ -263,14 +255,55 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         })
     }
 
-    /// A robot session starts with the tool at `x`: the command stands there (bumpless).
-    fn begin_session(&mut self, x: f64) {
+    /// A robot session starts (the first usable pose, or the robot's new session) with the tool at
+    /// `x`: the command stands there (bumpless). Returns whether it did.
+    fn begin_session(&mut self, cycle: &Cycle, pose_ok: bool, x: f64) -> bool {
+        if !(pose_ok && (!self.started || cycle.new_session)) {
+            return false;
+        }
+        if self.started {
+            self.stats.sessions += 1;
+        }
         self.started = true;
         self.last_cmd = x;
         self.last_out = Output {
             x_cmd: x,
             ..Output::default()
         };
+        true
+    }
+
+    /// The law's step on `(x, f)` over `dt`, its command within the loop's limits (a limit that
+    /// acted is noted in `fault`); `None` and [`Fault::NonFiniteCommand`] when the law gave no finite
+    /// command.
+    fn step_law(
+        &mut self,
+        x: f64,
+        f: f64,
+        dt: f64,
+        fault: &mut Option<Fault>,
+    ) -> Option<(Output, f64)> {
+        let o = self.law.step(x, f, dt);
+        if o.x_cmd.is_finite() {
+            let cmd = self.limit(o.x_cmd, fault);
+            Some((o, cmd))
+        } else {
+            *fault = Some(Fault::NonFiniteCommand);
+            None
+        }
+    }
+
+    /// Answer the robot with `command`, the law's output `out` behind it.
+    fn reply(
+        &mut self,
+        command: &Correction,
+        out: Output,
+    ) -> Result<(), LoopError<R::Error, S::Error>> {
+        self.robot.reply(command).map_err(LoopError::Robot)?;
+        self.stats.cycles += 1;
+        self.last_out = out;
+        self.last_cmd = command.translation.z;
+        Ok(())
     }
 
     /// Read the newest sample and classify it: a usable force, a non-finite sample, a sensor error
@@ -329,149 +362,6 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         } else {
             dt
         }
-    }
-
-    /// One cycle of a process the robot program commands (the cycle carries a [`ProcessCommand`]):
-    /// OFF returns the correction to zero, PRESS approaches, ramps and holds the program's force,
-    /// RELEASE ramps down, lifts off and returns to zero; a fault latches, backs off and holds there
-    /// until the program sends OFF. The loop never ends on a process fault: the program decides.
-    fn process_cycle(
-        &mut self,
-        cycle: Cycle,
-        x: f64,
-        pc: ProcessCommand,
-    ) -> Result<CycleReport, LoopError<R::Error, S::Error>> {
-        let pose_ok = cycle.actual.is_finite() && cycle.programmed.is_finite() && x.is_finite();
-        if pose_ok && (!self.started || cycle.new_session) {
-            if self.started {
-                self.stats.sessions += 1;
-            }
-            self.begin_session(x);
-            self.process = Process::new(self.cfg.process);
-        }
-        let Reading {
-            f,
-            sample,
-            mut fault,
-            fatal,
-        } = self.read_sensor(pose_ok);
-        if let Some(f) = f {
-            self.process.observe(f, cycle.period);
-        }
-        let lift = self.cfg.retract_distance;
-        let floor = -self.cfg.max_offset;
-        match self.process.command(&pc) {
-            Ok(true) => {
-                // A fresh start of force control at the measured position (bumpless).
-                self.law
-                    .set_set_point(self.process.sp)
-                    .expect("a checked PRESS force is a valid set-point");
-                self.law.start(if pose_ok { x } else { self.last_cmd });
-                self.stepped_t = None;
-                self.held = 0.0;
-            }
-            Ok(false) => {}
-            Err(why) => self.process.latch(
-                ProcessFault::BadCommand,
-                || format!("bad command: {why}"),
-                self.last_cmd,
-                lift,
-                floor,
-            ),
-        }
-        if let Some(e) = &fatal {
-            self.process.latch(
-                ProcessFault::SensorLost,
-                || format!("force sensor: {e}"),
-                self.last_cmd,
-                lift,
-                floor,
-            );
-        }
-
-        let mut out = self.last_out;
-        let mut cmd = self.last_cmd;
-        if let Some(f) = f {
-            self.process.back_off_further(f, self.last_cmd, lift, floor);
-        }
-        let controlling = match self.process.act() {
-            Act::MoveTo { target } => {
-                let step = (self.cfg.retract_speed * cycle.period).min(self.cfg.max_step);
-                cmd = self.last_cmd + (target - self.last_cmd).clamp(-step, step);
-                if cmd == target {
-                    self.process.arrived();
-                }
-                out.x_cmd = cmd;
-                if self.process.phase == hal::ProcessPhase::Fault {
-                    self.stats.retract_cycles += 1;
-                    fault = fault.or(Some(Fault::Retracting));
-                }
-                false
-            }
-            Act::Control => {
-                if let (None, Some(fv)) = (fault, f) {
-                    let dt = self.law_dt(&cycle);
-                    // The law takes the process's set-point: the ramp's step, or one the process
-                    // changed after the last law step (a contact the law took back restarts the
-                    // ramp at the entry force).
-                    self.process.ramp_step(dt);
-                    if self.law.set_point() != self.process.sp {
-                        self.law
-                            .set_set_point(self.process.sp)
-                            .expect("a ramp between checked forces is a valid set-point");
-                    }
-                    let o = self.law.step(x, fv, dt);
-                    if o.x_cmd.is_finite() {
-                        out = o;
-                        cmd = self.limit(o.x_cmd, &mut fault);
-                        if let Err((code, why)) = self.process.after_step(&o, fv, dt) {
-                            self.process.latch(code, || why, cmd, lift, floor);
-                        } else if fault == Some(Fault::EnvelopeLimited) {
-                            let (code, why) = guard::envelope(self.cfg.max_offset);
-                            self.process.latch(code, || why, cmd, lift, floor);
-                        } else if self.process.release_ramp_done() {
-                            self.process.release = Release::Lift {
-                                target: (cmd - lift).max(floor),
-                            };
-                        }
-                    } else {
-                        fault = Some(Fault::NonFiniteCommand);
-                    }
-                }
-                true
-            }
-        };
-        let held = self.count(fault) && controlling;
-        self.held = if held { self.held + cycle.period } else { 0.0 };
-        // Only a fault holds the command (`count`), so a hold that lasted has one.
-        if self.held > self.cfg.max_hold
-            && let Some(last) = fault
-        {
-            let code = hold_code(last);
-            let held = self.held;
-            let why = || hold_reason(held, last);
-            self.process.latch(code, why, cmd, lift, floor);
-            self.held = 0.0;
-        }
-
-        let command = Correction {
-            process: self.process.state(),
-            ..Correction::along_z(cmd)
-        };
-        self.robot.reply(&command).map_err(LoopError::Robot)?;
-        self.stats.cycles += 1;
-        self.last_out = out;
-        self.last_cmd = cmd;
-        Ok(CycleReport {
-            cycle,
-            x,
-            f,
-            sample,
-            out,
-            command,
-            set_point: self.process.recorded_set_point(),
-            fault,
-        })
     }
 
     /// The process's state as last reported to the robot program (OFF on links without process

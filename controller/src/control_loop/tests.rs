@@ -2,7 +2,7 @@
 use super::*;
 use crate::law::{ContactState, ImpedanceLaw};
 use hal::mock::{MockRobot, MockSensor};
-use hal::{Pose, Sample, Vector3, Wrench};
+use hal::{Pose, ProcessFault, Sample, Vector3, Wrench};
 use mockall::Sequence;
 use std::time::Duration;
 

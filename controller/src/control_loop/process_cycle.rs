@@ -1,0 +1,184 @@
+//! One cycle of a loop whose robot link carries the process channels: the robot program's command
+//! drives the process ([`super::process`]), which decides whether the law controls or the command
+//! moves to a target.
+
+use hal::{Correction, Cycle, ForceSensor, ProcessCommand, ProcessFault, RobotLink};
+
+use super::error::{hold_code, hold_reason};
+use super::process::{Act, Process, Release};
+use super::{ControlLoop, CycleReport, Fault, LoopError, Reading, guard, pose_ok};
+use crate::law::{ForceLaw, Output};
+
+impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
+    /// One cycle of a process the robot program commands (the cycle carries a [`ProcessCommand`]):
+    /// OFF returns the correction to zero, PRESS approaches, ramps and holds the program's force,
+    /// RELEASE ramps down, lifts off and returns to zero; a fault latches, backs off and holds there
+    /// until the program sends OFF. The loop never ends on a process fault: the program decides.
+    pub(super) fn process_cycle(
+        &mut self,
+        cycle: Cycle,
+        x: f64,
+        pc: ProcessCommand,
+    ) -> Result<CycleReport, LoopError<R::Error, S::Error>> {
+        let pose_ok = pose_ok(&cycle, x);
+        if self.begin_session(&cycle, pose_ok, x) {
+            self.process = Process::new(self.cfg.process);
+        }
+        let Reading {
+            f,
+            sample,
+            mut fault,
+            fatal,
+        } = self.read_sensor(pose_ok);
+        if let Some(f) = f {
+            self.process.observe(f, cycle.period);
+        }
+        self.take_process_command(&pc, if pose_ok { x } else { self.last_cmd });
+        if let Some(e) = &fatal {
+            let why = || format!("force sensor: {e}");
+            self.latch_at_last(ProcessFault::SensorLost, why);
+        }
+        if let Some(f) = f {
+            let (lift, floor) = self.back_off();
+            self.process.back_off_further(f, self.last_cmd, lift, floor);
+        }
+        let (out, cmd, controlling) = match self.process.act() {
+            Act::MoveTo { target } => {
+                let cmd = self.move_to(target, &cycle, &mut fault);
+                let out = Output {
+                    x_cmd: cmd,
+                    ..self.last_out
+                };
+                (out, cmd, false)
+            }
+            Act::Control => {
+                let (out, cmd) = match (fault, f) {
+                    (None, Some(fv)) => self.process_law_step(&cycle, x, fv, &mut fault),
+                    _ => (self.last_out, self.last_cmd),
+                };
+                (out, cmd, true)
+            }
+        };
+        self.bound_process_hold(fault, controlling, cycle.period, cmd);
+        let command = Correction {
+            process: self.process.state(),
+            ..Correction::along_z(cmd)
+        };
+        self.reply(&command, out)?;
+        Ok(CycleReport {
+            cycle,
+            x,
+            f,
+            sample,
+            out,
+            command,
+            set_point: self.process.recorded_set_point(),
+            fault,
+        })
+    }
+
+    /// How far a process fault backs off from the command and the envelope's floor it stops at, m.
+    fn back_off(&self) -> (f64, f64) {
+        (self.cfg.retract_distance, -self.cfg.max_offset)
+    }
+
+    /// Latch a process fault `code` (`why` says what happened) backing off from the last command.
+    fn latch_at_last(&mut self, code: ProcessFault, why: impl FnOnce() -> String) {
+        let (lift, floor) = self.back_off();
+        self.process.latch(code, why, self.last_cmd, lift, floor);
+    }
+
+    /// The robot program's command `pc` to the process: a PRESS that starts force control starts the
+    /// law afresh at `x` (bumpless), a command the process refuses latches a fault.
+    fn take_process_command(&mut self, pc: &ProcessCommand, x: f64) {
+        match self.process.command(pc) {
+            Ok(true) => {
+                self.law
+                    .set_set_point(self.process.sp)
+                    .expect("a checked PRESS force is a valid set-point");
+                self.law.start(x);
+                self.stepped_t = None;
+                self.held = 0.0;
+            }
+            Ok(false) => {}
+            Err(why) => {
+                self.latch_at_last(ProcessFault::BadCommand, || format!("bad command: {why}"))
+            }
+        }
+    }
+
+    /// The command one cycle nearer `target` (OFF's zero, a lift or a fault's back-off), at the
+    /// retract speed within the step limit; a back-off under a fault is reported as
+    /// [`Fault::Retracting`].
+    fn move_to(&mut self, target: f64, cycle: &Cycle, fault: &mut Option<Fault>) -> f64 {
+        let step = (self.cfg.retract_speed * cycle.period).min(self.cfg.max_step);
+        let cmd = self.last_cmd + (target - self.last_cmd).clamp(-step, step);
+        if cmd == target {
+            self.process.arrived();
+        }
+        if self.process.phase == hal::ProcessPhase::Fault {
+            self.stats.retract_cycles += 1;
+            *fault = fault.or(Some(Fault::Retracting));
+        }
+        cmd
+    }
+
+    /// The law's step under the process at its set-point (the ramp's step, or one the process
+    /// changed after the last law step: a contact the law took back restarts the ramp at the entry
+    /// force), and the process's checks of it: a check that fails latches its fault, a release ramp
+    /// that is done lifts off. Returns the law's output and the command.
+    fn process_law_step(
+        &mut self,
+        cycle: &Cycle,
+        x: f64,
+        f: f64,
+        fault: &mut Option<Fault>,
+    ) -> (Output, f64) {
+        let dt = self.law_dt(cycle);
+        self.process.ramp_step(dt);
+        if self.law.set_point() != self.process.sp {
+            self.law
+                .set_set_point(self.process.sp)
+                .expect("a ramp between checked forces is a valid set-point");
+        }
+        let Some((o, cmd)) = self.step_law(x, f, dt, fault) else {
+            return (self.last_out, self.last_cmd);
+        };
+        let (lift, floor) = self.back_off();
+        if let Err((code, why)) = self.process.after_step(&o, f, dt) {
+            self.process.latch(code, || why, cmd, lift, floor);
+        } else if *fault == Some(Fault::EnvelopeLimited) {
+            let (code, why) = guard::envelope(self.cfg.max_offset);
+            self.process.latch(code, || why, cmd, lift, floor);
+        } else if self.process.release_ramp_done() {
+            self.process.release = Release::Lift {
+                target: (cmd - lift).max(floor),
+            };
+        }
+        (o, cmd)
+    }
+
+    /// Every hold is bounded: a fault that held the command under control (`controlling`) for
+    /// longer than `max_hold` latches its process fault, backing off from `cmd`.
+    fn bound_process_hold(
+        &mut self,
+        fault: Option<Fault>,
+        controlling: bool,
+        period: f64,
+        cmd: f64,
+    ) {
+        let held = self.count(fault) && controlling;
+        self.held = if held { self.held + period } else { 0.0 };
+        // Only a fault holds the command (`count`), so a hold that lasted has one.
+        if self.held > self.cfg.max_hold
+            && let Some(last) = fault
+        {
+            let code = hold_code(last);
+            let held = self.held;
+            let (lift, floor) = self.back_off();
+            self.process
+                .latch(code, || hold_reason(held, last), cmd, lift, floor);
+            self.held = 0.0;
+        }
+    }
+}
