@@ -39,7 +39,8 @@ pub struct Motion {
     /// without a break, and the time left during which it holds the feed-forward on, s.
     slow_time: f64,
     slow_hold: f64,
-    /// How long no motion has been held since the last restart, s.
+    /// How long no motion (the feed-forward's slow one included) has been held since the last
+    /// restart, s.
     calm: f64,
     /// Whether the motion held now began after `motion_hold` of that calm.
     after_calm: bool,
@@ -126,9 +127,10 @@ impl Motion {
             self.hold = p.motion_hold;
         }
         // A surface slower than `thr` is fed forward too (the identification takes it for a still
-        // one but for the recursion's wait after a calm contact). Its motion must last the loop's lead time: the loop's own ringing under a
-        // stale `k̂_c` shows an apparent motion that turns within it (a noisy doubling at f_r 2.5 N
-        // on the 12 ms cell, fed forward, rang into three lost contacts).
+        // one but for the recursion's wait after a calm contact). Its motion must last the loop's
+        // lead time: the loop's own ringing under a stale `k̂_c` shows an apparent motion that turns
+        // within it (a noisy doubling at f_r 2.5 N on the 12 ms cell, fed forward, rang into three
+        // lost contacts).
         let slow = surface_moving(v, v_raw, thr_ff);
         if confirmed(&mut self.slow_time, slow, confirm.max(lead), dt) {
             self.slow_hold = p.motion_hold;

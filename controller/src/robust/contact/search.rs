@@ -5,9 +5,8 @@
 //! its lead over the lagging tool) in a surface of stiffness `k̂_c`. The approach stops within
 //! `2·f_r`, the fast search after a lost contact below the force limit (less what the force may
 //! reach before the contact is certainly seen: the limit is a trip); after `reacquire_distance` the
-//! search is at the speed that stops within `2·f_r`, on a surface seen receding that speed over the
-//! surface's. Behind the position where contact was lost the
-//! search is fast: the tool was there.
+//! search is at the speed that stops within `2·f_r`, over a surface seen receding that speed plus the
+//! surface's. Behind the position where contact was lost the search is fast: the tool was there.
 //!
 //! The fast search cannot also stop within `2·f_r` where a lost surface is found again close by (a
 //! transient, B8): the commands that catch up with a retreating surface in time (B3: 1 mm in 50 ms on

@@ -350,7 +350,7 @@ fn a_held_contact_shows_in_the_mean_where_the_threshold_is_beyond_the_set_point(
     assert_eq!(shown_after, Some(4));
 }
 
-/// After a bounce off a re-contact that found the surface `v_seen` further on, the search chases it
+/// After a bounce off a re-contact that found the surface receding at `v_seen`, the search chases it
 /// at up to the speed that stops within `2·f_r` *plus* that speed: it closes on a surface receding
 /// at `v_seen` no faster than on a still one. (Bounded by the speed that stops within `2·f_r` alone,
 /// a stiff surface receding faster than that was never caught: f_r 2 N on 500 kN/m on P2, 0.5 mm at
