@@ -768,8 +768,9 @@ fn census<S: Strategy>(
 /// and 85.4 N, f_r 2 N on the 12 ms cell, surfaces whose own floor is 28–34 N). Also printed: how
 /// many faults are forced — a surface approaching so fast that the set-point and its floor
 /// `k_c·v·(delay + cycle)` are beyond the force limit (12 of the 59; the worst trip left, 2.78 × at
-/// 500 kN/m, is one: 6.3 mm/s on the 12 ms cell) — and how many end on a contact lost for 0.5 s
-/// (fault 5: 6). Also printed and bounded: the
+/// 500 kN/m, is one: 6.3 mm/s on the 12 ms cell), how many end on a contact lost for 0.5 s
+/// (fault 5: 6), and of the other trips how many pressed past the limit without a contact lost
+/// since the sine began (20) and how many on a re-contact (21). Also printed and bounded: the
 /// highest true force of a faulted run (the trip's back-off included, [`run_to_end`]) over its force
 /// limit — with the fall at 30/s 4.36 at 500 kN/m (262 N at f_r 20 N on the 12 ms cell), 3.03 at 300
 /// kN/m — and how well the runs without a fault hold the force: the 90th percentile of their RMS error
@@ -792,9 +793,10 @@ fn moving_surfaces() {
     // [away from the tool, towards it] × [faults, k̂_c off, lossy], over all stiffnesses.
     let mut all = [[0usize; 3]; 2];
     // Of the faults: forced (a surface approaching so fast that the set-point plus its own floor
-    // `k_c·v·(delay + cycle)` is beyond the force limit: no law avoids the trip), and contacts lost
-    // for the loop's 0.5 s (fault 5).
-    let (mut forced, mut lost) = (0, 0);
+    // `k_c·v·(delay + cycle)` is beyond the force limit: no law avoids the trip), contacts lost
+    // for the loop's 0.5 s (fault 5), and the other trips: pressed past the limit without a contact
+    // lost since the sine began, or on a re-contact.
+    let (mut forced, mut lost, mut pressed, mut recontacts) = (0, 0, 0, 0);
     for (k_c, faults_measured, off_measured, lossy_measured, worst_measured) in rows {
         let mut counts = [[0usize; 3]; 2];
         // The highest true force of a run a fault ended, over its force limit.
@@ -811,9 +813,21 @@ fn moving_surfaces() {
                             counts[way][0] += 1;
                             let v = std::f64::consts::TAU * frequency * amplitude.abs();
                             let limit = t.loop_cfg.process.max_force;
-                            forced +=
-                                usize::from(amplitude < 0.0 && f_r + floor(k_c, v, plant) > limit);
+                            let is_forced = amplitude < 0.0 && f_r + floor(k_c, v, plant) > limit;
+                            forced += usize::from(is_forced);
                             lost += usize::from(ended.fault_code == Some(5));
+                            if !is_forced && ended.fault_code == Some(2) {
+                                // Up to the force's first crossing of the limit: the trip's
+                                // back-off lifts off after it.
+                                let rows = &ended.run.rows;
+                                let over = rows.iter().find(|r| r.f > limit);
+                                let trip = over.map_or(f64::INFINITY, |r| r.t);
+                                if ended.run.metrics(2.0, trip).contact_losses == 0.0 {
+                                    pressed += 1;
+                                } else {
+                                    recontacts += 1;
+                                }
+                            }
                             let peak = ended.run.metrics(0.0, f64::INFINITY).peak_force;
                             worst = worst.max(peak / t.loop_cfg.process.max_force);
                             continue;
@@ -856,7 +870,8 @@ fn moving_surfaces() {
     println!("all, of 540 each way: away from the tool {away:?}, towards it {towards:?}");
     println!(
         "of the {} faults: {forced} forced (approaching faster than the force limit allows at any \
-         law), {lost} contacts lost for 0.5 s (fault 5)",
+         law), {lost} contacts lost for 0.5 s (fault 5); of the other trips {pressed} pressed past \
+         the limit without losing contact since the sine began, {recontacts} on a re-contact",
         away[0] + towards[0]
     );
     rel.sort_by(f64::total_cmp);
