@@ -120,7 +120,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             held: 0.0,
             phase: Phase::Control,
             stepped_t: None,
-            process: Process::new(cfg.process),
+            process: cfg.new_process(),
             guard: Guard::default(),
         }
     }
@@ -234,13 +234,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             // Reported as FAULT with its code while backing off and with `Stop`, on links that
             // carry process channels (the program is not using them, but the integrator sees it).
             let code = end.code().expect("an ending is never the robot's");
-            self.process.latch(
-                code,
-                || end.reason(),
-                cmd,
-                self.cfg.retract_distance,
-                -self.cfg.max_offset,
-            );
+            self.process.latch(code, || end.reason(), cmd);
             self.phase = Phase::Retract { target, end };
         }
         Ok(CycleReport {
@@ -435,7 +429,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             Err(_) => (None, None),
         };
         let floor = -self.cfg.max_offset;
-        let step = (self.cfg.retract_speed * cycle.period).min(self.cfg.max_step);
+        let step = self.cfg.retract_step(cycle.period);
         let target = match &mut self.phase {
             Phase::Retract { target, .. } | Phase::Halted { target } => {
                 *target = guard::back_off_target(
@@ -455,11 +449,12 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             process: self.process.state(),
             ..Correction::along_z(cmd)
         };
-        self.robot.reply(&command).map_err(LoopError::Robot)?;
-        self.stats.cycles += 1;
+        let out = Output {
+            x_cmd: cmd,
+            ..self.last_out
+        };
+        self.reply(&command, out)?;
         self.stats.retract_cycles += 1;
-        self.last_cmd = cmd;
-        self.last_out.x_cmd = cmd;
         if cmd <= target
             && let Phase::Retract { end, .. } =
                 core::mem::replace(&mut self.phase, Phase::Halted { target })

@@ -122,7 +122,8 @@ impl SurfacePredictor {
 
     /// One step of `dt` (s) with measurement `z` (m) of variance `r` (m²), process noise `q` (m²/s⁵).
     /// An innovation that passes `jump` is a jump: the position is moved there, velocity and
-    /// acceleration are kept as they were before the step (not propagated through it). Returns the jump's innovation, m (`None`: tracked as motion).
+    /// acceleration are kept as they were before the step (not propagated through it). Returns the
+    /// jump's innovation, m (`None`: tracked as motion).
     pub fn update(&mut self, z: f64, r: f64, q: f64, dt: f64, jump: &JumpTest) -> Option<f64> {
         if !(z.is_finite() && r.is_finite() && r > 0.0 && dt.is_finite() && dt > 0.0) {
             return None;

@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::process::ProcessConfig;
+use super::process::{Process, ProcessConfig};
 
 /// How the loop maps devices onto the 1-DOF law and what it refuses to command.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -45,6 +45,17 @@ impl Default for LoopConfig {
 }
 
 impl LoopConfig {
+    /// How far a back-off, a lift or a return moves the command in one cycle of `period` (s): at
+    /// `retract_speed`, within `max_step`, m.
+    pub(super) fn retract_step(&self, period: f64) -> f64 {
+        (self.retract_speed * period).min(self.max_step)
+    }
+
+    /// A process at OFF whose faults back off `retract_distance`, within the envelope.
+    pub(super) fn new_process(&self) -> Process {
+        Process::new(self.process, self.retract_distance, -self.max_offset)
+    }
+
     /// Checks the values.
     pub fn validate(&self) -> Result<(), String> {
         if self.force_sign != 1.0 && self.force_sign != -1.0 {

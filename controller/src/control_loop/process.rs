@@ -165,10 +165,15 @@ pub(super) struct Process {
     pub release: Release,
     /// Where a fault's back-off ends, m.
     pub retract_target: f64,
+    /// How far a fault backs off beyond the command (the loop's `retract_distance`), and the
+    /// envelope's floor it never passes (`−max_offset`), m.
+    lift: f64,
+    floor: f64,
 }
 
 impl Process {
-    pub fn new(cfg: ProcessConfig) -> Self {
+    /// At OFF; a fault backs off `lift` (m) beyond the command, never beyond `floor` (m).
+    pub fn new(cfg: ProcessConfig, lift: f64, floor: f64) -> Self {
         Self {
             cfg,
             phase: ProcessPhase::Off,
@@ -181,6 +186,8 @@ impl Process {
             guard: Guard::default(),
             release: Release::Return,
             retract_target: 0.0,
+            lift,
+            floor,
         }
     }
 
@@ -211,36 +218,29 @@ impl Process {
         self.guard.observe(&self.cfg, f, dt);
     }
 
-    /// Latch a fault (the first one stands), backing off from `cmd`, within `floor`. `why` is only
+    /// Latch a fault (the first one stands), backing off from `cmd`, within the floor. `why` is only
     /// formatted when the fault latches, not on every cycle a latched condition persists.
-    pub fn latch(
-        &mut self,
-        fault: ProcessFault,
-        why: impl FnOnce() -> String,
-        cmd: f64,
-        lift: f64,
-        floor: f64,
-    ) {
+    pub fn latch(&mut self, fault: ProcessFault, why: impl FnOnce() -> String, cmd: f64) {
         if self.phase == ProcessPhase::Fault {
             return;
         }
         self.phase = ProcessPhase::Fault;
         self.fault = fault;
         self.reason = Some(why());
-        self.retract_target = (cmd - lift).max(floor);
+        self.retract_target = (cmd - self.lift).max(self.floor);
     }
 
     /// While a latched fault backs off: its target moves on while force `f` shows the tool still
     /// touching ([`back_off_target`]).
-    pub fn back_off_further(&mut self, f: f64, cmd: f64, lift: f64, floor: f64) {
+    pub fn back_off_further(&mut self, f: f64, cmd: f64) {
         if self.phase == ProcessPhase::Fault {
             self.retract_target = back_off_target(
                 self.retract_target,
                 Some(f),
                 self.cfg.entry_force,
                 cmd,
-                lift,
-                floor,
+                self.lift,
+                self.floor,
             );
         }
     }
@@ -374,6 +374,14 @@ impl Process {
             _ => {}
         }
         Ok(())
+    }
+
+    /// A RELEASE whose set-point has ramped down lifts off: `lift` beyond the command `cmd`, within
+    /// the floor.
+    pub fn lift_off(&mut self, cmd: f64) {
+        self.release = Release::Lift {
+            target: (cmd - self.lift).max(self.floor),
+        };
     }
 
     /// True once a RELEASE's set-point has ramped down: the tool lifts off next.

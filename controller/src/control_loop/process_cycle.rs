@@ -5,7 +5,7 @@
 use hal::{Correction, Cycle, ForceSensor, ProcessCommand, ProcessFault, RobotLink};
 
 use super::error::{hold_code, hold_reason};
-use super::process::{Act, Process, Release};
+use super::process::Act;
 use super::{ControlLoop, CycleReport, Fault, LoopError, Reading, guard, pose_ok};
 use crate::law::{ForceLaw, Output};
 
@@ -22,7 +22,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
     ) -> Result<CycleReport, LoopError<R::Error, S::Error>> {
         let pose_ok = pose_ok(&cycle, x);
         if self.begin_session(&cycle, pose_ok, x) {
-            self.process = Process::new(self.cfg.process);
+            self.process = self.cfg.new_process();
         }
         let Reading {
             f,
@@ -36,11 +36,11 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         self.take_process_command(&pc, if pose_ok { x } else { self.last_cmd });
         if let Some(e) = &fatal {
             let why = || format!("force sensor: {e}");
-            self.latch_at_last(ProcessFault::SensorLost, why);
+            self.process
+                .latch(ProcessFault::SensorLost, why, self.last_cmd);
         }
         if let Some(f) = f {
-            let (lift, floor) = self.back_off();
-            self.process.back_off_further(f, self.last_cmd, lift, floor);
+            self.process.back_off_further(f, self.last_cmd);
         }
         let (out, cmd, controlling) = match self.process.act() {
             Act::MoveTo { target } => {
@@ -77,17 +77,6 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         })
     }
 
-    /// How far a process fault backs off from the command and the envelope's floor it stops at, m.
-    fn back_off(&self) -> (f64, f64) {
-        (self.cfg.retract_distance, -self.cfg.max_offset)
-    }
-
-    /// Latch a process fault `code` (`why` says what happened) backing off from the last command.
-    fn latch_at_last(&mut self, code: ProcessFault, why: impl FnOnce() -> String) {
-        let (lift, floor) = self.back_off();
-        self.process.latch(code, why, self.last_cmd, lift, floor);
-    }
-
     /// The robot program's command `pc` to the process: a PRESS that starts force control starts the
     /// law afresh at `x` (bumpless), a command the process refuses latches a fault.
     fn take_process_command(&mut self, pc: &ProcessCommand, x: f64) {
@@ -102,7 +91,9 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             }
             Ok(false) => {}
             Err(why) => {
-                self.latch_at_last(ProcessFault::BadCommand, || format!("bad command: {why}"))
+                let why = || format!("bad command: {why}");
+                self.process
+                    .latch(ProcessFault::BadCommand, why, self.last_cmd);
             }
         }
     }
@@ -111,7 +102,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
     /// retract speed within the step limit; a back-off under a fault is reported as
     /// [`Fault::Retracting`].
     fn move_to(&mut self, target: f64, cycle: &Cycle, fault: &mut Option<Fault>) -> f64 {
-        let step = (self.cfg.retract_speed * cycle.period).min(self.cfg.max_step);
+        let step = self.cfg.retract_step(cycle.period);
         let cmd = self.last_cmd + (target - self.last_cmd).clamp(-step, step);
         if cmd == target {
             self.process.arrived();
@@ -144,16 +135,13 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         let Some((o, cmd)) = self.step_law(x, f, dt, fault) else {
             return (self.last_out, self.last_cmd);
         };
-        let (lift, floor) = self.back_off();
         if let Err((code, why)) = self.process.after_step(&o, f, dt) {
-            self.process.latch(code, || why, cmd, lift, floor);
+            self.process.latch(code, || why, cmd);
         } else if *fault == Some(Fault::EnvelopeLimited) {
             let (code, why) = guard::envelope(self.cfg.max_offset);
-            self.process.latch(code, || why, cmd, lift, floor);
+            self.process.latch(code, || why, cmd);
         } else if self.process.release_ramp_done() {
-            self.process.release = Release::Lift {
-                target: (cmd - lift).max(floor),
-            };
+            self.process.lift_off(cmd);
         }
         (o, cmd)
     }
@@ -175,9 +163,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         {
             let code = hold_code(last);
             let held = self.held;
-            let (lift, floor) = self.back_off();
-            self.process
-                .latch(code, || hold_reason(held, last), cmd, lift, floor);
+            self.process.latch(code, || hold_reason(held, last), cmd);
             self.held = 0.0;
         }
     }

@@ -264,18 +264,12 @@ mod tests {
     #[test]
     fn slow_motion_after_a_calm_contact_is_a_moving_surface() {
         let p = ObserverParams::default();
-        let dt = 1e-3;
         // 0.3 mm/s with the robot still: slow motion, under the motion test's 1 mm/s.
-        let (v, thr, lead) = (0.3e-3, [1e-3, 1e-4], 0.03);
+        let (slow, fast) = (Some(0.3e-3), Some(2e-3));
         let mut m = Motion::default();
         m.restart();
-        for _ in 0..600 {
-            m.hold(&p, false, dt);
-        }
-        for _ in 0..40 {
-            m.observe(&p, v, 0.0, thr, lead, dt);
-            m.hold(&p, false, dt);
-        }
+        cycles(&mut m, &p, 600, None);
+        cycles(&mut m, &p, 40, slow);
         assert!(
             m.still() && m.established(),
             "fed forward, still to the motion test"
@@ -284,18 +278,24 @@ mod tests {
         // Slow motion from a contact's start for 0.6 s, then fast: no calm to count.
         let mut m = Motion::default();
         m.restart();
-        for _ in 0..600 {
-            m.observe(&p, v, 0.0, thr, lead, dt);
-            m.hold(&p, false, dt);
-        }
-        for _ in 0..10 {
-            m.observe(&p, 2.0 * thr[0], 0.0, thr, lead, dt);
-            m.hold(&p, false, dt);
-        }
+        cycles(&mut m, &p, 600, slow);
+        cycles(&mut m, &p, 10, fast);
         assert!(
             !m.still() && !m.after_calm(),
             "no calm while the slow motion was held"
         );
+    }
+
+    /// `n` cycles of 1 ms with the robot still, the surface seen at `v` (m/s; `None`: no surface
+    /// velocity), under the thresholds of a 1 mm/s moving surface, 0.1 mm/s fed forward and a 30 ms
+    /// lead; the holds run every cycle.
+    fn cycles(m: &mut Motion, p: &ObserverParams, n: usize, v: Option<f64>) {
+        for _ in 0..n {
+            if let Some(v) = v {
+                m.observe(p, v, 0.0, [1e-3, 1e-4], 0.03, 1e-3);
+            }
+            m.hold(p, false, 1e-3);
+        }
     }
 
     #[test]

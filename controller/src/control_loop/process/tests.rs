@@ -3,6 +3,20 @@
 use super::*;
 use crate::law::ContactState;
 
+/// A process at OFF whose faults back off 2 mm, within −5 mm.
+fn new() -> Process {
+    Process::new(ProcessConfig::default(), 0.002, -0.005)
+}
+
+/// A process pressing at `f` (N) that has had its contact.
+fn pressing(f: f64) -> Process {
+    let mut p = new();
+    p.command(&press(f, 0.0)).unwrap();
+    p.guard.had_contact = true;
+    p.phase = ProcessPhase::Pressing;
+    p
+}
+
 fn press(f: f64, ramp: f64) -> ProcessCommand {
     ProcessCommand {
         mode: ProcessMode::Press,
@@ -32,7 +46,7 @@ fn commands_the_contract_forbids_are_refused() {
 
 #[test]
 fn entry_ramp_runs_from_the_contact_force_to_f_over_ramp() {
-    let mut p = Process::new(ProcessConfig::default());
+    let mut p = new();
     assert_eq!(p.command(&press(20.0, 0.5)), Ok(true));
     assert_eq!(p.phase, ProcessPhase::Approach);
     assert_eq!(p.sp, 2.0);
@@ -61,7 +75,7 @@ fn entry_ramp_runs_from_the_contact_force_to_f_over_ramp() {
 /// the program's ramp starts over from the next contact instead of going on in free air.
 #[test]
 fn a_contact_the_law_takes_back_restarts_the_approach_and_the_ramp() {
-    let mut p = Process::new(ProcessConfig::default());
+    let mut p = new();
     p.command(&press(20.0, 0.5)).unwrap();
     let contact = Output {
         state: Some(ContactState::Contact),
@@ -87,7 +101,7 @@ fn a_contact_the_law_takes_back_restarts_the_approach_and_the_ramp() {
 
 #[test]
 fn a_new_force_ramps_again_and_leaves_pressing() {
-    let mut p = Process::new(ProcessConfig::default());
+    let mut p = new();
     p.command(&press(10.0, 0.0)).unwrap();
     p.phase = ProcessPhase::Pressing;
     p.sp = 10.0;
@@ -101,10 +115,7 @@ fn a_new_force_ramps_again_and_leaves_pressing() {
 
 #[test]
 fn release_ramps_down_lifts_returns_then_off() {
-    let mut p = Process::new(ProcessConfig::default());
-    p.command(&press(20.0, 0.0)).unwrap();
-    p.guard.had_contact = true;
-    p.phase = ProcessPhase::Pressing;
+    let mut p = pressing(20.0);
     p.sp = 20.0;
     let rel = ProcessCommand {
         mode: ProcessMode::Release,
@@ -121,7 +132,8 @@ fn release_ramps_down_lifts_returns_then_off() {
     }
     // 18 N over 0.3 s asks for 60 N/s: the law's 50 N/s make it 0.36 s.
     assert!((90..=91).contains(&n), "{n} steps");
-    p.release = Release::Lift { target: -0.001 };
+    p.lift_off(0.001);
+    assert_eq!(p.release, Release::Lift { target: -0.001 });
     assert_eq!(p.act(), Act::MoveTo { target: -0.001 });
     p.arrived();
     assert_eq!(p.act(), Act::MoveTo { target: 0.0 });
@@ -131,10 +143,10 @@ fn release_ramps_down_lifts_returns_then_off() {
 
 #[test]
 fn a_fault_latches_until_off() {
-    let mut p = Process::new(ProcessConfig::default());
+    let mut p = new();
     p.command(&press(20.0, 0.0)).unwrap();
-    p.latch(ProcessFault::ForceLimit, || "x".into(), 0.002, 0.002, -0.05);
-    p.latch(ProcessFault::ContactLost, || "y".into(), 0.0, 0.002, -0.05);
+    p.latch(ProcessFault::ForceLimit, || "x".into(), 0.002);
+    p.latch(ProcessFault::ContactLost, || "y".into(), 0.0);
     assert_eq!(p.fault, ProcessFault::ForceLimit, "the first fault stands");
     assert_eq!(p.act(), Act::MoveTo { target: 0.0 });
     assert_eq!(
@@ -155,37 +167,28 @@ fn a_fault_latches_until_off() {
 
 #[test]
 fn a_fault_backs_off_until_the_tool_is_free() {
-    let mut p = Process::new(ProcessConfig::default());
+    let mut p = new();
     p.command(&press(20.0, 0.0)).unwrap();
-    p.latch(
-        ProcessFault::ForceLimit,
-        || "x".into(),
-        0.004,
-        0.002,
-        -0.005,
-    );
+    p.latch(ProcessFault::ForceLimit, || "x".into(), 0.004);
     assert_eq!(p.act(), Act::MoveTo { target: 0.002 });
-    p.back_off_further(70.0, 0.003, 0.002, -0.005);
+    p.back_off_further(70.0, 0.003);
     assert_eq!(p.act(), Act::MoveTo { target: 0.001 }, "still touching");
-    p.back_off_further(1.0, 0.0015, 0.002, -0.005);
+    p.back_off_further(1.0, 0.0015);
     assert_eq!(p.act(), Act::MoveTo { target: 0.001 }, "free: no further");
-    p.back_off_further(70.0, -0.004, 0.002, -0.005);
+    p.back_off_further(70.0, -0.004);
     assert_eq!(
         p.act(),
         Act::MoveTo { target: -0.005 },
         "never beyond the floor"
     );
-    let mut q = Process::new(ProcessConfig::default());
-    q.back_off_further(70.0, 0.0, 0.002, -0.005);
+    let mut q = new();
+    q.back_off_further(70.0, 0.0);
     assert_eq!(q.retract_target, 0.0, "only while a fault backs off");
 }
 
 #[test]
 fn contact_lost_too_long_is_a_fault() {
-    let mut p = Process::new(ProcessConfig::default());
-    p.command(&press(20.0, 0.0)).unwrap();
-    p.guard.had_contact = true;
-    p.phase = ProcessPhase::Pressing;
+    let mut p = pressing(20.0);
     let lost = Output {
         state: Some(ContactState::Reacquire),
         ..Output::default()
