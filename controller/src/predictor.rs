@@ -209,11 +209,22 @@ impl SurfacePredictor {
     }
 
     /// The command (m) that brings the tool to `offset` (m) beyond the surface through an inner loop of
-    /// pure delay `delay` (s) and first-order lag `lag` (s) at period `dt` (s), with the velocity and
-    /// acceleration estimates scaled by `wv` and `wa` (1: as estimated).
-    pub fn command(&self, offset: f64, delay: f64, lag: f64, dt: f64, wv: f64, wa: f64) -> f64 {
+    /// pure delay `delay` (s) and first-order lag `lag` (s) at period `dt` (s), the acceleration
+    /// estimate extrapolated no larger than `max_acceleration` (m/s²; `INFINITY`: as estimated).
+    ///
+    /// The bound is the surface's, not the filter's: a surface that starts to move at its full speed
+    /// (a velocity step) is an acceleration far beyond any real one to a constant-acceleration model,
+    /// which carries it over the whole lead time and commands the tool past the surface's path.
+    pub fn command(
+        &self,
+        offset: f64,
+        delay: f64,
+        lag: f64,
+        dt: f64,
+        max_acceleration: f64,
+    ) -> f64 {
         let [x, v, a] = self.s;
-        let (v, a) = (wv * v, wa * a);
+        let a = a.clamp(-max_acceleration, max_acceleration);
         let at = |h: f64| x + v * h + 0.5 * a * h * h;
         let alpha = if lag > 0.0 {
             1.0 - (-dt / lag).exp()
@@ -246,13 +257,44 @@ mod tests {
                 worst = worst.max((x - xc(t)).abs());
             }
             p.update(xc(t), 1e-14, 1e-3, dt, &JumpTest::gated(6.0, 1e-5));
-            let u = p.command(0.0, delay, lag, dt, 1.0, 1.0);
+            let u = p.command(0.0, delay, lag, dt, f64::INFINITY);
             let applied = queue[k % 4];
             queue[k % 4] = u;
             x += alpha * (applied - x);
         }
         // 1 µm of 1 mm amplitude: 0.07 N at 70 kN/m.
         assert!(worst < 1e-6, "tracking error {worst} m");
+    }
+
+    /// The most the tool, driven by the command through the inner loop, runs past a surface that
+    /// starts to move at 3 mm/s after 0.5 s at rest (P2's cycle: 4 ms, 12 ms delay, 10 ms lag), m.
+    fn overshoot_after_a_velocity_step(max_acceleration: f64) -> f64 {
+        let (dt, delay, lag, v): (f64, f64, f64, f64) = (0.004, 0.012, 0.010, 0.003);
+        let mut p = SurfacePredictor::new();
+        let xc = |t: f64| v * (t - 0.5).max(0.0);
+        let alpha = 1.0 - (-dt / lag).exp();
+        let mut queue = [0.0; 3];
+        let (mut x, mut worst) = (0.0, 0.0f64);
+        for k in 0..250 {
+            let t = k as f64 * dt;
+            worst = worst.max(x - xc(t));
+            p.update(xc(t), 1e-14, 1e-3, dt, &JumpTest::gated(6.0, 1e-3));
+            let u = p.command(0.0, delay, lag, dt, max_acceleration);
+            let applied = queue[k % 3];
+            queue[k % 3] = u;
+            x += alpha * (applied - x);
+        }
+        worst
+    }
+
+    /// To the constant-acceleration model a velocity step is an acceleration of 0.2 m/s², which the
+    /// command carried over the lead time: the tool ran 37 µm past the surface's path (11 N on
+    /// 300 kN/m). Bounded to 0.05 m/s² (the shipped `response.surface_acceleration`): 19 µm.
+    #[test]
+    fn a_surface_that_starts_at_full_speed_is_not_extrapolated_past_its_path() {
+        let bounded = overshoot_after_a_velocity_step(0.05);
+        assert!(bounded < 25e-6, "{bounded} m past the surface");
+        assert!(overshoot_after_a_velocity_step(f64::INFINITY) > 30e-6);
     }
 
     #[test]

@@ -596,7 +596,9 @@ fn noise_corners() {
         (2.0, 10e3, 0, 1.0, 2),
         (20.0, 500e3, 1, 1.0, 0),
         (5.0, 50e3, 2, 1.0, 41),
-        (2.0, 10e3, 2, 1.0, 58),
+        // 59: one seed (26) more on its impact, 6.25 N against 4.72 N, since the predictor's
+        // extrapolated acceleration is bounded (the noisy touch-down bounced and its runs diverge).
+        (2.0, 10e3, 2, 1.0, 59),
     ];
     for (f_r, k_c, cell_i, noise, measured) in corners {
         let failing = (1..200u64)
@@ -647,8 +649,8 @@ fn touch_down_census() {
 
 /// Every stiffness change [`stiffness_changes`] draws (the same seeded cases: 3000, or
 /// `FORCECELL_RANGE_CASES`), each miss printed and counted by its criterion; no more than measured
-/// with 3000 cases (the known limits list them): the mean error four times (small set-points under
-/// noise), nothing else. Before a jump's first sample was no excitation, also `k̂_c` once
+/// with 3000 cases (the known limits list them): the mean error three times (small set-points under
+/// noise; four before the predictor's extrapolated acceleration was bounded), nothing else. Before a jump's first sample was no excitation, also `k̂_c` once
 /// ([`a_jump_s_first_sample_is_no_excitation`]). Also counted, not asserted by the property test: a
 /// `k̂_c` beyond four deviations of what the change's information allows, where that allows no 10 %
 /// — once (a damped doubling at f_r 2.5 N on the 12 ms cell); four times before a halving was no
@@ -679,7 +681,7 @@ fn stiffness_changes_census() {
     census(
         cases,
         &kinds,
-        &[0, 4, 0, 1, 0, 0],
+        &[0, 3, 0, 1, 0, 0],
         |(f_r, k_c, double, at, cell_i, noise, c_e, seed)| {
             let c = Change {
                 f_r,
@@ -783,8 +785,8 @@ fn moving_surfaces() {
     let rows = [
         (10e3, 0, 0, 0, 0.0),
         (30e3, 0, 0, 0, 0.0),
-        (100e3, 3, 1, 1, 1.08),
-        (300e3, 22, 1, 13, 1.93),
+        (100e3, 3, 1, 1, 1.54),
+        (300e3, 15, 1, 13, 1.93),
         (500e3, 34, 0, 20, 2.79),
     ];
     // The RMS error after 3 s over the set-point of every run without a fault, its 90th percentile
@@ -987,6 +989,19 @@ fn a_slow_surface_that_starts_to_move_is_no_softer_surface() {
     ] {
         holds_a_sine(k_c, amplitude, frequency, &CELLS[2], 50.0, 1.3);
     }
+}
+
+/// A surface that starts to move at its full speed under a steady 50 N contact on the 12 ms cell:
+/// 0.5 mm at 1 Hz (3.1 mm/s) on 300 kN/m, towards the tool and away from it (`moving_surfaces`
+/// cases). The surface predictor's constant-acceleration model read the velocity step as an
+/// acceleration and carried it over the loop's lead: the command stepped 0.37 mm back in one cycle
+/// where 0.05 mm answered the force, and the loop rang into trips at 190.6 and 153.3 N (150 N limit).
+/// The predictor now extrapolates no more than `response.surface_acceleration`: no fault, at most
+/// 86.8 and 56.3 N, `k̂_c` within 1 %.
+#[test]
+fn a_surface_that_starts_at_full_speed_is_not_extrapolated_past_its_path() {
+    holds_a_sine(300e3, -0.5e-3, 1.0, &CELLS[2], 50.0, 1.8);
+    holds_a_sine(300e3, 0.5e-3, 1.0, &CELLS[2], 50.0, 1.2);
 }
 
 /// A stiff surface receding faster than the gentle search (`moving_surfaces` cases on P2, 500 kN/m:

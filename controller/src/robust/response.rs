@@ -29,6 +29,13 @@ pub struct ResponseParams {
     /// Spectral density of the surface's jerk in the surface predictor's model, m²/s⁵. With the
     /// measured sensor noise it sets the predictor's bandwidth (see [`crate::predictor`]).
     pub surface_jerk: f64,
+    /// Largest acceleration of the surface along the tool axis the predictor extrapolates, m/s²
+    /// (advanced). A pass at feed `v` over a curve of radius `R` shows `v²/R`: 50 mm/s over 50 mm is
+    /// 0.05 m/s², B5b's 1 mm at 1 Hz 0.039 m/s². A surface that starts to move at its full speed looks
+    /// like a far larger acceleration to the predictor's model (0.2 m/s² at 3 mm/s), whose
+    /// extrapolation over the lead time commands the tool past the surface's path.
+    #[serde(default = "default_surface_acceleration")]
+    pub surface_acceleration: f64,
     /// Floor of the force noise the predictor assumes, N (quantisation, model error).
     pub noise_floor: f64,
     /// Dead-band of the fallback feed-forward per newton of sensor noise, (m/s)/N. While no real
@@ -57,6 +64,10 @@ fn default_jump_caution() -> f64 {
     2.0
 }
 
+fn default_surface_acceleration() -> f64 {
+    0.05
+}
+
 fn default_integral_noise() -> f64 {
     0.1
 }
@@ -77,6 +88,7 @@ impl ResponseParams {
         positive("response.integral_noise", self.integral_noise)?;
         positive("response.surface_bandwidth", self.surface_bandwidth)?;
         positive("response.surface_jerk", self.surface_jerk)?;
+        positive("response.surface_acceleration", self.surface_acceleration)?;
         positive("response.noise_floor", self.noise_floor)?;
         non_negative("response.feedforward_deadband", self.feedforward_deadband)?;
         positive("response.set_point_rate", self.set_point_rate)?;
@@ -181,6 +193,7 @@ mod tests {
         integral_noise: 0.1,
         surface_bandwidth: 8.0,
         surface_jerk: 0.001,
+        surface_acceleration: 0.05,
         noise_floor: 0.02,
         feedforward_deadband: 0.0006,
         set_point_rate: 50.0,

@@ -67,7 +67,9 @@ impl SurfaceObserver {
         } else {
             0.0
         };
-        let ahead = self.pred.command(0.0, delay, lag, cycle, 1.0, 1.0);
+        let ahead = self
+            .pred
+            .command(0.0, delay, lag, cycle, r.surface_acceleration);
         let z_f = s.xf - s.ff / k;
         let [_, v, a] = self.pred.state();
         let v_std = self.pred.velocity_std();

@@ -53,6 +53,7 @@ fn response() -> crate::robust::ResponseParams {
         integral_noise: 0.1,
         surface_bandwidth: 8.0,
         surface_jerk: 1e-3,
+        surface_acceleration: 0.05,
         noise_floor: 0.02,
         feedforward_deadband: 6e-4,
         set_point_rate: 50.0,
