@@ -785,13 +785,13 @@ fn moving_surfaces() {
     let rows = [
         (10e3, 0, 0, 0, 0.0),
         (30e3, 0, 0, 0, 0.0),
-        (100e3, 3, 1, 1, 1.54),
-        (300e3, 15, 1, 13, 1.93),
-        (500e3, 34, 0, 20, 2.79),
+        (100e3, 1, 1, 1, 1.74),
+        (300e3, 13, 1, 13, 1.93),
+        (500e3, 27, 0, 20, 2.79),
     ];
     // The RMS error after 3 s over the set-point of every run without a fault, its 90th percentile
     // measured.
-    let (mut rel, rel_p90_measured) = (Vec::new(), 0.0966);
+    let (mut rel, rel_p90_measured) = (Vec::new(), 0.1);
     // [away from the tool, towards it] × [faults, k̂_c off, lossy], over all stiffnesses.
     let mut all = [[0usize; 3]; 2];
     // Of the faults: forced (a surface approaching so fast that the set-point plus its own floor
@@ -1002,6 +1002,23 @@ fn a_slow_surface_that_starts_to_move_is_no_softer_surface() {
 fn a_surface_that_starts_at_full_speed_is_not_extrapolated_past_its_path() {
     holds_a_sine(300e3, -0.5e-3, 1.0, &CELLS[2], 50.0, 1.8);
     holds_a_sine(300e3, 0.5e-3, 1.0, &CELLS[2], 50.0, 1.2);
+}
+
+/// A stiff surface that starts towards the tool at full speed under a clean sensor
+/// (`moving_surfaces` cases, 500 kN/m: 1 mm at 1 Hz, 6.3 mm/s, at f_r 2 and 5 N on P1; 0.5 mm at
+/// 1 Hz, 3.1 mm/s, at f_r 5 N on P2). The force rises 3.1 N a millisecond on P1, each sample far
+/// beyond the sensor's noise, so the surface predictor took every sample for a jump for the
+/// conditioning's step time (31 ms on P1) and fed none of the motion forward: the conditioned force
+/// lagging, the loop tripped the 60 N limit at 72.3, 73.6 and 64.5 N. Jumps in a row of the same
+/// size are a ramp now, tracked at their speed from the third: no fault, at most 52.7 N.
+#[test]
+fn a_stiff_surface_starting_at_full_speed_is_no_series_of_jumps() {
+    for (f_r, amplitude, plant) in [(2.0, -1e-3, 0), (5.0, -1e-3, 0), (5.0, -0.5e-3, 1)] {
+        let r = run(&sine(500e3, amplitude, 1.0), &CELLS[plant], &tuning(f_r)).expect("no fault");
+        let m = r.metrics(0.0, f64::INFINITY);
+        assert!(m.peak_force <= 55.0, "peak {} N", m.peak_force);
+        assert!(m.kc_rel_error <= 0.1, "k̂_c off by {}", m.kc_rel_error);
+    }
 }
 
 /// A stiff surface receding faster than the gentle search (`moving_surfaces` cases on P2, 500 kN/m:
