@@ -1,5 +1,5 @@
-//! What a real force sensor does to the truth: white noise, bias, bias drift, count quantisation,
-//! dropouts and injected non-finite samples. Seeded, so a run repeats exactly.
+//! What a real force sensor does to the truth: its own low-pass filter, white noise, bias, bias drift,
+//! count quantisation, dropouts and injected non-finite samples. Seeded, so a run repeats exactly.
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -40,12 +40,30 @@ pub struct SensorParams {
     pub nan_at: Vec<f64>,
     /// RNG seed.
     pub seed: u64,
+    /// Cut-off of the sensor's own low-pass filter on the force (a second-order Butterworth, as
+    /// F/T boards offer), Hz; 0: none. It runs at the sensor's own rate (at least 4 kHz, on the
+    /// true force interpolated between two reads), whatever the rate it is read at.
+    pub bandwidth: f64,
 }
 
 impl SensorParams {
+    /// How much older a force sample is than the time it is read at, s: the low-frequency group
+    /// delay of the sensor's own filter, `√2/(2π·bandwidth)` (0 without one).
+    pub fn delay(&self) -> f64 {
+        if self.bandwidth > 0.0 {
+            core::f64::consts::SQRT_2 / (core::f64::consts::TAU * self.bandwidth)
+        } else {
+            0.0
+        }
+    }
+
     /// Checks the values.
     pub fn validate(&self) -> Result<(), String> {
-        for (n, v) in [("noise", self.noise), ("quantum", self.quantum)] {
+        for (n, v) in [
+            ("noise", self.noise),
+            ("quantum", self.quantum),
+            ("bandwidth", self.bandwidth),
+        ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(format!("sensor {n} must be >= 0, got {v}"));
             }
@@ -68,6 +86,79 @@ impl SensorParams {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Dropout;
 
+/// The sensor's own low-pass on each force axis: a second-order Butterworth, bilinear at the sensor's
+/// internal period, run over the interval between two reads on the true force interpolated linearly.
+#[derive(Clone, Debug, Default)]
+struct LowPass {
+    /// The last read's time, s, and its true force (`None`: the next read primes the filter).
+    last: Option<(f64, [f64; 3])>,
+    /// `[b0, a1, a2]` of the internal period `h` they were designed for (`b1 = 2·b0`, `b2 = b0`).
+    coeffs: [f64; 3],
+    h: f64,
+    /// Transposed direct form II state per axis, and the last output.
+    state: [[f64; 2]; 3],
+    out: [f64; 3],
+}
+
+/// The longest internal period of the sensor's filter, s (4 kHz).
+const SENSOR_PERIOD: f64 = 2.5e-4;
+
+impl LowPass {
+    fn step(&mut self, cutoff: f64, t: f64, f: [f64; 3]) -> [f64; 3] {
+        let (t0, f0) = match self.last {
+            Some((t0, f0)) if t > t0 => (t0, f0),
+            Some(_) => return self.out,
+            None => {
+                // At rest at the first read: y = x, so s1 = y − b0·x and s2 = b2·x − a2·y, whatever
+                // the coefficients (they are set below with the first interval).
+                self.last = Some((t, f));
+                self.out = f;
+                self.state = f.map(|x| [x, 0.0]);
+                self.coeffs = [0.0; 3];
+                return f;
+            }
+        };
+        self.last = Some((t, f));
+        let dt = t - t0;
+        // (Less a rounding's worth: an interval of exactly four periods is four steps.)
+        let n = (dt / SENSOR_PERIOD * (1.0 - 1e-9)).ceil().max(1.0);
+        let h = dt / n;
+        // Designed again only when the period changes beyond its rounding (times summed in floating
+        // point differ in the last bits from one read to the next); the state carries on.
+        if (h - self.h).abs() > 1e-6 * h {
+            self.h = h;
+            let w = (core::f64::consts::PI * cutoff.min(0.45 / h) * h).tan();
+            let q = core::f64::consts::FRAC_1_SQRT_2;
+            let norm = 1.0 / (1.0 + w / q + w * w);
+            let [b0_old, _, a2_old] = self.coeffs;
+            self.coeffs = [
+                w * w * norm,
+                2.0 * (w * w - 1.0) * norm,
+                (1.0 - w / q + w * w) * norm,
+            ];
+            if b0_old == 0.0 && a2_old == 0.0 {
+                // Still at rest at the first read: its state under the real coefficients.
+                let [b0, _, a2] = self.coeffs;
+                for (st, &x) in self.state.iter_mut().zip(&self.out) {
+                    *st = [x - b0 * x, b0 * x - a2 * x];
+                }
+            }
+        }
+        let [b0, a1, a2] = self.coeffs;
+        for k in 1..=n as u32 {
+            let share = f64::from(k) / n;
+            for i in 0..3 {
+                let x = f0[i] + (f[i] - f0[i]) * share;
+                let [s1, s2] = self.state[i];
+                let y = b0 * x + s1;
+                self.state[i] = [2.0 * b0 * x - a1 * y + s2, b0 * x - a2 * y];
+                self.out[i] = y;
+            }
+        }
+        self.out
+    }
+}
+
 /// A sensor model with its RNG state.
 #[derive(Clone, Debug)]
 pub struct SensorModel {
@@ -75,6 +166,7 @@ pub struct SensorModel {
     rng: ChaCha8Rng,
     normal: Option<Normal<f64>>,
     nan_done: Vec<bool>,
+    lowpass: LowPass,
 }
 
 impl SensorModel {
@@ -88,6 +180,7 @@ impl SensorModel {
             params,
             normal,
             nan_done,
+            lowpass: LowPass::default(),
         }
     }
 
@@ -103,6 +196,12 @@ impl SensorModel {
 
     /// Measure the true force vector `f` (N) at time `t`.
     pub fn measure(&mut self, t: f64, f: [f64; 3]) -> Result<[f64; 3], Dropout> {
+        // The sensor filters on through a dropout: only its samples are lost.
+        let filtered = if self.params.bandwidth > 0.0 {
+            self.lowpass.step(self.params.bandwidth, t, f)
+        } else {
+            f
+        };
         if self.params.dropouts.iter().any(|w| w.contains(t)) {
             return Err(Dropout);
         }
@@ -113,7 +212,7 @@ impl SensorModel {
             }
         }
         let off = self.offset(t);
-        let mut out = f;
+        let mut out = filtered;
         for v in &mut out {
             *v += off;
             if let Some(n) = &self.normal {
@@ -144,6 +243,41 @@ mod tests {
             let t = k as f64 * 1e-3;
             assert_eq!(a.measure(t, [0.0, 0.0, 5.0]), b.measure(t, [0.0, 0.0, 5.0]));
         }
+    }
+
+    /// A 10 N step read every millisecond through a 50 Hz filter: the first read after it shows
+    /// a fraction, the reads rise over a few milliseconds with the Butterworth's 4 % overshoot, and
+    /// settle at the step (the true force ramps between two reads).
+    #[test]
+    fn the_sensor_s_own_filter_spreads_a_step() {
+        let mut m = SensorModel::new(SensorParams {
+            bandwidth: 50.0,
+            ..SensorParams::default()
+        });
+        let read = |m: &mut SensorModel, k: u32, f: f64| {
+            m.measure(f64::from(k) * 1e-3, [0.0, 0.0, f]).unwrap()[2]
+        };
+        for k in 0..10 {
+            let v = read(&mut m, k, 2.0);
+            assert!((v - 2.0).abs() < 1e-12, "{v}");
+        }
+        let r: Vec<f64> = (10..200).map(|k| read(&mut m, k, 12.0)).collect();
+        assert!(r[0] > 2.0 && r[0] < 3.0, "{}", r[0]);
+        let peak = r.iter().copied().fold(0.0, f64::max);
+        assert!((peak - 12.43).abs() < 0.1, "{peak}");
+        assert!((r[189] - 12.0).abs() < 1e-3, "{}", r[189]);
+        // Two reads at the same time: the same value.
+        assert_eq!(read(&mut m, 199, 0.0), r[189]);
+        // The filter runs at the sensor's own rate, not the reader's: read every 12 ms, a 200 Hz
+        // filter has settled within a read (run at 12 ms, its cut-off would be held at 37.5 Hz).
+        let mut m = SensorModel::new(SensorParams {
+            bandwidth: 200.0,
+            ..SensorParams::default()
+        });
+        m.measure(0.0, [0.0; 3]).unwrap();
+        m.measure(0.012, [0.0, 0.0, 10.0]).unwrap();
+        let settled = m.measure(0.024, [0.0, 0.0, 10.0]).unwrap()[2];
+        assert!((settled - 10.0).abs() < 0.1, "{settled}");
     }
 
     #[test]
