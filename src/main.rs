@@ -398,6 +398,14 @@ fn sim(mut a: SimArgs) -> Result<ExitCode> {
         spec.tuning.name,
         spec.steps()
     );
+    let sensor = &spec.scenario.sensor;
+    if sensor.bandwidth > 0.0 {
+        println!(
+            "sensor filtered at {} Hz: its force {:.2} ms older than the position it comes with",
+            sensor.bandwidth,
+            sensor.delay() * 1e3
+        );
+    }
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create output directory {}", a.out.display()))?;
     // An unwritable output directory is found before the run, not after it.

@@ -39,8 +39,10 @@ impl RunSpec {
         let model = spec.model()?;
         let mut tuning = load_tuning(tuning.unwrap_or(&scenario.tuning))?;
         tuning.law.apply(&scenario.controller);
-        // The law's model of the inner loop is the cell's: here, the simulated plant's.
-        tuning.law.set_cell(::scenario::run::cell_model(&model));
+        // The law's model of the cell is the cell's: here, the simulated plant's and sensor's.
+        tuning
+            .law
+            .set_cell(::scenario::run::cell_model(&model, &scenario.sensor));
         tuning
             .validate()
             .map_err(|e| anyhow!("tuning {} with the scenario's overrides: {e}", tuning.name))?;

@@ -1273,11 +1273,7 @@ fn a_trip_on_an_approaching_stiff_surface_presses_little_past_the_limit() {
 #[ignore = "figures for the README's known limits, not a criterion"]
 fn stopping_times() {
     for plant in &CELLS {
-        let model_cell = controller::CellParams {
-            cycle: plant.period,
-            lag: plant.tau,
-            delay: plant.delay(),
-        };
+        let model_cell = scenario::run::cell_model(plant, &sim::SensorParams::default());
         let mut line = format!(
             "{:>4.0} ms cycle (delay + cycle {:.1} ms):",
             plant.period * 1e3,

@@ -5,18 +5,20 @@
 
 use anyhow::{Result, anyhow};
 use controller::{CellParams, ControlLoop, EventCounts, ForceLaw, LoopStats, Tuning};
-use sim::{InProcRobot, InProcSensor, InnerLoopModel, World};
+use sim::{InProcRobot, InProcSensor, InnerLoopModel, SensorParams, World};
 
 use crate::metrics::Metrics;
 use crate::record::Row;
 use crate::scenario::{Scenario, Target};
 
-/// The law's model of the cell's inner loop, from the simulated plant (the cycle, the lag, the delay).
-pub fn cell_model(m: &InnerLoopModel) -> CellParams {
+/// The law's model of the cell, from the simulated plant (the cycle, the lag, the delay) and sensor
+/// (how much older its force is than the position it comes with).
+pub fn cell_model(m: &InnerLoopModel, sensor: &SensorParams) -> CellParams {
     CellParams {
         cycle: m.period,
         lag: m.tau,
         delay: m.delay(),
+        sensor_delay: sensor.delay(),
     }
 }
 
@@ -116,7 +118,7 @@ pub fn run(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) -> Resu
 pub fn run_to_end(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) -> Result<Ended> {
     let mut tuning = tuning.clone();
     tuning.law.apply(&scenario.controller);
-    tuning.law.set_cell(cell_model(plant));
+    tuning.law.set_cell(cell_model(plant, &scenario.sensor));
     let law = tuning.law.build().map_err(|e| anyhow!(e))?;
     let world = World::new(
         scenario.environment.plant(),

@@ -21,7 +21,16 @@ pub struct CellParams {
     /// Pure delay `T_d` of the inner loop and the interface, s, from the command sent to the position
     /// moving (e.g. RSI: the delay cycles times the `#IPO` cycle).
     pub delay: f64,
+    /// How much older the force sample is than the position it comes with, s: the sensor's own
+    /// filter (a second-order Butterworth at `f_c` delays by `√2/(2π·f_c)`: 2.25 ms at 100 Hz) and
+    /// its transport. The law pairs each force with the position of that time (interpolated in the
+    /// positions it was given, at most [`SENSOR_DELAY_STEPS`] steps back). 0: simultaneous.
+    #[serde(default)]
+    pub sensor_delay: f64,
 }
+
+/// The most steps back the position paired with a force is looked up.
+pub const SENSOR_DELAY_STEPS: usize = 16;
 
 impl Default for CellParams {
     /// KUKA RSI at 1 kHz (`P1`): 10 ms lag, 4 ms delay, cycle measured.
@@ -30,16 +39,31 @@ impl Default for CellParams {
             cycle: 0.0,
             lag: 0.010,
             delay: 0.004,
+            sensor_delay: 0.0,
         }
     }
 }
 
 impl CellParams {
+    /// The loop's pure delay, s: from a command sent to the force it causes reaching the law, the
+    /// robot's `delay` and the sensor's `sensor_delay` (the law pairs each force with the position of
+    /// its time, and that pair is this old).
+    pub fn loop_delay(&self) -> f64 {
+        self.delay + self.sensor_delay
+    }
+
     /// Checks the values.
     pub fn validate(&self) -> Result<(), String> {
         non_negative("cell.cycle", self.cycle)?;
         non_negative("cell.lag", self.lag)?;
         non_negative("cell.delay", self.delay)?;
+        non_negative("cell.sensor_delay", self.sensor_delay)?;
+        if self.sensor_delay > 0.1 {
+            return Err(format!(
+                "cell.sensor_delay {} s is not a force sensor's (at most 0.1 s)",
+                self.sensor_delay
+            ));
+        }
         if self.cycle > 1.0 || self.lag > 10.0 || self.delay > 10.0 {
             return Err(format!(
                 "cell: cycle {} s, lag {} s, delay {} s are not a robot's inner loop (at most 1 s, 10 s, 10 s)",
@@ -151,13 +175,23 @@ mod tests {
             cycle: 0.012,
             lag: 0.010,
             delay: 0.024,
+            sensor_delay: 0.00225,
         };
         assert!(p.validate().is_ok());
+        assert!((p.loop_delay() - 0.02625).abs() < 1e-15);
         assert!(
             CellParams { delay: -1.0, ..p }
                 .validate()
                 .unwrap_err()
                 .contains("cell.delay")
         );
+        for sensor_delay in [-1e-3, 0.5, f64::NAN] {
+            assert!(
+                CellParams { sensor_delay, ..p }
+                    .validate()
+                    .unwrap_err()
+                    .contains("cell.sensor_delay")
+            );
+        }
     }
 }

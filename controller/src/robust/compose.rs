@@ -42,7 +42,7 @@ impl RobustLaw {
     /// How far ahead of the robot the approach may command, in time at approach speed, s.
     pub(super) fn anchor_time(&self, cycle: f64) -> f64 {
         let c = &self.p.cell;
-        (4.0 * (c.lag + c.delay + self.signals.delay(cycle))).max(0.05)
+        (4.0 * (c.lag + c.loop_delay() + self.signals.delay(cycle))).max(0.05)
     }
 
     /// The command in contact before limits.
@@ -86,20 +86,20 @@ impl RobustLaw {
             self.response
                 .correction(s.ff, k_gain, view.noise_var, view.force_scale, dt);
         let cell = self.p.cell;
-        let lead = cell.lag + cell.delay + self.signals.delay(cycle);
+        let lead = cell.lag + cell.loop_delay() + self.signals.delay(cycle);
         let ff = self.observer.feedforward(
             &view,
             &self.p.response,
             self.p.estimator.max_surface_speed,
             cell.lag,
-            cell.delay,
+            cell.loop_delay(),
             cycle,
             lead,
             dt,
         );
         // The set-point's own motion, fed forward over the loop's lead time: a ramp is followed, not
         // chased (the force lags the command by the inner loop's lag and delay and the conditioning).
-        let ramp = self.response.rate() / k * (cell.lag + cell.delay);
+        let ramp = self.response.rate() / k * (cell.lag + cell.loop_delay());
         let ff = ff.weight * ff.predicted + (1.0 - ff.weight) * ff.fallback;
         let ff = if cautious { ff.min(0.0) } else { ff };
         s.xf + proportional + ff + integral + ramp
@@ -152,7 +152,8 @@ impl RobustLaw {
         if excursion || (calm && self.observer.jump_on_still_surface()) {
             // The loop answers the jump within its lead time and the conditioning's step time.
             let c = &self.p.cell;
-            let early = c.lag + c.delay + self.signals.delay(cycle) + self.signals.step_time(cycle);
+            let early =
+                c.lag + c.loop_delay() + self.signals.delay(cycle) + self.signals.step_time(cycle);
             let slowest = self.p.observer.feedforward_speed;
             self.identify.refit(s.x, s.f, early, slowest);
         }

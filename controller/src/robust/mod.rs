@@ -195,7 +195,7 @@ impl ForceLaw for RobustLaw {
         }
         let cycle = self.cycle.step(dt);
         self.response.slew(self.p.f_r, dt);
-        let s = self.signals.step(x, f, dt);
+        let s = self.signals.step(x, f, dt, self.p.cell.sensor_delay);
         self.noise.step(f, dt);
         if matches!(
             self.contact.state(),

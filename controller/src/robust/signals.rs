@@ -1,13 +1,15 @@
-//! The law's view of its inputs: the raw position and force, the same conditioning
+//! The law's view of its inputs: the raw position and force, each force paired with the position of
+//! the time it was measured (the cell's `sensor_delay` back), the same conditioning
 //! ([`crate::conditioning`]) applied to both (so force and position stay in phase), and the velocities
 //! of the conditioned and the raw position.
 
+use super::cell::SENSOR_DELAY_STEPS;
 use crate::conditioning::{ConditioningParams, SignalFilter};
 
 /// One step's conditioned signals.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Signals {
-    /// Measured position, m.
+    /// Measured position of the time the force was measured, m.
     pub x: f64,
     /// Measured force, N.
     pub f: f64,
@@ -29,6 +31,35 @@ pub struct Conditioner {
     position: SignalFilter,
     xf_prev: Option<f64>,
     x_prev: Option<f64>,
+    past: Past,
+}
+
+/// The positions of the last steps and the steps' durations, the latest first.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Past {
+    x: [f64; SENSOR_DELAY_STEPS],
+    dt: [f64; SENSOR_DELAY_STEPS],
+    len: usize,
+}
+
+impl Past {
+    /// Remember position `x` (m) reached after a step of `dt` (s); the position `delay` (s) before it,
+    /// interpolated between the positions remembered (the oldest, further back).
+    fn pair(&mut self, x: f64, dt: f64, delay: f64) -> f64 {
+        self.x.copy_within(..SENSOR_DELAY_STEPS - 1, 1);
+        self.dt.copy_within(..SENSOR_DELAY_STEPS - 1, 1);
+        self.x[0] = x;
+        self.dt[0] = dt;
+        self.len = (self.len + 1).min(SENSOR_DELAY_STEPS);
+        let mut back = delay;
+        for i in 0..self.len - 1 {
+            if back <= self.dt[i] {
+                return self.x[i] + (self.x[i + 1] - self.x[i]) * (back / self.dt[i]);
+            }
+            back -= self.dt[i];
+        }
+        self.x[self.len - 1]
+    }
 }
 
 /// The position is filtered like the force, without the notch (the notch is for the tool's ringing).
@@ -45,6 +76,7 @@ impl Conditioner {
             position: SignalFilter::new(position_params(p)),
             xf_prev: None,
             x_prev: None,
+            past: Past::default(),
         }
     }
 
@@ -61,6 +93,7 @@ impl Conditioner {
         self.position.clear();
         self.xf_prev = None;
         self.x_prev = None;
+        self.past = Past::default();
     }
 
     /// Restart the force filter at `f` (a contact is gone: forget the filter's memory of it).
@@ -68,8 +101,14 @@ impl Conditioner {
         self.force.reset_to(f);
     }
 
-    /// Condition one sample.
-    pub fn step(&mut self, x: f64, f: f64, dt: f64) -> Signals {
+    /// Condition one sample: position `x` (m) and force `f` (N) as they arrived after a step of `dt`
+    /// (s), the force measured `sensor_delay` (s) before the position.
+    pub fn step(&mut self, x: f64, f: f64, dt: f64, sensor_delay: f64) -> Signals {
+        let x = if sensor_delay > 0.0 {
+            self.past.pair(x, dt, sensor_delay)
+        } else {
+            x
+        };
         let ff = self.force.step(f, dt);
         let xf = self.position.step(x, dt);
         let v_x = self.xf_prev.map_or(0.0, |p| (xf - p) / dt);
@@ -117,16 +156,42 @@ mod tests {
             cutoff: 20.0,
             notch: None,
         });
-        let s = c.step(0.01, 0.0, 1e-3);
+        let s = c.step(0.01, 0.0, 1e-3, 0.0);
         assert_eq!((s.v_x, s.v_raw), (0.0, 0.0));
         let mut last = s;
         for i in 1..500 {
-            last = c.step(0.01 + 0.002 * i as f64 * 1e-3, 0.0, 1e-3);
+            last = c.step(0.01 + 0.002 * i as f64 * 1e-3, 0.0, 1e-3, 0.0);
         }
         assert!((last.v_raw - 0.002).abs() < 1e-12);
         assert!((last.v_x - 0.002).abs() < 1e-6, "{}", last.v_x);
         c.reset();
-        assert_eq!(c.step(0.5, 0.0, 1e-3).v_raw, 0.0);
+        assert_eq!(c.step(0.5, 0.0, 1e-3, 0.0).v_raw, 0.0);
+    }
+
+    /// A force measured 2.5 ms before it arrives is paired with the position of that time: on a
+    /// 2 mm/s ramp read every millisecond, 5 µm behind the latest; before 2.5 ms have passed, with the
+    /// oldest position there is; the raw velocity is the paired position's.
+    #[test]
+    fn a_late_force_is_paired_with_the_position_of_its_time() {
+        let mut c = Conditioner::new(ConditioningParams {
+            cutoff: 20.0,
+            notch: None,
+        });
+        let x = |i: u32| 0.01 + 0.002 * f64::from(i) * 1e-3;
+        assert_eq!(c.step(x(0), 0.0, 1e-3, 0.0025).x, x(0));
+        assert_eq!(c.step(x(1), 0.0, 1e-3, 0.0025).x, x(0));
+        for i in 2..50 {
+            let s = c.step(x(i), 0.0, 1e-3, 0.0025);
+            if i >= 3 {
+                assert!((s.x - (x(i) - 5e-6)).abs() < 1e-15, "{i}: {}", s.x);
+                if i >= 4 {
+                    assert!((s.v_raw - 0.002).abs() < 1e-9, "{}", s.v_raw);
+                }
+            }
+        }
+        // Never further back than the steps remembered.
+        let far = c.step(x(50), 0.0, 1e-3, 1.0).x;
+        assert_eq!(far, x(50 - SENSOR_DELAY_STEPS as u32 + 1));
     }
 
     #[test]

@@ -55,7 +55,7 @@ impl Stopping {
         let key = [
             cycle,
             cell.lag,
-            cell.delay,
+            cell.loop_delay(),
             limits.max_acceleration,
             limits.max_velocity,
         ];
@@ -109,11 +109,11 @@ impl Stopping {
 }
 
 /// The travel into a surface touched at `v` (m/s) just after a sample, m: one cycle to the next
-/// sample, the delay's commands, then the stop at the limiter's hardest reversal through the lag.
-/// Without a measured cycle, the delay alone.
+/// sample, the sensor's delay until the force shows it, the delay's commands, then the stop at the
+/// limiter's hardest reversal through the lag. Without a measured cycle, the delays alone.
 pub fn travel(cell: &CellParams, cycle: f64, limits: &LimitParams, v: f64) -> f64 {
     if cycle.is_nan() || cycle <= 0.0 || v.is_nan() || v <= 0.0 {
-        return v.max(0.0) * cell.delay;
+        return v.max(0.0) * cell.loop_delay();
     }
     let t = cycle;
     let alpha = if cell.lag > 0.0 {
@@ -125,7 +125,7 @@ pub fn travel(cell: &CellParams, cycle: f64, limits: &LimitParams, v: f64) -> f6
     // At the sample that sees the contact, the tool has gone up to one cycle in, and the commands of
     // the delay still move it on at `v`; then the first braked command arrives. At steady speed the
     // tool is `v·t/α` behind the command it follows. The last command sent is the origin.
-    let before = v * t * (1.0 + delay_cycles);
+    let before = v * t * (1.0 + delay_cycles) + v * cell.sensor_delay;
     let (a, top) = (limits.max_acceleration, limits.max_velocity);
     let mut y = v * t * (1.0 - 1.0 / alpha);
     let start = y;
@@ -160,6 +160,7 @@ pub(crate) mod tests {
             cycle,
             lag: 0.010,
             delay,
+            sensor_delay: 0.0,
         };
         let mut s = Stopping::new();
         s.update(&c, cycle, &LIMITS);
@@ -185,6 +186,23 @@ pub(crate) mod tests {
             );
         }
         assert!(p1.time(0.05) > p1.time(0.01), "the lag costs more at speed");
+    }
+
+    /// A sensor whose force is 2.25 ms old (its own 100 Hz filter) shows a contact that much later:
+    /// the tool goes on `v·2.25 ms` further, not a whole cycle of the robot's delay line more.
+    #[test]
+    fn a_sensor_s_delay_adds_its_own_travel() {
+        for (cycle, delay) in [(0.001, 0.004), (0.004, 0.012)] {
+            let (c, _) = cell(cycle, delay);
+            let late = CellParams {
+                sensor_delay: 0.00225,
+                ..c
+            };
+            for v in [0.01, 0.05] {
+                let more = travel(&late, cycle, &LIMITS, v) - travel(&c, cycle, &LIMITS, v);
+                assert!((more - v * 0.00225).abs() < 1e-12, "{more} m");
+            }
+        }
     }
 
     #[test]
@@ -218,6 +236,7 @@ pub(crate) mod tests {
     #[test]
     fn a_lag_of_seconds_on_a_fast_cycle_is_bounded_by_the_farthest_command() {
         let c = CellParams {
+            sensor_delay: 0.0,
             cycle: 1e-4,
             lag: 10.0,
             delay: 0.004,

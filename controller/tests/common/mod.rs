@@ -80,11 +80,7 @@ pub fn reach_time(t: &Tuning, k: f64, gap: f64, plant: &InnerLoopModel) -> f64 {
     let LawConfig::Robust(p) = &t.law else {
         panic!("robust")
     };
-    let cell = controller::CellParams {
-        cycle: plant.period,
-        lag: plant.tau,
-        delay: plant.delay(),
-    };
+    let cell = scenario::run::cell_model(plant, &sim::SensorParams::default());
     let mut stop = controller::robust::Stopping::new();
     stop.update(&cell, plant.period, &p.limits);
     let machine = controller::robust::ContactMachine::new(p.contact);

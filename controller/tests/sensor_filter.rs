@@ -1,0 +1,142 @@
+//! A force sensor with its own low-pass filter (`[sensor] bandwidth` in a scenario: a second-order
+//! Butterworth, as F/T boards offer): its force is older than the position it arrives with. The law
+//! pairs each force with the position of its time and counts the sensor's delay in its loop's
+//! (`[law.cell] sensor_delay`, which the simulator sets from the sensor's filter as it sets the robot's
+//! lag and delay from the plant). Closed loop, simulated time only.
+
+mod common;
+
+use common::{CELLS, floor, tuning};
+use scenario::run::{run, run_to_end};
+use scenario::scenario::Scenario;
+
+/// 1 mm short of a surface of `k_c` (N/m) at 10 mm, `events` (TOML) on it, read through a sensor
+/// filtered at `bandwidth` (Hz; 0: none), for `duration` s.
+fn filtered(k_c: f64, events: &str, bandwidth: f64, duration: f64) -> Scenario {
+    let text = format!(
+        "name = \"filtered\"\nduration = {duration}\nx0 = 0.009\n[environment]\nk_c = {k_c}\n\
+         x_c = 0.010\n{events}\n[sensor]\nbandwidth = {bandwidth}\n"
+    );
+    Scenario::from_toml(&text, "filtered").expect("a valid scenario")
+}
+
+/// A sine of `amplitude` (m) at `frequency` (Hz) from 2 s on, starting at full speed.
+fn sine(amplitude: f64, frequency: f64) -> String {
+    format!(
+        "x_c_events = [{{ kind = \"sine\", start = 2.0, amplitude = {amplitude}, frequency = \
+         {frequency} }}]"
+    )
+}
+
+/// A surface step of `delta` (m) at 2 s.
+fn step(delta: f64) -> String {
+    format!("x_c_events = [{{ kind = \"step\", at = 2.0, delta = {delta} }}]")
+}
+
+/// 0.5 mm at 0.5 Hz on 500 kN/m at f_r 20 N on P1, read through a 100 Hz filter (2.25 ms): paired with
+/// the position it arrived with, the force's lag behind the tool's own motion read as the surface
+/// moving with the tool, and the law chased it — 9.7 and 8.3 N RMS after 3 s, the sine towards and
+/// away from the tool (0.10 N with a clean sensor). Paired with the position of its time and fed
+/// forward over the loop's whole delay: 0.11 N (paired alone 1.4 N, the other half alone 12.2 N).
+#[test]
+fn a_filtered_force_is_paired_with_the_position_of_its_time() {
+    for amplitude in [-0.5e-3, 0.5e-3] {
+        let s = filtered(500e3, &sine(amplitude, 0.5), 100.0, 6.0);
+        let r = run(&s, &CELLS[0], &tuning(20.0)).expect("no fault");
+        let m = r.metrics(3.0, f64::INFINITY);
+        assert!(m.rms_error <= 0.5, "RMS error {} N", m.rms_error);
+        assert!(m.kc_rel_error <= 0.1, "k̂_c off by {}", m.kc_rel_error);
+    }
+}
+
+/// B5b's sine (1 mm at 1 Hz on 70 kN/m, f_r 5 N) on P1 through a 100 Hz filter: the surface the law
+/// sees is 2.25 ms old, so its feed-forward must reach that much further ahead. Paired but fed forward
+/// over the robot's delay alone, 0.93 N RMS after 3 s (B5b's target is 1 N; 0.061 N unpaired, 0.046 N
+/// with a clean sensor); over the loop's whole delay 0.061 N.
+#[test]
+fn a_filtered_force_is_fed_forward_over_the_sensor_s_delay_too() {
+    let s = filtered(70e3, &sine(1e-3, 1.0), 100.0, 6.0);
+    let r = run(&s, &CELLS[0], &tuning(5.0)).expect("no fault");
+    let m = r.metrics(3.0, f64::INFINITY);
+    assert!(m.rms_error <= 0.25, "RMS error {} N", m.rms_error);
+}
+
+/// The cost of a filtered sensor, measured, not a criterion: per filter cut-off, over the three cells,
+/// of 216 surface steps (−3 mm to +2.62 mm on 10, 70 and 500 kN/m at f_r 2, 20 and 50 N) those that
+/// end on a fault although the step's own jump is under the force limit, those not back within ±2 %
+/// 1.5 s after the step, of 48 touch-downs (10–500 kN/m, f_r 2–50 N) those over `2·f_r` above the
+/// floor or ending on a fault, and of 648 sines (0.2–1 mm at 0.25–1 Hz on 100–500 kN/m, both ways,
+/// f_r 2–50 N) those ending on a fault; no more than measured.
+#[test]
+#[ignore = "2736 closed-loop runs: the known limits' figures, not a criterion"]
+fn filtered_sensors() {
+    // (bandwidth, step faults, unsettled steps, touch-down misses, sine faults) measured
+    let rows = [
+        (0.0, 4, 0, 0, 41),
+        (50.0, 6, 1, 5, 88),
+        (100.0, 5, 4, 2, 65),
+        (200.0, 9, 0, 1, 64),
+        (400.0, 9, 0, 1, 71),
+    ];
+    for (bandwidth, steps_measured, unsettled_measured, touch_measured, sines_measured) in rows {
+        let (mut faults, mut unsettled) = (0, 0);
+        for plant in &CELLS {
+            for k_c in [10e3, 70e3, 500e3] {
+                for f_r in [2.0f64, 20.0, 50.0] {
+                    for delta in [
+                        -3e-3f64, -0.5e-3, -0.1e-3, -0.02e-3, 0.02e-3, 0.1e-3, 1e-3, 2.62e-3,
+                    ] {
+                        let t = tuning(f_r);
+                        let limit = t.loop_cfg.process.max_force;
+                        let jump = f_r + k_c * (-delta).max(0.0);
+                        let s = filtered(k_c, &step(delta), bandwidth, 4.0);
+                        let e = run_to_end(&s, plant, &t).expect("a valid tuning");
+                        if e.fault.is_some() {
+                            faults += usize::from(jump <= limit);
+                        } else if e.run.metrics(2.0, f64::INFINITY).settle_time > 1.5 {
+                            unsettled += 1;
+                        }
+                    }
+                }
+            }
+        }
+        let mut touch = 0;
+        for plant in &CELLS {
+            for k_c in [10e3, 70e3, 200e3, 500e3] {
+                for f_r in [2.0, 5.0, 20.0, 50.0] {
+                    let s = filtered(k_c, "", bandwidth, 3.0);
+                    let e = run_to_end(&s, plant, &tuning(f_r)).expect("a valid tuning");
+                    let peak = e.run.metrics(0.0, f64::INFINITY).peak_force;
+                    touch += usize::from(
+                        e.fault.is_some() || peak > 2.0 * f_r + floor(k_c, 0.002, plant),
+                    );
+                }
+            }
+        }
+        let mut sines = 0;
+        for k_c in [100e3, 300e3, 500e3] {
+            for f_r in [2.0, 5.0, 20.0, 50.0] {
+                for plant in &CELLS {
+                    for amplitude in [-1e-3, -0.5e-3, -0.2e-3, 0.2e-3, 0.5e-3, 1e-3] {
+                        for frequency in [0.25, 0.5, 1.0] {
+                            let s = filtered(k_c, &sine(amplitude, frequency), bandwidth, 6.0);
+                            let e = run_to_end(&s, plant, &tuning(f_r)).expect("a valid tuning");
+                            sines += usize::from(e.fault.is_some());
+                        }
+                    }
+                }
+            }
+        }
+        println!(
+            "{bandwidth} Hz: {faults} of 216 steps on a fault, {unsettled} unsettled; {touch} of 48 \
+             touch-downs over their bound; {sines} of 648 sines on a fault"
+        );
+        assert!(faults <= steps_measured, "{faults} > {steps_measured}");
+        assert!(
+            unsettled <= unsettled_measured,
+            "{unsettled} > {unsettled_measured}"
+        );
+        assert!(touch <= touch_measured, "{touch} > {touch_measured}");
+        assert!(sines <= sines_measured, "{sines} > {sines_measured}");
+    }
+}
