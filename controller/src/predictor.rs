@@ -194,7 +194,8 @@ impl SurfacePredictor {
                 same
             });
             if ramp {
-                self.start_moving(z, y / dt, r);
+                // The jumps kept the motion from before them: the ramp is that and their speed.
+                self.start_moving(z, s[1] + y / dt, r);
                 return None;
             }
             self.jumps[0] = y;
@@ -409,6 +410,28 @@ mod tests {
             assert_eq!(*jump, None);
             assert!((speed - v).abs() < 0.05 * v, "{speed} m/s");
         }
+    }
+
+    /// A surface tracked at 1 mm/s that goes on at 7 mm/s: its three jumps of 6 µm are a ramp at
+    /// 7 mm/s, the motion the jumps kept and theirs (not 6 mm/s).
+    #[test]
+    fn a_ramp_from_a_moving_surface_keeps_the_motion_before_it() {
+        let (dt, test) = (1e-3, JumpTest::gated(6.0, 1e-6));
+        let mut p = SurfacePredictor::new();
+        let mut z = 0.0;
+        for _ in 0..500 {
+            z += 1e-3 * dt;
+            p.update(z, 1e-14, 1e-3, dt, &test);
+        }
+        assert!((p.state()[1] - 1e-3).abs() < 1e-6, "{:?}", p.state());
+        let out: Vec<_> = (0..3)
+            .map(|_| {
+                z += 7e-3 * dt;
+                p.update(z, 1e-14, 1e-3, dt, &test)
+            })
+            .collect();
+        assert!(out[0].is_some() && out[1].is_some() && out[2].is_none());
+        assert!((p.state()[1] - 7e-3).abs() < 1e-5, "{:?}", p.state());
     }
 
     /// A 0.3 mm step seen through a sensor's own first-order filter of three samples: every sample
