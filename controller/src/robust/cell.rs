@@ -30,7 +30,7 @@ pub struct CellParams {
 }
 
 /// The most steps back the position paired with a force is looked up.
-pub const SENSOR_DELAY_STEPS: usize = 16;
+pub const SENSOR_DELAY_STEPS: usize = 128;
 
 impl Default for CellParams {
     /// KUKA RSI at 1 kHz (`P1`): 10 ms lag, 4 ms delay, cycle measured.

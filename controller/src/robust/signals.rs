@@ -34,31 +34,46 @@ pub struct Conditioner {
     past: Past,
 }
 
-/// The positions of the last steps and the steps' durations, the latest first.
-#[derive(Clone, Debug, Default, PartialEq)]
+/// The positions of the last steps and the steps' durations, a ring with the latest at `head`.
+#[derive(Clone, Debug, PartialEq)]
 struct Past {
     x: [f64; SENSOR_DELAY_STEPS],
     dt: [f64; SENSOR_DELAY_STEPS],
+    head: usize,
     len: usize,
+}
+
+impl Default for Past {
+    fn default() -> Self {
+        Self {
+            x: [0.0; SENSOR_DELAY_STEPS],
+            dt: [0.0; SENSOR_DELAY_STEPS],
+            head: 0,
+            len: 0,
+        }
+    }
 }
 
 impl Past {
     /// Remember position `x` (m) reached after a step of `dt` (s); the position `delay` (s) before it,
     /// interpolated between the positions remembered (the oldest, further back).
     fn pair(&mut self, x: f64, dt: f64, delay: f64) -> f64 {
-        self.x.copy_within(..SENSOR_DELAY_STEPS - 1, 1);
-        self.dt.copy_within(..SENSOR_DELAY_STEPS - 1, 1);
-        self.x[0] = x;
-        self.dt[0] = dt;
-        self.len = (self.len + 1).min(SENSOR_DELAY_STEPS);
+        const N: usize = SENSOR_DELAY_STEPS;
+        self.head = (self.head + 1) % N;
+        self.x[self.head] = x;
+        self.dt[self.head] = dt;
+        self.len = (self.len + 1).min(N);
+        // The slot `i` steps back.
+        let back_by = |i: usize| (self.head + N - i) % N;
         let mut back = delay;
         for i in 0..self.len - 1 {
-            if back <= self.dt[i] {
-                return self.x[i] + (self.x[i + 1] - self.x[i]) * (back / self.dt[i]);
+            let (k, before) = (back_by(i), back_by(i + 1));
+            if back <= self.dt[k] {
+                return self.x[k] + (self.x[before] - self.x[k]) * (back / self.dt[k]);
             }
-            back -= self.dt[i];
+            back -= self.dt[k];
         }
-        self.x[self.len - 1]
+        self.x[back_by(self.len - 1)]
     }
 }
 
@@ -180,7 +195,7 @@ mod tests {
         let x = |i: u32| 0.01 + 0.002 * f64::from(i) * 1e-3;
         assert_eq!(c.step(x(0), 0.0, 1e-3, 0.0025).x, x(0));
         assert_eq!(c.step(x(1), 0.0, 1e-3, 0.0025).x, x(0));
-        for i in 2..50 {
+        for i in 2..200 {
             let s = c.step(x(i), 0.0, 1e-3, 0.0025);
             if i >= 3 {
                 assert!((s.x - (x(i) - 5e-6)).abs() < 1e-15, "{i}: {}", s.x);
@@ -190,8 +205,8 @@ mod tests {
             }
         }
         // Never further back than the steps remembered.
-        let far = c.step(x(50), 0.0, 1e-3, 1.0).x;
-        assert_eq!(far, x(50 - SENSOR_DELAY_STEPS as u32 + 1));
+        let far = c.step(x(200), 0.0, 1e-3, 1.0).x;
+        assert_eq!(far, x(200 - SENSOR_DELAY_STEPS as u32 + 1));
     }
 
     #[test]
