@@ -6,31 +6,14 @@
 
 mod common;
 
-use common::{CELLS, floor, tuning};
+use common::{CELLS, cell, floor, sine, tuning};
 use scenario::run::{run, run_to_end};
 use scenario::scenario::Scenario;
 
-/// 1 mm short of a surface of `k_c` (N/m) at 10 mm, `events` (TOML) on it, read through a sensor
-/// filtered at `bandwidth` (Hz; 0: none), for `duration` s.
-fn filtered(k_c: f64, events: &str, bandwidth: f64, duration: f64) -> Scenario {
-    let text = format!(
-        "name = \"filtered\"\nduration = {duration}\nx0 = 0.009\n[environment]\nk_c = {k_c}\n\
-         x_c = 0.010\n{events}\n[sensor]\nbandwidth = {bandwidth}\n"
-    );
-    Scenario::from_toml(&text, "filtered").expect("a valid scenario")
-}
-
-/// A sine of `amplitude` (m) at `frequency` (Hz) from 2 s on, starting at full speed.
-fn sine(amplitude: f64, frequency: f64) -> String {
-    format!(
-        "x_c_events = [{{ kind = \"sine\", start = 2.0, amplitude = {amplitude}, frequency = \
-         {frequency} }}]"
-    )
-}
-
-/// A surface step of `delta` (m) at 2 s.
-fn step(delta: f64) -> String {
-    format!("x_c_events = [{{ kind = \"step\", at = 2.0, delta = {delta} }}]")
+/// Scenario `s` read through a sensor filtered at `bandwidth` (Hz; 0: none).
+fn through(mut s: Scenario, bandwidth: f64) -> Scenario {
+    s.sensor.bandwidth = bandwidth;
+    s
 }
 
 /// 0.5 mm at 0.5 Hz on 500 kN/m at f_r 20 N on P1, read through a 100 Hz filter (2.25 ms): paired with
@@ -41,7 +24,7 @@ fn step(delta: f64) -> String {
 #[test]
 fn a_filtered_force_is_paired_with_the_position_of_its_time() {
     for amplitude in [-0.5e-3, 0.5e-3] {
-        let s = filtered(500e3, &sine(amplitude, 0.5), 100.0, 6.0);
+        let s = through(sine(500e3, amplitude, 0.5), 100.0);
         let r = run(&s, &CELLS[0], &tuning(20.0)).expect("no fault");
         let m = r.metrics(3.0, f64::INFINITY);
         assert!(m.rms_error <= 0.5, "RMS error {} N", m.rms_error);
@@ -55,7 +38,7 @@ fn a_filtered_force_is_paired_with_the_position_of_its_time() {
 /// with a clean sensor); over the loop's whole delay 0.061 N.
 #[test]
 fn a_filtered_force_is_fed_forward_over_the_sensor_s_delay_too() {
-    let s = filtered(70e3, &sine(1e-3, 1.0), 100.0, 6.0);
+    let s = through(sine(70e3, 1e-3, 1.0), 100.0);
     let r = run(&s, &CELLS[0], &tuning(5.0)).expect("no fault");
     let m = r.metrics(3.0, f64::INFINITY);
     assert!(m.rms_error <= 0.25, "RMS error {} N", m.rms_error);
@@ -89,7 +72,8 @@ fn filtered_sensors() {
                         let t = tuning(f_r);
                         let limit = t.loop_cfg.process.max_force;
                         let jump = f_r + k_c * (-delta).max(0.0);
-                        let s = filtered(k_c, &step(delta), bandwidth, 4.0);
+                        let step = Some((2.0, delta));
+                        let s = through(cell(4.0, k_c, 0.0, None, step, 0.0, 1), bandwidth);
                         let e = run_to_end(&s, plant, &t).expect("a valid tuning");
                         if e.fault.is_some() {
                             faults += usize::from(jump <= limit);
@@ -104,7 +88,7 @@ fn filtered_sensors() {
         for plant in &CELLS {
             for k_c in [10e3, 70e3, 200e3, 500e3] {
                 for f_r in [2.0, 5.0, 20.0, 50.0] {
-                    let s = filtered(k_c, "", bandwidth, 3.0);
+                    let s = through(cell(3.0, k_c, 0.0, None, None, 0.0, 1), bandwidth);
                     let e = run_to_end(&s, plant, &tuning(f_r)).expect("a valid tuning");
                     let peak = e.run.metrics(0.0, f64::INFINITY).peak_force;
                     touch += usize::from(
@@ -119,7 +103,7 @@ fn filtered_sensors() {
                 for plant in &CELLS {
                     for amplitude in [-1e-3, -0.5e-3, -0.2e-3, 0.2e-3, 0.5e-3, 1e-3] {
                         for frequency in [0.25, 0.5, 1.0] {
-                            let s = filtered(k_c, &sine(amplitude, frequency), bandwidth, 6.0);
+                            let s = through(sine(k_c, amplitude, frequency), bandwidth);
                             let e = run_to_end(&s, plant, &tuning(f_r)).expect("a valid tuning");
                             sines += usize::from(e.fault.is_some());
                         }

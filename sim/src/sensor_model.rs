@@ -41,8 +41,8 @@ pub struct SensorParams {
     /// RNG seed.
     pub seed: u64,
     /// Cut-off of the sensor's own low-pass filter on the force (a second-order Butterworth, as
-    /// F/T boards offer), Hz; 0: none. It runs at the sensor's own rate (at least 4 kHz, on the
-    /// true force interpolated between two reads), whatever the rate it is read at.
+    /// F/T boards offer), Hz; 0: none. It ticks at the sensor's own 4 kHz, on the true force
+    /// interpolated between two reads, whatever the rate it is read at.
     pub bandwidth: f64,
 }
 
@@ -87,66 +87,58 @@ impl SensorParams {
 pub struct Dropout;
 
 /// The sensor's own low-pass on each force axis: a second-order Butterworth, bilinear at the sensor's
-/// internal period, run over the interval between two reads on the true force interpolated linearly.
-#[derive(Clone, Debug, Default)]
+/// own period [`SENSOR_PERIOD`], ticking at its multiples on the true force interpolated linearly
+/// between two reads; a read gets the output of the last tick.
+#[derive(Clone, Debug)]
 struct LowPass {
-    /// The last read's time, s, and its true force (`None`: the next read primes the filter).
-    last: Option<(f64, [f64; 3])>,
-    /// `[b0, a1, a2]` of the internal period `h` they were designed for (`b1 = 2·b0`, `b2 = b0`).
+    /// `[b0, a1, a2]` (`b1 = 2·b0`, `b2 = b0`).
     coeffs: [f64; 3],
-    h: f64,
-    /// Transposed direct form II state per axis, and the last output.
+    /// The last read's time (s), its tick and its true force (`None`: the next read starts the filter
+    /// at rest at its force).
+    last: Option<(f64, u64, [f64; 3])>,
+    /// Transposed direct form II state per axis, and the last tick's output.
     state: [[f64; 2]; 3],
     out: [f64; 3],
 }
 
-/// The longest internal period of the sensor's filter, s (4 kHz).
+/// The sensor's own filter period, s (4 kHz).
 const SENSOR_PERIOD: f64 = 2.5e-4;
 
 impl LowPass {
-    fn step(&mut self, cutoff: f64, t: f64, f: [f64; 3]) -> [f64; 3] {
-        let (t0, f0) = match self.last {
-            Some((t0, f0)) if t > t0 => (t0, f0),
-            Some(_) => return self.out,
-            None => {
-                // At rest at the first read: y = x, so s1 = y − b0·x and s2 = b2·x − a2·y, whatever
-                // the coefficients (they are set below with the first interval).
-                self.last = Some((t, f));
-                self.out = f;
-                self.state = f.map(|x| [x, 0.0]);
-                self.coeffs = [0.0; 3];
-                return f;
-            }
-        };
-        self.last = Some((t, f));
-        let dt = t - t0;
-        // (Less a rounding's worth: an interval of exactly four periods is four steps.)
-        let n = (dt / SENSOR_PERIOD * (1.0 - 1e-9)).ceil().max(1.0);
-        let h = dt / n;
-        // Designed again only when the period changes beyond its rounding (times summed in floating
-        // point differ in the last bits from one read to the next); the state carries on.
-        if (h - self.h).abs() > 1e-6 * h {
-            self.h = h;
-            let w = (core::f64::consts::PI * cutoff.min(0.45 / h) * h).tan();
-            let q = core::f64::consts::FRAC_1_SQRT_2;
-            let norm = 1.0 / (1.0 + w / q + w * w);
-            let [b0_old, _, a2_old] = self.coeffs;
-            self.coeffs = [
+    fn new(cutoff: f64) -> Self {
+        let w = (core::f64::consts::PI * cutoff.min(0.45 / SENSOR_PERIOD) * SENSOR_PERIOD).tan();
+        let q = core::f64::consts::FRAC_1_SQRT_2;
+        let norm = 1.0 / (1.0 + w / q + w * w);
+        Self {
+            coeffs: [
                 w * w * norm,
                 2.0 * (w * w - 1.0) * norm,
                 (1.0 - w / q + w * w) * norm,
-            ];
-            if b0_old == 0.0 && a2_old == 0.0 {
-                // Still at rest at the first read: its state under the real coefficients.
-                let [b0, _, a2] = self.coeffs;
-                for (st, &x) in self.state.iter_mut().zip(&self.out) {
-                    *st = [x - b0 * x, b0 * x - a2 * x];
-                }
-            }
+            ],
+            last: None,
+            state: [[0.0; 2]; 3],
+            out: [0.0; 3],
         }
+    }
+
+    /// The filtered force read at `t` (s), the true force being `f` (N) then.
+    fn step(&mut self, t: f64, f: [f64; 3]) -> [f64; 3] {
+        // The last tick at or before `t` (less a rounding's worth: 1 ms is four ticks).
+        let tick = (t / SENSOR_PERIOD + 1e-6).floor().max(0.0) as u64;
         let [b0, a1, a2] = self.coeffs;
-        for k in 1..=n as u32 {
-            let share = f64::from(k) / n;
+        let Some((t0, tick0, f0)) = self.last else {
+            // At rest at the first read: y = x, s1 = y − b0·x, s2 = b2·x − a2·y.
+            self.last = Some((t, tick, f));
+            self.state = f.map(|x| [x - b0 * x, b0 * x - a2 * x]);
+            self.out = f;
+            return f;
+        };
+        if t <= t0 {
+            return self.out;
+        }
+        self.last = Some((t, tick, f));
+        for k in tick0 + 1..=tick {
+            let share = ((k as f64 * SENSOR_PERIOD - t0) / (t - t0)).clamp(0.0, 1.0);
             for i in 0..3 {
                 let x = f0[i] + (f[i] - f0[i]) * share;
                 let [s1, s2] = self.state[i];
@@ -175,12 +167,13 @@ impl SensorModel {
         let normal =
             (params.noise > 0.0).then(|| Normal::new(0.0, params.noise).expect("noise >= 0"));
         let nan_done = vec![false; params.nan_at.len()];
+        let lowpass = LowPass::new(params.bandwidth);
         Self {
             rng: ChaCha8Rng::seed_from_u64(params.seed),
             params,
             normal,
             nan_done,
-            lowpass: LowPass::default(),
+            lowpass,
         }
     }
 
@@ -198,7 +191,7 @@ impl SensorModel {
     pub fn measure(&mut self, t: f64, f: [f64; 3]) -> Result<[f64; 3], Dropout> {
         // The sensor filters on through a dropout: only its samples are lost.
         let filtered = if self.params.bandwidth > 0.0 {
-            self.lowpass.step(self.params.bandwidth, t, f)
+            self.lowpass.step(t, f)
         } else {
             f
         };

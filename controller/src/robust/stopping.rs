@@ -27,8 +27,9 @@ const MAX_STEPS: usize = 4096;
 /// The travel after contact as a function of speed, for one cell and one set of limits.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Stopping {
-    /// What the table was made for: cycle, lag, delay, acceleration, velocity (NaN: nothing yet).
-    key: [f64; 5],
+    /// What the table was made for: cycle, lag, the robot's and the sensor's delays, acceleration,
+    /// velocity (NaN: nothing yet).
+    key: [f64; 6],
     /// `speed[i]` (m/s, falling) and the travel into the surface at that speed, m.
     speed: [f64; POINTS],
     travel: [f64; POINTS],
@@ -44,7 +45,7 @@ impl Stopping {
     /// Nothing tabulated yet.
     pub fn new() -> Self {
         Self {
-            key: [f64::NAN; 5],
+            key: [f64::NAN; 6],
             speed: [0.0; POINTS],
             travel: [0.0; POINTS],
         }
@@ -55,7 +56,8 @@ impl Stopping {
         let key = [
             cycle,
             cell.lag,
-            cell.loop_delay(),
+            cell.delay,
+            cell.sensor_delay,
             limits.max_acceleration,
             limits.max_velocity,
         ];
