@@ -54,12 +54,16 @@ fn a_filtered_force_is_fed_forward_over_the_sensor_s_delay_too() {
 #[ignore = "2736 closed-loop runs: the known limits' figures, not a criterion"]
 fn filtered_sensors() {
     // (bandwidth, step faults, unsettled steps, touch-down misses, sine faults) measured
+    // Sines on a fault were 41, 89, 65, 64 and 71 before the predictor's acceleration bound took
+    // the velocity inferred with the excess along; with it four 200 Hz steps that ended on a fault
+    // no longer do but never settle (the 12 ms cell's holds at f_r 2 N on 500 kN/m, whose
+    // touch-down already rings: the steps are ±0.02 and ±0.1 mm).
     let rows = [
-        (0.0, 4, 0, 0, 41),
-        (50.0, 6, 1, 5, 89),
-        (100.0, 5, 4, 2, 65),
-        (200.0, 9, 0, 1, 64),
-        (400.0, 9, 0, 1, 71),
+        (0.0, 4, 0, 0, 37),
+        (50.0, 6, 1, 5, 73),
+        (100.0, 5, 4, 2, 59),
+        (200.0, 5, 4, 1, 58),
+        (400.0, 9, 0, 1, 66),
     ];
     for (bandwidth, steps_measured, unsettled_measured, touch_measured, sines_measured) in rows {
         let (mut faults, mut unsettled) = (0, 0);
