@@ -30,9 +30,11 @@ use sim::InnerLoopModel;
 // * the touch-down under noise still fails at its corners, where the noise is a large part of a
 //   small set-point or the cycle is slow: `noise_corners` (ignored; `--ignored` runs it) counts the
 //   seeds 1–199 that fail the touch-down criteria — f_r 2 N on 10 kN/m, P1: 1 at σ 0.82 N, 2 at 1
-//   N (on the mean error at the end); on the 12 ms cell at σ 1 N: f_r 5 N on 50 kN/m 42 (37 before the
+//   N (on the mean error at the end); on the 12 ms cell at σ 1 N: f_r 5 N on 50 kN/m 37 (41 before the
+//   observer learnt from a velocity a still measurement contradicts, 42 once; 37 before the
 //   true force's spread at the end was asserted: five seeds spread 0.60–1.16 N), f_r 2 N on
-//   10 kN/m 58 (59 while the predictor's acceleration bound kept the velocity inferred with it; 61
+//   10 kN/m 54 (58 before the observer learnt from a velocity a still measurement contradicts, 59
+//   while the predictor's acceleration bound kept the velocity inferred with it; 61
 //   before the landing waited for the force to show the contact; 62, the mean error
 //   but for four impacts, before the caution of an unresolved rise kept a feed-forward that backs
 //   off); on P2 at σ 1 N f_r 20 N on 500 kN/m 1 (0 before that landing: seed 112 trips at 102 N, a
@@ -81,7 +83,8 @@ use sim::InnerLoopModel;
 //   (P2, f_r 2.3 and 3.7 N on 330–380 kN/m under σ 0.57–0.95 N: 17.9 against 16.6 N, 18.6 against
 //   18.0 N), and one fault, fixed since ([`a_contact_declared_on_noise_does_not_dash_into_a_stiff_surface`];
 //   with that fix the mean error misses once more, f_r 3.75 N on 15.9 kN/m, 12 ms, σ 0.93 N: 0.211
-//   against 0.168 N);
+//   against 0.168 N; and once more since the observer learns from a velocity a still measurement
+//   contradicts, f_r 4.26 N on 344 kN/m, 12 ms, σ 0.81 N: 0.187 against 0.166 N);
 // * with 3000 cases (`FORCECELL_RANGE_CASES=3000`; `FORCECELL_RANGE_SHRINK=0` shows them as drawn)
 //   `stiffness_changes` misses its mean error under noise at a small set-point on P2 (f_r 2.5 N,
 //   78 → 39 kN/m, σ 0.47 N, 135 N·s/m: 0.103 N against 0.097 N, 0.161 N before its re-fit was
@@ -596,11 +599,13 @@ fn noise_corners() {
         (2.0, 10e3, 0, 0.82, 1),
         (2.0, 10e3, 0, 1.0, 2),
         (20.0, 500e3, 1, 1.0, 0),
-        (5.0, 50e3, 2, 1.0, 41),
+        // 41 until the observer learnt from a velocity a still measurement contradicts.
+        (5.0, 50e3, 2, 1.0, 37),
         // 59: one seed (26) more on its impact, 6.25 N against 4.72 N, since the predictor's
         // extrapolated acceleration is bounded (the noisy touch-down bounced and its runs diverge);
-        // 58 since the bound takes the velocity inferred with the excess acceleration along.
-        (2.0, 10e3, 2, 1.0, 58),
+        // 58 since the bound takes the velocity inferred with the excess acceleration along; 54
+        // since the observer learns from a velocity a still measurement contradicts.
+        (2.0, 10e3, 2, 1.0, 54),
     ];
     for (f_r, k_c, cell_i, noise, measured) in corners {
         let failing = (1..200u64)
@@ -614,8 +619,9 @@ fn noise_corners() {
 /// Every touch-down [`touch_down_and_hold`] draws (the same seeded cases: 3000, or
 /// `FORCECELL_RANGE_CASES`), each miss printed and counted by its criterion, not stopped at the first
 /// failing case as the property test is; no more than measured with 3000 cases (the known limits
-/// list them): the true force's spread once, the mean error eight times, the impact twice, nothing
-/// else.
+/// list them): the true force's spread once, the mean error nine times (eight before the observer
+/// learnt from a velocity a still measurement contradicts: f_r 4.26 N on 344 kN/m on the 12 ms
+/// cell under σ 0.81 N, 0.187 N against 0.166 N), the impact twice, nothing else.
 #[test]
 #[ignore = "3000 closed-loop touch-downs: the known limits' figures, not a criterion"]
 fn touch_down_census() {
@@ -635,11 +641,11 @@ fn touch_down_census() {
         "k̂_c",
         "loop ended",
     ];
-    // No more than measured with 3000 cases: two impacts, eight mean errors, one spread, no fault.
+    // No more than measured with 3000 cases: two impacts, nine mean errors, one spread, no fault.
     census(
         cases,
         &kinds,
-        &[2, 0, 8, 0, 1, 0, 0],
+        &[2, 0, 9, 0, 1, 0, 0],
         |(f_r, k_c, cell_i, noise, seed)| {
             (
                 format!("f_r {f_r:.2} N, {k_c:.0} N/m, cell {cell_i}, σ {noise:.3} N, seed {seed}"),
@@ -655,7 +661,8 @@ fn touch_down_census() {
 /// noise; four before the predictor's extrapolated acceleration was bounded), nothing else. Before a jump's first sample was no excitation, also `k̂_c` once
 /// ([`a_jump_s_first_sample_is_no_excitation`]). Also counted, not asserted by the property test: a
 /// `k̂_c` beyond four deviations of what the change's information allows, where that allows no 10 %
-/// — once (a damped doubling at f_r 2.5 N on the 12 ms cell); four times before a halving was no
+/// — none (once, a damped doubling at f_r 2.5 N on the 12 ms cell, 49 % off against 29 %, until the
+/// observer learnt from a velocity a still measurement contradicts); four times before a halving was no
 /// crawling surface ([`a_halving_is_no_crawling_surface`]; at f_r 3.9 N on the 12 ms cell 53 % off,
 /// now 12 %), twice before a window that rejects the stale stiffness was no hold
 /// ([`a_window_that_rejects_the_stale_stiffness_is_no_hold`]).
@@ -683,7 +690,7 @@ fn stiffness_changes_census() {
     census(
         cases,
         &kinds,
-        &[0, 3, 0, 1, 0, 0],
+        &[0, 3, 0, 0, 0, 0],
         |(f_r, k_c, double, at, cell_i, noise, c_e, seed)| {
             let c = Change {
                 f_r,
@@ -782,7 +789,9 @@ fn census<S: Strategy>(
 /// 0.0165 and 0.0075; 0.0073 with the landing's end above). Then, with the predictor's acceleration
 /// bound 52 faults, with jumps in a row a ramp 41 (12 forced, 5 on fault 5, 11 pressed, 13 on a
 /// re-contact); now, with the bound taking the velocity inferred with the excess acceleration along,
-/// 37 (12, 5, 11, 9; `k̂_c` off 2, lossy 34, RMS p90 0.0999, as before).
+/// 37 (12, 5, 11, 9; `k̂_c` off 2, lossy 34, RMS p90 0.0999, as before); with the observer learning
+/// from a velocity a still measurement contradicts (it had taken every cycle of it for a jump), 37,
+/// `k̂_c` off 2, lossy 29, RMS p90 0.0973.
 #[test]
 #[ignore = "1080 closed-loop runs: the known limits' figures, not a criterion"]
 fn moving_surfaces() {
@@ -791,8 +800,8 @@ fn moving_surfaces() {
         (10e3, 0, 0, 0, 0.0),
         (30e3, 0, 0, 0, 0.0),
         (100e3, 1, 2, 1, 1.70),
-        (300e3, 11, 0, 13, 1.92),
-        (500e3, 25, 0, 20, 2.78),
+        (300e3, 11, 0, 10, 1.92),
+        (500e3, 25, 0, 18, 2.78),
     ];
     // The RMS error after 3 s over the set-point of every run without a fault, its 90th percentile
     // measured.

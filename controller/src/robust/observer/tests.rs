@@ -207,3 +207,40 @@ fn a_new_stiffness_estimate_is_no_surface_motion() {
         assert!(o.receding() < 1e-9, "{} m/s", o.receding());
     }
 }
+
+/// A tracker that learnt a surface's motion on a slow cell, the surface then still: each cycle its
+/// velocity carried it more than the jump threshold off the measurement (0.2 mm/s is 2.4 µm a 12 ms
+/// cycle, the threshold a quarter of 2 N on 500 kN/m, 1 µm), which was taken for a jump — the
+/// position reset, the velocity kept — and the velocity never decayed. Where the measurement stayed
+/// put, that innovation is the velocity contradicted.
+#[test]
+fn a_velocity_a_still_surface_contradicts_every_cycle_decays() {
+    let (dt, k, f) = (0.012, 500_000.0, 2.0);
+    let at = |z: f64| View {
+        k,
+        force_scale: f,
+        step_time: 0.048,
+        ..view(z + f / k, f)
+    };
+    let mut o = SurfaceObserver::new(ObserverParams::default());
+    o.restart(0.010);
+    let mut z = 0.010;
+    for _ in 0..100 {
+        z += 2e-4 * dt;
+        o.track(&at(z), 8.0, dt);
+    }
+    assert!(
+        o.receding() > 1e-4,
+        "the motion learnt: {} m/s",
+        o.receding()
+    );
+    for _ in 0..200 {
+        o.track(&at(z), 8.0, dt);
+    }
+    assert!(
+        o.receding() < 1e-6,
+        "still after 2.4 s: {} m/s",
+        o.receding()
+    );
+    assert!((o.surface() - z).abs() < 1e-7, "{} m off", o.surface() - z);
+}
