@@ -83,8 +83,7 @@ use sim::InnerLoopModel;
 //   (P2, f_r 2.3 and 3.7 N on 330–380 kN/m under σ 0.57–0.95 N: 17.9 against 16.6 N, 18.6 against
 //   18.0 N), and one fault, fixed since ([`a_contact_declared_on_noise_does_not_dash_into_a_stiff_surface`];
 //   with that fix the mean error misses once more, f_r 3.75 N on 15.9 kN/m, 12 ms, σ 0.93 N: 0.211
-//   against 0.168 N; and once more since the observer learns from a velocity a still measurement
-//   contradicts, f_r 4.26 N on 344 kN/m, 12 ms, σ 0.81 N: 0.187 against 0.166 N);
+//   against 0.168 N);
 // * with 3000 cases (`FORCECELL_RANGE_CASES=3000`; `FORCECELL_RANGE_SHRINK=0` shows them as drawn)
 //   `stiffness_changes` misses its mean error under noise at a small set-point on P2 (f_r 2.5 N,
 //   78 → 39 kN/m, σ 0.47 N, 135 N·s/m: 0.103 N against 0.097 N, 0.161 N before its re-fit was
@@ -619,9 +618,10 @@ fn noise_corners() {
 /// Every touch-down [`touch_down_and_hold`] draws (the same seeded cases: 3000, or
 /// `FORCECELL_RANGE_CASES`), each miss printed and counted by its criterion, not stopped at the first
 /// failing case as the property test is; no more than measured with 3000 cases (the known limits
-/// list them): the true force's spread once, the mean error nine times (eight before the observer
-/// learnt from a velocity a still measurement contradicts: f_r 4.26 N on 344 kN/m on the 12 ms
-/// cell under σ 0.81 N, 0.187 N against 0.166 N), the impact twice, nothing else.
+/// list them): the true force's spread once, the mean error eight times (nine while the observer
+/// learnt from a velocity a still measurement contradicts but the onset fit still took a sample
+/// surely behind its surface for one on its line: f_r 4.26 N on 344 kN/m on the 12 ms cell under
+/// σ 0.81 N, 0.187 N against 0.166 N), the impact twice, nothing else.
 #[test]
 #[ignore = "3000 closed-loop touch-downs: the known limits' figures, not a criterion"]
 fn touch_down_census() {
@@ -641,11 +641,11 @@ fn touch_down_census() {
         "k̂_c",
         "loop ended",
     ];
-    // No more than measured with 3000 cases: two impacts, nine mean errors, one spread, no fault.
+    // No more than measured with 3000 cases: two impacts, eight mean errors, one spread, no fault.
     census(
         cases,
         &kinds,
-        &[2, 0, 9, 0, 1, 0, 0],
+        &[2, 0, 8, 0, 1, 0, 0],
         |(f_r, k_c, cell_i, noise, seed)| {
             (
                 format!("f_r {f_r:.2} N, {k_c:.0} N/m, cell {cell_i}, σ {noise:.3} N, seed {seed}"),

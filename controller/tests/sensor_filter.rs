@@ -44,6 +44,35 @@ fn a_filtered_force_is_fed_forward_over_the_sensor_s_delay_too() {
     assert!(m.rms_error <= 0.25, "RMS error {} N", m.rms_error);
 }
 
+/// A hold at f_r 2 N on 500 kN/m on the 12 ms cell through a 100, 200 or 400 Hz filter, a 20 µm step
+/// at 2 s (`filtered_sensors` cases). The touch-down bounced, and the contact ended between two
+/// samples: the filter still showed 1.47 N 51 µm behind the surface, which the onset fit took for a
+/// sample on the spring's line (`k̂_c` 397 → 116 kN/m at 100 Hz; at 400 Hz 119 kN/m and a trip at
+/// 77 N). It is off the line now, beyond the fit's doubt. Then the surface observer's velocity,
+/// learnt on the bounce, carried it a jump threshold a cycle off the still surface, was taken for a
+/// jump every other cycle and never decayed: the hold stood at 5.3 N, its feed-forward cancelling the
+/// correction. Now: no fault, back within ±2 % within 0.6 s of the step.
+#[test]
+fn a_filtered_bounce_at_a_small_set_point_on_a_slow_cell_settles() {
+    for bandwidth in [100.0, 200.0, 400.0] {
+        let s = through(
+            cell(4.0, 500e3, 0.0, None, Some((2.0, 0.02e-3)), 0.0, 1),
+            bandwidth,
+        );
+        let r = run(&s, &CELLS[2], &tuning(2.0)).expect("no fault");
+        let m = r.metrics(2.0, f64::INFINITY);
+        println!(
+            "{bandwidth} Hz: settle {} s, k̂_c off {}",
+            m.settle_time, m.kc_rel_error
+        );
+        assert!(
+            m.settle_time <= 0.6,
+            "{bandwidth} Hz: settled after {} s",
+            m.settle_time
+        );
+    }
+}
+
 /// The cost of a filtered sensor, measured, not a criterion: per filter cut-off, over the three cells,
 /// of 216 surface steps (−3 mm to +2.62 mm on 10, 70 and 500 kN/m at f_r 2, 20 and 50 N) those that
 /// end on a fault although the step's own jump is under the force limit, those not back within ±2 %
@@ -59,13 +88,16 @@ fn filtered_sensors() {
     // no longer do but never settle (the 12 ms cell's holds at f_r 2 N on 500 kN/m, whose
     // touch-down already rings: the steps are ±0.02 and ±0.1 mm).
     // With the observer learning from a velocity a still measurement contradicts: 50 Hz sines 73 →
-    // 77 and one step settled, 100 / 200 / 400 Hz sines 59 / 58 / 66 → 56 / 57 / 64.
+    // 77 and one step settled, 100 / 200 / 400 Hz sines 59 / 58 / 66 → 56 / 57 / 64. With a filtered
+    // force's tail behind the surface off the onset fit's line: at 100 / 200 / 400 Hz steps on a
+    // fault 5 / 5 / 9 → 4, unsettled 4 / 4 / 0 → 0, touch-downs over their bound 2 / 1 / 1 → 1 / 0 /
+    // 0, sines on a fault 56 / 57 / 64 → 53 / 41 / 40.
     let rows = [
         (0.0, 4, 0, 0, 37),
         (50.0, 6, 0, 5, 77),
-        (100.0, 5, 4, 2, 56),
-        (200.0, 5, 4, 1, 57),
-        (400.0, 9, 0, 1, 64),
+        (100.0, 4, 0, 1, 53),
+        (200.0, 4, 0, 0, 41),
+        (400.0, 4, 0, 0, 40),
     ];
     for (bandwidth, steps_measured, unsettled_measured, touch_measured, sines_measured) in rows {
         let (mut faults, mut unsettled) = (0, 0);

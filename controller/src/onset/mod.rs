@@ -201,6 +201,19 @@ impl OnsetFit {
             .is_some_and(|f| f.a + f.b * (x - self.x0) / self.scale < 0.0)
     }
 
+    /// Whether position `x` (m) is behind the surface of the fit so far beyond doubt: the line's
+    /// force there below zero by `significance` standard deviations of a new sample's (the fit's
+    /// own uncertainty at `x`, and its residuals' or the noise variance `noise_var` (N²), whichever
+    /// is larger). A sample there is off the spring's line whatever its force.
+    pub fn surely_behind(&self, x: f64, significance: f64, noise_var: f64) -> bool {
+        self.fit(0.0).is_some_and(|f| {
+            let u = (x - self.x0) / self.scale;
+            let var =
+                f.var_a + u * u * f.var_b + 2.0 * u * f.cov_ab + f.residual_var.max(noise_var);
+            f.a + f.b * u + significance * var.max(0.0).sqrt() < 0.0
+        })
+    }
+
     /// Count `dt` s of the window without a sample (one [`behind`](Self::behind) the surface).
     pub fn pass(&mut self, dt: f64) {
         if self.left > 0.0 {
