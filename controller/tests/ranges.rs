@@ -89,7 +89,7 @@ use sim::InnerLoopModel;
 //   78 → 39 kN/m, σ 0.47 N, 135 N·s/m: 0.103 N against 0.097 N, 0.161 N before its re-fit was
 //   taken); 1000 pass. With 1000 cases
 //   `touch_down_and_hold` misses its mean error under σ 0.43 N at f_r 2.46 N on the 12 ms cell
-//   (0.146 N against 0.093 N, the corners below); it found and we fixed a contact the law took back
+//   (0.145 N against 0.093 N, the corners below); it found and we fixed a contact the law took back
 //   counted as lost (`a_contact_taken_back_at_the_start_is_not_a_lost_one`). `surface_steps` passes 5000 cases; 20000 find a
 //   step whose jump is within 0.03 % of the force limit (72.68 N against 72.71 N), which trips it:
 //   this test's bound has no margin there. Found with 1000 and 5000 cases and fixed
