@@ -192,29 +192,21 @@ impl OnsetFit {
         self.left > 0.0
     }
 
-    /// Whether position `x` (m) is behind the surface the fit so far puts its line's zero at (its
-    /// spring force `a + b·u` negative): a sample there is on the hinge's flat part, not on the line.
-    /// Chosen by the position, not the force, so noise does not bias what is kept. `false` while the
-    /// fit is undetermined.
-    pub fn behind(&self, x: f64) -> bool {
-        self.fit(0.0)
-            .is_some_and(|f| f.a + f.b * (x - self.x0) / self.scale < 0.0)
-    }
-
-    /// Whether position `x` (m) is behind the surface of the fit so far beyond doubt: the line's
-    /// force there below zero by `significance` standard deviations of a new sample's (the fit's
-    /// own uncertainty at `x`, and its residuals' or the noise variance `noise_var` (N²), whichever
-    /// is larger). A sample there is off the spring's line whatever its force.
-    pub fn surely_behind(&self, x: f64, significance: f64, noise_var: f64) -> bool {
-        self.fit(0.0).is_some_and(|f| {
+    /// The spring force the fit so far gives at position `x` (m), N, and the standard deviation of a
+    /// new sample's force about it (the fit's own uncertainty at `x`, and its residuals' or the noise
+    /// variance `noise_var` (N²), whichever is larger), N; `None` while the fit is undetermined. A
+    /// force below zero puts `x` behind the surface: a sample there is on the hinge's flat part, not
+    /// on the line (chosen by the position, not the force, so noise does not bias what is kept).
+    pub fn line_at(&self, x: f64, noise_var: f64) -> Option<(f64, f64)> {
+        self.fit(0.0).map(|f| {
             let u = (x - self.x0) / self.scale;
             let var =
                 f.var_a + u * u * f.var_b + 2.0 * u * f.cov_ab + f.residual_var.max(noise_var);
-            f.a + f.b * u + significance * var.max(0.0).sqrt() < 0.0
+            (f.a + f.b * u, var.max(0.0).sqrt())
         })
     }
 
-    /// Count `dt` s of the window without a sample (one [`behind`](Self::behind) the surface).
+    /// Count `dt` s of the window without a sample (one behind the surface, [`line_at`](Self::line_at)).
     pub fn pass(&mut self, dt: f64) {
         if self.left > 0.0 {
             self.left -= dt;

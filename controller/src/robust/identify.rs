@@ -177,14 +177,15 @@ impl Identifier {
             // behind a 500 kN/m surface through 100 Hz on the 12 ms cell took the fit from 397 to
             // 116 kN/m). Not in a re-fit: a stiffness change's transient can lie behind the line
             // of its first samples (a doubling at f_r 37 N on 21.6 kN/m kept the stale `k̂_c`).
-            let noise = noise_var.max(noise_floor * noise_floor);
             let touch_down = self.refit.is_none();
-            if (lifted && self.onset.behind(x))
-                || (touch_down
-                    && self
-                        .onset
-                        .surely_behind(x, crate::robust::contact::SIGNIFICANCE, noise))
-            {
+            let off = self
+                .onset
+                .line_at(x, noise_var.max(noise_floor * noise_floor))
+                .is_some_and(|(line, sd)| {
+                    (lifted && line < 0.0)
+                        || (touch_down && line + crate::robust::contact::SIGNIFICANCE * sd < 0.0)
+                });
+            if off {
                 self.onset.pass(dt);
             } else {
                 self.onset.add(x, f, v, dt);
