@@ -77,7 +77,8 @@ fn a_filtered_bounce_at_a_small_set_point_on_a_slow_cell_settles() {
 /// of 216 surface steps (−3 mm to +2.62 mm on 10, 70 and 500 kN/m at f_r 2, 20 and 50 N) those that
 /// end on a fault although the step's own jump is under the force limit, those not back within ±2 %
 /// 1.5 s after the step, of 48 touch-downs (10–500 kN/m, f_r 2–50 N) those over `2·f_r` above the
-/// floor or ending on a fault, and of 648 sines (0.2–1 mm at 0.25–1 Hz on 100–500 kN/m, both ways,
+/// floor (the cell's and the sensor's delay: the filter shows the contact that much later) or ending
+/// on a fault, and of 648 sines (0.2–1 mm at 0.25–1 Hz on 100–500 kN/m, both ways,
 /// f_r 2–50 N) those ending on a fault; no more than measured.
 #[test]
 #[ignore = "2736 closed-loop runs: the known limits' figures, not a criterion"]
@@ -92,10 +93,13 @@ fn filtered_sensors() {
     // force's tail behind the surface off the onset fit's line: at 100 / 200 / 400 Hz steps on a
     // fault 5 / 5 / 9 → 4, unsettled 4 / 4 / 0 → 0, touch-downs over their bound 2 / 1 / 1 → 1 / 0 /
     // 0, sines on a fault 56 / 57 / 64 → 53 / 41 / 40.
+    // A touch-down's bound counts the sensor's delay in its floor since: the 50 Hz misses were 5
+    // over the cell's floor alone, 1 with the filter's 4.5 ms counted (f_r 50 N on 500 kN/m on P2,
+    // 124 N against 120.5 N); at 100 Hz 1 and 0.
     let rows = [
         (0.0, 4, 0, 0, 37),
-        (50.0, 6, 0, 5, 77),
-        (100.0, 4, 0, 1, 53),
+        (50.0, 6, 0, 1, 77),
+        (100.0, 4, 0, 0, 53),
         (200.0, 4, 0, 0, 41),
         (400.0, 4, 0, 0, 40),
     ];
@@ -122,15 +126,19 @@ fn filtered_sensors() {
                 }
             }
         }
-        let mut touch = 0;
+        // Over the bound with the cell's floor alone, the sensor's delay not counted.
+        let (mut touch, mut over_cell) = (0, 0);
         for plant in &CELLS {
             for k_c in [10e3, 70e3, 200e3, 500e3] {
                 for f_r in [2.0, 5.0, 20.0, 50.0] {
                     let s = through(cell(3.0, k_c, 0.0, None, None, 0.0, 1), bandwidth);
                     let e = run_to_end(&s, plant, &tuning(f_r)).expect("a valid tuning");
                     let peak = e.run.metrics(0.0, f64::INFINITY).peak_force;
-                    touch += usize::from(
-                        e.fault.is_some() || peak > 2.0 * f_r + floor(k_c, 0.002, plant),
+                    // The filter shows the contact its delay later: the tool goes on for that too.
+                    let seen = floor(k_c, 0.002, plant) + k_c * 0.002 * s.sensor.delay();
+                    touch += usize::from(e.fault.is_some() || peak > 2.0 * f_r + seen);
+                    over_cell += usize::from(
+                        e.fault.is_none() && peak > 2.0 * f_r + floor(k_c, 0.002, plant),
                     );
                 }
             }
@@ -151,7 +159,8 @@ fn filtered_sensors() {
         }
         println!(
             "{bandwidth} Hz: {faults} of 216 steps on a fault, {unsettled} unsettled; {touch} of 48 \
-             touch-downs over their bound; {sines} of 648 sines on a fault"
+             touch-downs over their bound ({over_cell} over the cell's floor alone); {sines} of 648 \
+             sines on a fault"
         );
         assert!(faults <= steps_measured, "{faults} > {steps_measured}");
         assert!(
