@@ -791,9 +791,11 @@ fn census<S: Strategy>(
 /// re-contact); now, with the bound taking the velocity inferred with the excess acceleration along,
 /// 37 (12, 5, 11, 9; `k̂_c` off 2, lossy 34, RMS p90 0.0999, as before); with the observer learning
 /// from a velocity a still measurement contradicts (it had taken every cycle of it for a jump), 37,
-/// `k̂_c` off 2, lossy 29, RMS p90 0.0973. Also printed: of the other trips, how many are forced once
-/// the inner loop's lag `τ` counts in the floor too (8 of the 20: a surface approaching at
-/// `v` gains `k_c·v·τ` more while the tool catches up with its command).
+/// `k̂_c` off 2, lossy 29, RMS p90 0.0973. Also printed: of the re-contacts, how many are forced (5
+/// of 9: a sine starting away whose floor is above the set-point loses the contact at its start,
+/// and comes back at the same peak speed), and of the other trips how many are forced once the
+/// inner loop's lag `τ` counts in the floor too (8, all pressed: a surface approaching at `v` gains
+/// `k_c·v·τ` more while the tool catches up with its command).
 #[test]
 #[ignore = "1080 closed-loop runs: the known limits' figures, not a criterion"]
 fn moving_surfaces() {
@@ -818,6 +820,11 @@ fn moving_surfaces() {
     // Of the other trips, those forced once the inner loop's lag counts too: the tool follows a
     // command `τ` behind, so the floor is `k_c·v·(delay + cycle + τ)` (the issue's leaves `τ` out).
     let mut forced_with_lag = 0;
+    // Of the re-contacts, those forced too: a sine starting away from the tool whose floor is above
+    // the set-point (the contact is lost at its start whatever the law: the force falls by the
+    // floor before any answer arrives) comes back at the same peak speed, and a contact found again
+    // while it approaches presses at least the set-point plus its floor.
+    let mut recontacts_forced = 0;
     for (k_c, faults_measured, off_measured, lossy_measured, worst_measured) in rows {
         let mut counts = [[0usize; 3]; 2];
         // The highest true force of a run a fault ended, over its force limit.
@@ -854,6 +861,10 @@ fn moving_surfaces() {
                                     pressed += 1;
                                 } else {
                                     recontacts += 1;
+                                    let fl = floor(k_c, v, plant);
+                                    recontacts_forced += usize::from(
+                                        amplitude > 0.0 && fl > f_r && f_r + fl > limit,
+                                    );
                                 }
                             }
                             let peak = ended.run.metrics(0.0, f64::INFINITY).peak_force;
@@ -899,8 +910,10 @@ fn moving_surfaces() {
     println!(
         "of the {} faults: {forced} forced (approaching faster than the force limit allows at any \
          law), {lost} contacts lost for 0.5 s (fault 5); of the other trips {pressed} pressed past \
-         the limit without losing contact since the sine began, {recontacts} on a re-contact; \
-         {forced_with_lag} of the other trips forced once the inner loop's lag counts",
+         the limit without losing contact since the sine began, {recontacts} on a re-contact \
+         ({recontacts_forced} of them forced: the contact lost at the sine's start and the surface \
+         back at a speed whose floor is beyond the limit); {forced_with_lag} of the other trips \
+         forced once the inner loop's lag counts",
         away[0] + towards[0]
     );
     rel.sort_by(f64::total_cmp);
