@@ -795,7 +795,9 @@ fn census<S: Strategy>(
 /// of 9: a sine starting away whose floor is above the set-point loses the contact at its start,
 /// and comes back at the same peak speed), and of the other trips how many are forced once the
 /// inner loop's lag `τ` counts in the floor too (8, all pressed: a surface approaching at `v` gains
-/// `k_c·v·τ` more while the tool catches up with its command).
+/// `k_c·v·τ` more while the tool catches up with its command). Then, with a line that misses a clean
+/// force far beyond its noise no stiffness change, 36 faults (0 / 0 / 0 / 11 / 25), `k̂_c` off 0,
+/// lossy 29, RMS p90 0.0970.
 #[test]
 #[ignore = "1080 closed-loop runs: the known limits' figures, not a criterion"]
 fn moving_surfaces() {
@@ -803,7 +805,7 @@ fn moving_surfaces() {
     let rows = [
         (10e3, 0, 0, 0, 0.0),
         (30e3, 0, 0, 0, 0.0),
-        (100e3, 1, 2, 1, 1.71),
+        (100e3, 0, 0, 1, 0.0),
         (300e3, 11, 0, 10, 1.93),
         (500e3, 25, 0, 18, 2.78),
     ];
@@ -1057,6 +1059,22 @@ fn a_surface_that_starts_at_full_speed_is_not_extrapolated_past_its_path() {
 fn a_velocity_inferred_with_an_impossible_acceleration_is_not_extrapolated() {
     holds_a_sine(500e3, 0.5e-3, 1.0, &CELLS[2], 50.0, 2.1);
     holds_a_sine(300e3, 1e-3, 1.0, &CELLS[2], 50.0, 2.3);
+}
+
+/// Sines on 100 kN/m on the 12 ms cell (`moving_surfaces` cases: 1 mm at 1 Hz at f_r 20 N, 0.5 mm at
+/// 0.5 Hz and 1 mm at 0.25 Hz at f_r 5 N, all starting away from the tool). The sine's start opened a
+/// re-fit, and its window held the tool chasing a surface that slowed down: a line of 44 kN/m
+/// explained it a little better than the stale stiffness on a surface at a constant speed (an SSE
+/// of 14.1 against 17.4 N²), though it missed the samples by 1.7 N RMS where the clean sensor's
+/// noise is 0.02 N. Taken, it tripped at 102 N or rang 29–58 % off. A line that leaves more than
+/// `SIGNIFICANCE²` noise variances is no spring's now (unless the force comes through a filter,
+/// whose shape a line misses by far more: `filtered` in `robust::identify`): no fault, at most 36,
+/// 17 and 9 N, `k̂_c` within 10 %.
+#[test]
+fn a_line_that_misses_a_clean_force_far_beyond_its_noise_is_no_stiffness_change() {
+    holds_a_sine(100e3, 1e-3, 1.0, &CELLS[2], 20.0, 2.0);
+    holds_a_sine(100e3, 0.5e-3, 0.5, &CELLS[2], 5.0, 4.0);
+    holds_a_sine(100e3, 1e-3, 0.25, &CELLS[2], 5.0, 2.5);
 }
 
 /// A stiff surface that starts towards the tool at full speed under a clean sensor

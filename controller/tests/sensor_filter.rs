@@ -97,7 +97,7 @@ fn filtered_sensors() {
     // over the cell's floor alone, 1 with the filter's 4.5 ms counted (f_r 50 N on 500 kN/m on P2,
     // 124 N against 120.5 N); at 100 Hz 1 and 0.
     let rows = [
-        (0.0, 4, 0, 0, 37),
+        (0.0, 4, 0, 0, 36),
         (50.0, 6, 0, 1, 77),
         (100.0, 4, 0, 0, 53),
         (200.0, 4, 0, 0, 41),
@@ -169,5 +169,36 @@ fn filtered_sensors() {
         );
         assert!(touch <= touch_measured, "{touch} > {touch_measured}");
         assert!(sines <= sines_measured, "{sines} > {sines_measured}");
+    }
+}
+
+/// Stiffness changes through a filtered sensor, measured, not a criterion: per filter cut-off, of 108
+/// changes (×0.5 and ×2 at 3 s on 20, 70 and 200 kN/m at f_r 5, 20 and 50 N, clean and under σ 0.3 N,
+/// the three cells) those that end on a fault or with `k̂_c` more than 10 % off 2 s after the change;
+/// no more than measured.
+#[test]
+#[ignore = "540 closed-loop runs: the known limits' figures, not a criterion"]
+fn filtered_stiffness_changes() {
+    // (bandwidth, misses measured)
+    let rows = [(0.0, 0), (50.0, 11), (100.0, 4), (200.0, 1), (400.0, 0)];
+    for (bandwidth, measured) in rows {
+        let mut misses = 0;
+        for plant in &CELLS {
+            for k_c in [20e3, 70e3, 200e3] {
+                for f_r in [5.0, 20.0, 50.0] {
+                    for factor in [0.5, 2.0] {
+                        for noise in [0.0, 0.3] {
+                            let s = cell(5.0, k_c, 0.0, Some((3.0, factor)), None, noise, 7);
+                            let e = run_to_end(&through(s, bandwidth), plant, &tuning(f_r))
+                                .expect("a valid tuning");
+                            let off = e.run.metrics(3.0, f64::INFINITY).kc_rel_error;
+                            misses += usize::from(e.fault.is_some() || off.is_nan() || off > 0.1);
+                        }
+                    }
+                }
+            }
+        }
+        println!("{bandwidth} Hz: {misses} of 108 stiffness changes on a fault or k̂_c > 10 % off");
+        assert!(misses <= measured, "{misses} > {measured}");
     }
 }

@@ -178,6 +178,7 @@ impl RobustLaw {
                 lifted: s.f < lift,
                 disturbed,
                 jumped,
+                filtered: self.p.cell.sensor_delay > 0.0,
             },
             self.noise.var(),
             self.p.response.noise_floor,

@@ -156,6 +156,7 @@ impl Identifier {
             lifted,
             disturbed,
             jumped,
+            filtered,
         } = state;
         if self.hold_step(dt) {
             return Identified::default();
@@ -198,7 +199,7 @@ impl Identifier {
             None if onset => self.onset_fit(noise_var, dt),
             None => None,
             // A re-fit: as soon as it is conclusive, at the latest at the window's end.
-            Some(_) => self.judge_refit(x, f, noise_var, noise_floor),
+            Some(_) => self.judge_refit(x, f, noise_var, noise_floor, filtered),
         };
         match fit {
             Some(fit) => {

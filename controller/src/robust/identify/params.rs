@@ -114,4 +114,7 @@ pub struct StepState {
     /// The raw force left its band in a calm contact this step (beyond what its noise reaches): a
     /// jump's first sample, which the conditioned force the band test reads shows only later.
     pub jumped: bool,
+    /// The force comes through a sensor's own filter (`[law.cell] sensor_delay` above zero): a
+    /// spring's window fits a line only to the filter's shape, not to the noise.
+    pub filtered: bool,
 }
