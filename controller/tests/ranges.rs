@@ -8,7 +8,9 @@
 
 mod common;
 
-use common::{CELLS, cell, change_bound, floor, mean_error, reach_time, sine, stiffness, tuning};
+use common::{
+    CELLS, cell, change_bound, floor, floor_after, mean_error, reach_time, sine, stiffness, tuning,
+};
 use controller::LawConfig;
 use proptest::prelude::*;
 use scenario::run::{run, run_to_end};
@@ -846,7 +848,7 @@ fn moving_surfaces() {
                             let is_forced = amplitude < 0.0 && f_r + floor(k_c, v, plant) > limit;
                             forced += usize::from(is_forced);
                             lost += usize::from(ended.fault_code == Some(5));
-                            let with_lag = floor(k_c, v, plant) + k_c * v * plant.tau;
+                            let with_lag = floor_after(k_c, v, plant, plant.tau);
                             forced_with_lag += usize::from(
                                 !is_forced
                                     && ended.fault_code == Some(2)

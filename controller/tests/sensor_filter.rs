@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{CELLS, cell, floor, sine, tuning};
+use common::{CELLS, cell, floor, floor_after, sine, tuning};
 use scenario::run::{run, run_to_end};
 use scenario::scenario::Scenario;
 
@@ -135,7 +135,7 @@ fn filtered_sensors() {
                     let e = run_to_end(&s, plant, &tuning(f_r)).expect("a valid tuning");
                     let peak = e.run.metrics(0.0, f64::INFINITY).peak_force;
                     // The filter shows the contact its delay later: the tool goes on for that too.
-                    let seen = floor(k_c, 0.002, plant) + k_c * 0.002 * s.sensor.delay();
+                    let seen = floor_after(k_c, 0.002, plant, s.sensor.delay());
                     touch += usize::from(e.fault.is_some() || peak > 2.0 * f_r + seen);
                     over_cell += usize::from(
                         e.fault.is_none() && peak > 2.0 * f_r + floor(k_c, 0.002, plant),

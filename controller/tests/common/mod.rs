@@ -66,9 +66,15 @@ pub fn sine(k_c: f64, amplitude: f64, frequency: f64) -> Scenario {
 }
 
 /// The physical floor of an impact: after a stop command the tool still travels `v·(delay + one
-/// cycle)` into a surface of stiffness `k`, N.
+/// cycle)` into a surface of stiffness `k`, N (the floor).
 pub fn floor(k: f64, v: f64, plant: &InnerLoopModel) -> f64 {
-    k * v * (plant.delay() + plant.period)
+    floor_after(k, v, plant, 0.0)
+}
+
+/// [`floor`] with `extra` (s) more of travel: what the floor leaves out, the inner loop's lag
+/// (the tool catches up with its command) or a sensor's own delay (its force shows the contact later).
+pub fn floor_after(k: f64, v: f64, plant: &InnerLoopModel, extra: f64) -> f64 {
+    k * v * (plant.delay() + plant.period + extra)
 }
 
 /// The least time the search after a lost contact takes to a surface `gap` (m) away at stiffness `k`
