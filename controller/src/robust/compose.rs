@@ -208,7 +208,8 @@ impl RobustLaw {
             self.identify.kc(),
             self.identify.kc_rel_sd(),
             self.response.set_point(),
-            self.p.limits.max_force - th.strong,
+            self.p.limits.max_force,
+            th.strong,
             &self.stopping,
         );
         match self

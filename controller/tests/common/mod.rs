@@ -80,8 +80,8 @@ pub fn floor_after(k: f64, v: f64, plant: &InnerLoopModel, extra: f64) -> f64 {
 /// The least time the search after a lost contact takes to a surface `gap` (m) away at stiffness `k`
 /// (N/m) on `plant` under `tuning`, s: the law's own speeds ([`controller::robust::ContactMachine::speeds`],
 /// `k̂_c` exact and known exactly, a quiet sensor) on the law's own model of the plant's cell
-/// ([`controller::robust::Stopping`]): the fast search for its fast distance, then the one that stops
-/// within `2·f_r`.
+/// ([`controller::robust::Stopping`]): the gentle search within its margin, the fast search for the
+/// rest of its fast distance, then the one that stops within `2·f_r`.
 pub fn reach_time(t: &Tuning, k: f64, gap: f64, plant: &InnerLoopModel) -> f64 {
     let LawConfig::Robust(p) = &t.law else {
         panic!("robust")
@@ -91,9 +91,13 @@ pub fn reach_time(t: &Tuning, k: f64, gap: f64, plant: &InnerLoopModel) -> f64 {
     stop.update(&cell, plant.period, &p.limits);
     let machine = controller::robust::ContactMachine::new(p.contact);
     let strong = machine.thresholds(p.f_r, 0.0, 0.0).strong;
-    let sp = machine.speeds(k, 0.0, p.f_r, p.limits.max_force - strong, &stop);
-    let near = gap.clamp(0.0, p.contact.reacquire_distance);
-    near / sp.reacquire + (gap - near).max(0.0) / sp.near
+    let sp = machine.speeds(k, 0.0, p.f_r, p.limits.max_force, strong, &stop);
+    // The part of [a, b) the gap covers, m.
+    let part = |a: f64, b: f64| (b.min(gap) - a).max(0.0);
+    let (margin, fast) = (sp.margin, p.contact.reacquire_distance);
+    part(0.0, margin) / sp.gentle
+        + part(margin.min(fast), fast) / sp.reacquire
+        + part(margin.max(fast), f64::INFINITY) / sp.near
 }
 
 /// The relative standard deviation below which nothing can know the new stiffness after a change by

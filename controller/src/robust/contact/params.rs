@@ -33,13 +33,15 @@ pub struct ContactParams {
     /// [`ContactMachine::thresholds`](super::ContactMachine::thresholds)).
     #[serde(default = "default_strong_contact")]
     pub strong_contact: f64,
-    /// How far beyond the position where contact was lost the search stays at the speed the cell can
-    /// stop within twice the set-point, in set-point penetrations `f_r/k̂_c` (advanced; 0: off, the
-    /// whole search is fast). A surface found there is the lost one moved a little; farther on it went
-    /// away, and the search is fast. Each penetration costs a retreating surface about half the
-    /// stopping time ([`Stopping`](crate::robust::Stopping)) before it is found again: on P2 (16 ms
-    /// at that speed), over the default wires, 4 bring B8's peak from 44 N to 13 N and B3's loss of
-    /// contact from 48 ms to 76 ms (target 50 ms).
+    /// How far beyond the position where contact was lost the search stays at the gentle speed, in
+    /// set-point penetrations `f_r/k̂_c` (advanced; 0: off, the fast search; `inf`: the whole search
+    /// towards a surface not found yet is gentle, the `robust-gentle` tuning). The gentle speed is
+    /// what the cell can stop within twice the set-point, counting what the force reaches before the
+    /// contact is certainly seen (one raw sample at the strong threshold). A surface found there is
+    /// the lost one moved a little; farther on it went away, and the search is fast. Each
+    /// penetration costs a retreating surface about the stopping time
+    /// ([`Stopping`](crate::robust::Stopping)) before it is found again; what the choice costs and
+    /// buys on P1 and P2 is measured in the README ("Choosing the re-acquire search").
     #[serde(default)]
     pub reacquire_margin: f64,
     /// Once the search is past `reacquire_distance`, it moves faster than the approach by this many
@@ -74,7 +76,13 @@ impl ContactParams {
         non_negative("contact.retract_distance", self.retract_distance)?;
         non_negative("contact.bounce_time", self.bounce_time)?;
         positive("contact.strong_contact", self.strong_contact)?;
-        non_negative("contact.reacquire_margin", self.reacquire_margin)?;
+        // `inf` is a margin: the whole search is gentle.
+        if self.reacquire_margin.is_nan() || self.reacquire_margin < 0.0 {
+            return Err(format!(
+                "contact.reacquire_margin must be >= 0 (inf: the whole search is gentle), got {}",
+                self.reacquire_margin
+            ));
+        }
         non_negative("contact.reacquire_outrun", self.reacquire_outrun)?;
         if self.lift_force >= self.contact_force {
             return Err(format!(

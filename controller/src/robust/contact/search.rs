@@ -12,8 +12,11 @@
 //! transient, B8): the commands that catch up with a retreating surface in time (B3: 1 mm in 50 ms on
 //! P2, whose delay alone is 12 ms) are in the delay line before the tool has moved at all, so a surface
 //! found close by is pressed by all of them. `reacquire_margin` trades one for the other: within
-//! `reacquire_margin·f_r/k̂_c` of the position where contact was lost the search moves at the speed
-//! that stops within `2·f_r`, which costs a surface that went away about `reacquire_margin·T_s/2`.
+//! `reacquire_margin·f_r/k̂_c` of the position where contact was lost the search moves at the gentle
+//! speed, which stops within `2·f_r` counting what the force reaches before the contact is certainly
+//! seen (one raw sample at the strong threshold), and costs a surface that went away about
+//! `reacquire_margin·T_s/2`. With `reacquire_margin = inf` (the `robust-gentle` tuning) every speed
+//! of the search towards a surface not found yet is gentle.
 
 use super::{ContactMachine, Thresholds};
 use crate::law::ContactState;
@@ -32,6 +35,9 @@ pub struct Speeds {
     pub approach: f64,
     /// Search near where contact was lost: stops within twice the set-point, m/s.
     pub near: f64,
+    /// Search within `margin`: stops within twice the set-point counting what the force reaches
+    /// before the contact is certainly seen (the approach's speed where seeing it takes more), m/s.
+    pub gentle: f64,
     /// Fast search after a loss of contact, farther on: stops below the force limit, m/s.
     pub reacquire: f64,
     /// How far beyond the position where contact was lost the search is `near`, m.
@@ -42,23 +48,37 @@ pub struct Speeds {
 
 impl ContactMachine {
     /// Speeds for stiffness estimate `k` (N/m) known to relative deviation `k_sd`, set-point `f_r`
-    /// (N) and `limit` (N: the force limit less what the force may reach before a contact is
-    /// certainly seen, one raw sample at `strong`): the approach and the search near the lost contact
-    /// no faster than the cell stops within `2·f_r` at `k`, the fast search no faster than it stops
-    /// within `limit` at `k` `TRIP_CONFIDENCE` deviations stiffer ([`Stopping`]).
-    pub fn speeds(&self, k: f64, k_sd: f64, f_r: f64, limit: f64, stop: &Stopping) -> Speeds {
+    /// (N), force limit `max_force` (N) and `seen` (N: what the force may reach before a contact is
+    /// certainly seen, one raw sample at the strong threshold): the approach and the search near the
+    /// lost contact no faster than the cell stops within `2·f_r` at `k`; the gentle search and the
+    /// fast search no faster than it stops within `2·f_r − seen` and `max_force − seen` at `k`
+    /// `TRIP_CONFIDENCE` deviations stiffer (bounds, not targets; the gentle one at the approach's
+    /// speed where `seen` is more than `2·f_r`: under noise whose strong threshold is beyond it)
+    /// ([`Stopping`]).
+    pub fn speeds(
+        &self,
+        k: f64,
+        k_sd: f64,
+        f_r: f64,
+        max_force: f64,
+        seen: f64,
+        stop: &Stopping,
+    ) -> Speeds {
         let c = &self.p;
         let k_trip = k * (1.0 + TRIP_CONFIDENCE * k_sd.max(0.0));
-        let gentle = 2.0 * f_r.max(c.contact_force);
-        let approach = stop.speed_within(gentle, k, c.approach_speed);
-        let near = stop
-            .speed_within(gentle, k, c.reacquire_speed)
-            .max(approach);
+        let twice = 2.0 * f_r.max(c.contact_force);
+        let approach = stop.speed_within(twice, k, c.approach_speed);
+        let near = stop.speed_within(twice, k, c.reacquire_speed).max(approach);
         Speeds {
             approach,
             near,
+            gentle: if twice > seen {
+                stop.speed_within(twice - seen, k_trip, c.reacquire_speed)
+            } else {
+                approach
+            },
             reacquire: stop
-                .speed_within(limit, k_trip, c.reacquire_speed)
+                .speed_within(max_force - seen, k_trip, c.reacquire_speed)
                 .max(near),
             margin: c.reacquire_margin * f_r.max(c.contact_force) / k.max(1e-12),
             penetration: f_r.max(c.contact_force) / k.max(1e-12),
@@ -152,17 +172,21 @@ impl ContactMachine {
                 // turned; at the seen speed, bounded only by the fast search, it hit at 18 N; bounded
                 // by the gentle speed alone, a stiff surface receding faster than that was never
                 // caught: f_r 2 N on 500 kN/m on P2 receding at 0.79 mm/s, fault 5).
+                // Within the margin beyond the lost contact, what stops within 2·f_r is the gentle
+                // speed, the detection counted.
+                let gentle = sp.margin > 0.0 && u < self.x_lost + sp.margin;
+                let near = if gentle { sp.gentle } else { sp.near };
                 let speed = if u < self.x_lost - sp.penetration {
                     sp.reacquire
                 } else if self.travelled >= c.reacquire_distance {
-                    let slow = if self.slow { sp.approach } else { sp.near };
+                    let slow = if self.slow { sp.approach } else { near };
                     let chase =
-                        (sp.approach + c.reacquire_outrun * self.v_seen).min(sp.near + self.v_seen);
+                        (sp.approach + c.reacquire_outrun * self.v_seen).min(near + self.v_seen);
                     slow.max(sp.approach + c.reacquire_outrun * self.v_lost)
                         .max(chase)
                         .min(sp.reacquire)
-                } else if sp.margin > 0.0 && u < self.x_lost + sp.margin {
-                    sp.near
+                } else if gentle {
+                    sp.gentle
                 } else {
                     sp.reacquire
                 };

@@ -29,6 +29,7 @@ const TH: Thresholds = Thresholds {
 const SP: Speeds = Speeds {
     approach: 0.002,
     near: 0.0089,
+    gentle: 0.0062,
     reacquire: 0.05,
     margin: 0.0001,
     penetration: 0.0001,
@@ -109,18 +110,18 @@ fn thresholds_scale_with_set_point_and_noise_and_speeds_with_stiffness() {
     // command reverses within a cycle), 60 N at 48 mm/s (54 without the lag); on 500 kN/m 1.25 and
     // 7.5 mm/s. 5 N is 71 µm in.
     let (_, stop) = crate::robust::stopping::tests::cell(0.004, 0.012);
-    let sp = m.speeds(70_000.0, 0.0, 5.0, 60.0, &stop);
+    let sp = m.speeds(70_000.0, 0.0, 5.0, 60.0, 0.0, &stop);
     assert_eq!(sp.approach, 0.002);
     assert_eq!(sp.near, stop.speed_within(10.0, 70_000.0, 1.0), "{sp:?}");
     assert!((0.047..0.049).contains(&sp.reacquire), "{sp:?}");
     assert!((sp.near - 10.0 / 1120.0).abs() < 1e-6, "{sp:?}");
     assert!((sp.margin - 5.0 / 70_000.0).abs() < 1e-15, "{sp:?}");
-    let stiff = m.speeds(500_000.0, 0.0, 5.0, 60.0, &stop);
+    let stiff = m.speeds(500_000.0, 0.0, 5.0, 60.0, 0.0, &stop);
     assert!(stiff.approach == stiff.near && (stiff.near - 0.00125).abs() < 1e-6);
     assert!((stiff.reacquire - 0.0075).abs() < 1e-6, "{stiff:?}");
     // A `k̂_c` known to 2 %: the fast search stops within the limit on a surface 6 % stiffer; the
     // approach and the near search stay at the estimate's (2·f_r is a target, the limit a trip).
-    let unsure = m.speeds(70_000.0, 0.02, 5.0, 60.0, &stop);
+    let unsure = m.speeds(70_000.0, 0.02, 5.0, 60.0, 0.0, &stop);
     let sure_of_stiffer = stop.speed_within(60.0, 70_000.0 * 1.06, 1.0);
     assert!(
         (unsure.reacquire - sure_of_stiffer).abs() < 1e-12,
@@ -129,6 +130,17 @@ fn thresholds_scale_with_set_point_and_noise_and_speeds_with_stiffness() {
     assert!(
         unsure.reacquire < sp.reacquire && (unsure.near, unsure.approach) == (sp.near, sp.approach)
     );
+    // The gentle search counts what the force reaches before the contact is certainly seen: with a
+    // raw sample at 3 N the contact is seen, 7 N of the 10 are left for the stop (6.2 mm/s); the fast
+    // search's budget loses the same 3 N. Under noise whose strong threshold (12 N) leaves nothing of
+    // 2·f_r, the gentle search is no slower than the approach.
+    let seen = m.speeds(70_000.0, 0.0, 5.0, 60.0, 3.0, &stop);
+    assert_eq!(seen.gentle, stop.speed_within(7.0, 70_000.0, 1.0));
+    assert!((0.006..0.0065).contains(&seen.gentle), "{seen:?}");
+    assert_eq!(seen.reacquire, stop.speed_within(57.0, 70_000.0, 1.0));
+    assert_eq!((seen.approach, seen.near), (sp.approach, sp.near));
+    let noisy = m.speeds(70_000.0, 0.0, 5.0, 60.0, 12.0, &stop);
+    assert_eq!(noisy.gentle, noisy.approach);
 }
 
 /// One landing step of 1 ms as the law steps it: the force's touch, then the command.
@@ -165,11 +177,11 @@ fn the_search_is_bounded_near_the_lost_contact_and_fast_beyond_it() {
         speeds.push(((u - 0.01) * 1e6, (next - u) / 1e-3));
         u = next;
     }
-    // Within 100 µm of the lost contact at the speed that stops within 2·f_r, then fast, and after
-    // `reacquire_distance` at the speed that stops within 2·f_r again.
+    // Within 100 µm of the lost contact at the gentle speed, then fast, and after
+    // `reacquire_distance` at the speed that stops within 2·f_r.
     for &(at_um, v) in &speeds {
         let want = if at_um < 100.0 - 1e-6 {
-            SP.near
+            SP.gentle
         } else if at_um < 2000.0 - 1e-6 {
             SP.reacquire
         } else {
@@ -181,6 +193,53 @@ fn the_search_is_bounded_near_the_lost_contact_and_fast_beyond_it() {
         );
     }
     assert!(speeds.iter().any(|&(_, v)| (v - SP.reacquire).abs() < 1e-9));
+}
+
+#[test]
+fn an_infinite_margin_makes_the_whole_search_gentle() {
+    // `reacquire_margin = inf` (the `robust-gentle` tuning): gentle from the lost contact on, past
+    // the fast distance too; behind the lost contact the tool was there, and the search is fast.
+    let mut m = lost_at(0.01);
+    m.set_params(ContactParams {
+        reacquire_margin: f64::INFINITY,
+        ..params()
+    });
+    let sp = Speeds {
+        margin: f64::INFINITY,
+        ..SP
+    };
+    let mut u = 0.0095;
+    let mut speeds = Vec::new();
+    while m.state() == ContactState::Reacquire && u < 0.0135 {
+        let next = m.command(u, u, &sp, 0.1, 1e-3).unwrap();
+        speeds.push((u, (next - u) / 1e-3));
+        u = next;
+    }
+    for &(at, v) in &speeds {
+        let want = if at < 0.01 - SP.penetration {
+            SP.reacquire
+        } else {
+            SP.gentle
+        };
+        assert!((v - want).abs() < 1e-9, "{v} m/s at {at} m, want {want}");
+    }
+    assert!(
+        speeds.iter().any(|&(at, _)| at > 0.0125),
+        "past the fast distance"
+    );
+    assert!(
+        ContactParams {
+            reacquire_margin: f64::INFINITY,
+            ..params()
+        }
+        .validate()
+        .is_ok()
+    );
+    let nan = ContactParams {
+        reacquire_margin: f64::NAN,
+        ..params()
+    };
+    assert!(nan.validate().unwrap_err().contains("reacquire_margin"));
 }
 
 #[test]
@@ -372,11 +431,18 @@ fn a_surface_seen_receding_is_chased_at_its_speed_over_the_gentle_one() {
     );
     // A bounce: lost again at once.
     while m.step(&at(x, 0.0), &TH, 60.0, 0.0, 1e-3) != Transition::LiftOff {}
-    let u = m.command(x, x, &SP, 0.1, 1e-3).unwrap();
-    let v = (u - x) / 1e-3;
+    // Without a margin (the shipped tuning) over the speed that stops within 2·f_r; within a margin
+    // over the gentle speed.
     let v_seen = 0.001 / 0.051;
-    assert!(
-        v > SP.near + 0.9 * v_seen && v <= SP.near + v_seen + 1e-9,
-        "{v} m/s"
-    );
+    for (margin, base) in [(0.0, SP.near), (SP.margin, SP.gentle)] {
+        let mut m = m;
+        let u = m
+            .command(x, x, &Speeds { margin, ..SP }, 0.1, 1e-3)
+            .unwrap();
+        let v = (u - x) / 1e-3;
+        assert!(
+            v > base + 0.9 * v_seen && v <= base + v_seen + 1e-9,
+            "margin {margin}: {v} m/s"
+        );
+    }
 }
