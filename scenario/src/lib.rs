@@ -7,3 +7,4 @@ pub mod metrics;
 pub mod record;
 pub mod run;
 pub mod scenario;
+pub mod tuning;

@@ -4,11 +4,13 @@
 use std::path::Path;
 
 use anyhow::{Context, Result, anyhow, bail};
-use controller::{Overrides, Tuning};
+use controller::Overrides;
 use serde::{Deserialize, Serialize};
 use sim::{ContactPlant, Event, InnerLoopModel, Program, Schedule, SensorParams, SurfaceForm};
 
-mod builtin {
+pub use crate::tuning::{builtin_tuning_names, load_tuning, tuning_from_toml};
+
+pub(crate) mod builtin {
     include!(concat!(env!("OUT_DIR"), "/builtin.rs"));
 }
 
@@ -350,41 +352,6 @@ impl Scenario {
 /// Names of the built-in scenarios.
 pub fn builtin_names() -> Vec<&'static str> {
     builtin::SCENARIOS.iter().map(|(n, _)| *n).collect()
-}
-
-/// Load a built-in tuning by name or a TOML file by path, and validate it.
-pub fn load_tuning(spec: &str) -> Result<Tuning> {
-    let (origin, text) = if spec.ends_with(".toml") || spec.contains('/') {
-        let text = std::fs::read_to_string(spec)
-            .with_context(|| format!("cannot read tuning file {spec}"))?;
-        (spec.to_string(), text)
-    } else {
-        let (_, t) = builtin::TUNINGS
-            .iter()
-            .find(|(n, _)| *n == spec)
-            .ok_or_else(|| {
-                anyhow!(
-                    "unknown tuning {spec:?}; built-in: {} (or give a .toml file)",
-                    builtin_tuning_names().join(", ")
-                )
-            })?;
-        (spec.to_string(), t.to_string())
-    };
-    tuning_from_toml(&text, &origin)
-}
-
-/// Parse and validate a tuning's TOML text; `origin` names it in errors.
-pub fn tuning_from_toml(text: &str, origin: &str) -> Result<Tuning> {
-    let t: Tuning =
-        toml::from_str(text).map_err(|e| anyhow!("{origin}: {}", one_line(&e.to_string())))?;
-    t.validate()
-        .map_err(|e| anyhow!("{origin}: invalid tuning: {e}"))?;
-    Ok(t)
-}
-
-/// Names of the built-in tunings.
-pub fn builtin_tuning_names() -> Vec<&'static str> {
-    builtin::TUNINGS.iter().map(|(n, _)| *n).collect()
 }
 
 /// toml's errors span several lines with a source excerpt; keep the message and the position.
