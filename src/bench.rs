@@ -155,13 +155,14 @@ pub const WIRES: &str = "over the default wires: KUKA RSI driver ↔ simulated K
 
 /// The table as text.
 pub fn table(rows: &[BenchRow]) -> String {
+    let w = rows.iter().map(|r| r.tuning.len()).fold(7, usize::max);
     let mut s = format!(
-        "{:<22} {:<18} {:<7} {:<20} {:<12} {:>12}  {:<10} {}\n",
+        "{:<22} {:<18} {:<w$} {:<20} {:<12} {:>12}  {:<10} {}\n",
         "scenario", "plant", "tuning", "metric", "window s", "value", "target", "verdict"
     );
     for r in rows {
         s.push_str(&format!(
-            "{:<22} {:<18} {:<7} {:<20} {:<12} {:>12.4}  {:<10} {}\n",
+            "{:<22} {:<18} {:<w$} {:<20} {:<12} {:>12.4}  {:<10} {}\n",
             r.scenario,
             r.plant,
             r.tuning,
@@ -175,15 +176,16 @@ pub fn table(rows: &[BenchRow]) -> String {
     for (name, what) in ELSEWHERE {
         s.push_str(&format!("{name:<22} {what}\n"));
     }
-    let of = |t: &str| {
-        let v: Vec<&BenchRow> = rows.iter().filter(|r| r.tuning == t).collect();
-        (v.iter().filter(|r| r.pass).count(), v.len())
-    };
-    for t in ["robust", "paper"] {
-        let (p, n) = of(t);
-        if n > 0 {
-            s.push_str(&format!("{t}: {p} of {n} targets met\n"));
+    let mut tunings: Vec<&str> = Vec::new();
+    for r in rows {
+        if !tunings.contains(&r.tuning.as_str()) {
+            tunings.push(&r.tuning);
         }
+    }
+    for t in tunings {
+        let v: Vec<&BenchRow> = rows.iter().filter(|r| r.tuning == t).collect();
+        let p = v.iter().filter(|r| r.pass).count();
+        s.push_str(&format!("{t}: {p} of {} targets met\n", v.len()));
     }
     s
 }

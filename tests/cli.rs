@@ -221,3 +221,64 @@ fn bench_scenarios_prints_one_table_and_writes_the_plots() {
         2
     );
 }
+
+/// The re-acquire search is the integrator's choice, and `bench-scenarios` shows what it costs over
+/// the default wires: the shipped fast search meets B3's 50 ms contact-loss target on the 1 mm
+/// retreat on P1 and P2, the gentle one (`robust-gentle`, which stops within 2·f_r) does not, and
+/// `--check` says so; a tuning file that extends another runs the same way.
+#[test]
+fn bench_scenarios_compares_the_fast_and_the_gentle_search() {
+    let dir = tempfile::tempdir().unwrap();
+    let loss = |s: &str, tuning: &str| -> Vec<(f64, bool)> {
+        s.lines()
+            .filter(|l| l.starts_with("b03a-surface-retreat") && l.contains("contact_loss_time"))
+            .filter(|l| l.split_whitespace().nth(2) == Some(tuning))
+            .map(|l| {
+                let w: Vec<&str> = l.split_whitespace().collect();
+                (w[w.len() - 4].parse().unwrap(), w[w.len() - 1] == "pass")
+            })
+            .collect()
+    };
+    let fast = forcecell(
+        &[
+            "bench-scenarios",
+            "b03a",
+            "--out",
+            "b",
+            "--tuning",
+            "robust",
+            "--check",
+        ],
+        dir.path(),
+    );
+    assert!(fast.status.success(), "{}", stderr(&fast));
+    let fast = loss(&String::from_utf8_lossy(&fast.stdout), "robust");
+    assert_eq!(fast.len(), 2, "P1 and P2");
+    assert!(fast.iter().all(|&(t, pass)| pass && t <= 0.05), "{fast:?}");
+    std::fs::write(
+        dir.path().join("mine.toml"),
+        "extends = \"robust-gentle\"\nname = \"mine\"\n",
+    )
+    .unwrap();
+    for tuning in ["robust-gentle", "mine.toml"] {
+        let o = forcecell(
+            &[
+                "bench-scenarios",
+                "b03a",
+                "--out",
+                "b",
+                "--tuning",
+                tuning,
+                "--check",
+            ],
+            dir.path(),
+        );
+        assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+        let name = tuning.trim_end_matches(".toml");
+        let gentle = loss(&String::from_utf8_lossy(&o.stdout), name);
+        assert_eq!(gentle.len(), 2, "P1 and P2");
+        for (&(g, pass), &(f, _)) in gentle.iter().zip(&fast) {
+            assert!(!pass && g > 0.05 && g > f, "gentle {g} s, fast {f} s");
+        }
+    }
+}
