@@ -16,6 +16,9 @@ use crate::scenario::{builtin, one_line};
 /// How many tunings an `extends` chain may hold: a loop of files ends here with the chain named.
 pub const MAX_EXTENDS: usize = 8;
 
+/// The largest tuning file read, bytes (a device or a wrong path is an error, not a hang).
+pub const MAX_FILE: u64 = 1 << 20;
+
 /// Load a built-in tuning by name or a TOML file by path (anything ending in `.toml` or containing a
 /// path separator), resolve its `extends`, and validate it.
 pub fn load_tuning(spec: &str) -> Result<Tuning> {
@@ -67,6 +70,14 @@ impl Source {
                 Some(d) if Path::new(spec).is_relative() => d.join(spec),
                 _ => PathBuf::from(spec),
             };
+            let meta = std::fs::metadata(&path)
+                .with_context(|| format!("cannot read tuning file {}", path.display()))?;
+            if !meta.is_file() || meta.len() > MAX_FILE {
+                bail!(
+                    "{} is no tuning file (a regular file of at most {MAX_FILE} bytes)",
+                    path.display()
+                );
+            }
             let text = std::fs::read_to_string(&path)
                 .with_context(|| format!("cannot read tuning file {}", path.display()))?;
             let dir = path.parent().map(Path::to_path_buf);
@@ -226,6 +237,8 @@ mod tests {
                 "unknown tuning \"robustt\"",
             ),
             ("extends = 3\nname = \"x\"\n", "extends must name a tuning"),
+            ("extends = \"/dev/zero\"\nname = \"x\"\n", "no tuning file"),
+            ("extends = \"/\"\nname = \"x\"\n", "no tuning file"),
             (
                 "extends = \"robust\"\nname = \"x\"\n[law.contact]\nreacquire_margn = 1.0\n",
                 "reacquire_margn",
