@@ -40,7 +40,7 @@ pub struct Speeds {
     pub gentle: f64,
     /// Fast search after a loss of contact, farther on: stops below the force limit, m/s.
     pub reacquire: f64,
-    /// How far beyond the position where contact was lost the search is `near`, m.
+    /// How far beyond the position where contact was lost the search is `gentle`, m.
     pub margin: f64,
     /// One set-point penetration `f_r/k̂_c`, m.
     pub penetration: f64,
