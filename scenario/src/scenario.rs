@@ -222,21 +222,10 @@ impl Scenario {
     /// Load a built-in scenario by name, or a TOML file by path (anything ending in `.toml` or
     /// containing a path separator).
     pub fn load(spec: &str) -> Result<Self> {
-        if spec.ends_with(".toml") || spec.contains('/') {
-            let text = std::fs::read_to_string(Path::new(spec))
-                .with_context(|| format!("cannot read scenario file {spec}"))?;
-            return Self::from_toml(&text, spec);
+        if names_a_file(spec) {
+            return Self::from_toml(&read_toml_file(Path::new(spec), "scenario")?, spec);
         }
-        let (_, text) = builtin::SCENARIOS
-            .iter()
-            .find(|(n, _)| *n == spec)
-            .ok_or_else(|| {
-                anyhow!(
-                    "unknown scenario {spec:?}; built-in: {} (or give a .toml file)",
-                    builtin_names().join(", ")
-                )
-            })?;
-        Self::from_toml(text, spec)
+        Self::from_toml(builtin_text(builtin::SCENARIOS, "scenario", spec)?, spec)
     }
 
     /// Every built-in scenario, parsed.
@@ -349,6 +338,47 @@ impl Scenario {
     }
 }
 
+/// The largest scenario or tuning file read, bytes (a device or a wrong path is an error, not a hang).
+pub const MAX_FILE: u64 = 1 << 20;
+
+/// Whether `spec` names a file (it ends in `.toml` or holds a path separator), not a built-in.
+pub(crate) fn names_a_file(spec: &str) -> bool {
+    spec.ends_with(".toml") || spec.contains('/')
+}
+
+/// A `kind` ("scenario", "tuning") file's text: a regular file of at most [`MAX_FILE`] bytes.
+pub(crate) fn read_toml_file(path: &Path, kind: &str) -> Result<String> {
+    let meta = std::fs::metadata(path)
+        .with_context(|| format!("cannot read {kind} file {}", path.display()))?;
+    if !meta.is_file() || meta.len() > MAX_FILE {
+        bail!(
+            "{} is no {kind} file (a regular file of at most {MAX_FILE} bytes)",
+            path.display()
+        );
+    }
+    std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read {kind} file {}", path.display()))
+}
+
+/// The text of the built-in `kind` named `spec` in `table`, or an error that lists the names.
+pub(crate) fn builtin_text(
+    table: &'static [(&'static str, &'static str)],
+    kind: &str,
+    spec: &str,
+) -> Result<&'static str> {
+    table
+        .iter()
+        .find(|(n, _)| *n == spec)
+        .map(|(_, t)| *t)
+        .ok_or_else(|| {
+            let names: Vec<&str> = table.iter().map(|(n, _)| *n).collect();
+            anyhow!(
+                "unknown {kind} {spec:?}; built-in: {} (or give a .toml file)",
+                names.join(", ")
+            )
+        })
+}
+
 /// Names of the built-in scenarios.
 pub fn builtin_names() -> Vec<&'static str> {
     builtin::SCENARIOS.iter().map(|(n, _)| *n).collect()
@@ -401,5 +431,10 @@ mod tests {
         assert!(e.contains("p9") && e.contains("p2"), "{e}");
         let e = format!("{:#}", load_tuning("nope").unwrap_err());
         assert!(e.contains("paper"), "{e}");
+        // A device or a directory is no file to read.
+        for path in ["/dev/zero", "/tmp/"] {
+            let e = format!("{:#}", Scenario::load(path).unwrap_err());
+            assert!(e.contains("no scenario file"), "{e}");
+        }
     }
 }

@@ -11,13 +11,10 @@ use anyhow::{Context, Result, anyhow, bail};
 use controller::Tuning;
 use toml::{Table, Value};
 
-use crate::scenario::{builtin, one_line};
+use crate::scenario::{builtin, builtin_text, names_a_file, one_line, read_toml_file};
 
 /// How many tunings an `extends` chain may hold: a loop of files ends here with the chain named.
 pub const MAX_EXTENDS: usize = 8;
-
-/// The largest tuning file read, bytes (a device or a wrong path is an error, not a hang).
-pub const MAX_FILE: u64 = 1 << 20;
 
 /// Load a built-in tuning by name or a TOML file by path (anything ending in `.toml` or containing a
 /// path separator), resolve its `extends`, and validate it.
@@ -65,40 +62,20 @@ struct Source {
 impl Source {
     /// A built-in by name or a file by path (relative to `dir` when given).
     fn find(spec: &str, dir: Option<&Path>) -> Result<Self> {
-        if spec.ends_with(".toml") || spec.contains('/') {
+        if names_a_file(spec) {
             let path = match dir {
                 Some(d) if Path::new(spec).is_relative() => d.join(spec),
                 _ => PathBuf::from(spec),
             };
-            let meta = std::fs::metadata(&path)
-                .with_context(|| format!("cannot read tuning file {}", path.display()))?;
-            if !meta.is_file() || meta.len() > MAX_FILE {
-                bail!(
-                    "{} is no tuning file (a regular file of at most {MAX_FILE} bytes)",
-                    path.display()
-                );
-            }
-            let text = std::fs::read_to_string(&path)
-                .with_context(|| format!("cannot read tuning file {}", path.display()))?;
-            let dir = path.parent().map(Path::to_path_buf);
             return Ok(Self {
                 origin: path.display().to_string(),
-                text,
-                dir,
+                text: read_toml_file(&path, "tuning")?,
+                dir: path.parent().map(Path::to_path_buf),
             });
         }
-        let (_, text) = builtin::TUNINGS
-            .iter()
-            .find(|(n, _)| *n == spec)
-            .ok_or_else(|| {
-                anyhow!(
-                    "unknown tuning {spec:?}; built-in: {} (or give a .toml file)",
-                    builtin_tuning_names().join(", ")
-                )
-            })?;
         Ok(Self {
             origin: spec.to_string(),
-            text: text.to_string(),
+            text: builtin_text(builtin::TUNINGS, "tuning", spec)?.to_string(),
             dir: None,
         })
     }
