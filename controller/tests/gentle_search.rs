@@ -11,26 +11,22 @@
 
 mod common;
 
-use common::{CELLS, cell, reach_time};
+use common::{CELLS, cell, config, reach_time, tuning_named};
 use controller::{LawConfig, Tuning};
 use proptest::prelude::*;
 use scenario::run::run;
-use scenario::scenario::load_tuning;
 use sim::InnerLoopModel;
 
-/// The shipped gentle tuning at set-point `f_r` (the force limit follows it, as in `ranges.rs`).
+/// The shipped gentle tuning at set-point `f_r`.
 fn gentle(f_r: f64) -> Tuning {
-    let mut t = load_tuning("robust-gentle").expect("shipped tuning");
-    let LawConfig::Robust(p) = &mut t.law else {
+    let t = tuning_named("robust-gentle", f_r);
+    let LawConfig::Robust(p) = &t.law else {
         panic!("robust")
     };
     assert!(
         p.contact.reacquire_margin.is_infinite(),
         "the gentle tuning"
     );
-    p.f_r = f_r;
-    p.limits.max_force = p.limits.max_force.max(3.0 * f_r);
-    t.loop_cfg.process.max_force = p.limits.max_force;
     t
 }
 
@@ -72,12 +68,7 @@ fn retreat(f_r: f64, k_c: f64, delta: f64, plant: &InnerLoopModel) -> Result<f64
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig {
-        cases: std::env::var("FORCECELL_RANGE_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(200),
-        rng_seed: proptest::test_runner::RngSeed::Fixed(0x0011_2026),
-        failure_persistence: None,
-        ..ProptestConfig::default()
-    })]
+    #![proptest_config(config(200))]
 
     /// B3's retreat carried over, searched gently: see [`retreat`].
     #[test]

@@ -9,7 +9,8 @@
 mod common;
 
 use common::{
-    CELLS, cell, change_bound, floor, floor_after, mean_error, reach_time, sine, stiffness, tuning,
+    CELLS, cell, change_bound, config, env_or, floor, floor_after, mean_error, reach_time, sine,
+    stiffness, tuning,
 };
 use controller::LawConfig;
 use proptest::prelude::*;
@@ -117,26 +118,6 @@ use sim::InnerLoopModel;
 //   touch-down now peaks at 23.9 N, 21.0 N on 100 kN/m. The touch-down goes on at approach speed
 //   until `k̂_c` is identified; before that, f_r 36.6 N on 354 kN/m on P2 hit 115 N against 84.5 N,
 //   now 37 N.)
-
-/// `cases` seeded cases, or as many as `FORCECELL_RANGE_CASES` says (a deeper search than CI's);
-/// `FORCECELL_RANGE_SHRINK=0` reports a failing case as drawn, not shrunk.
-fn config(cases: u32) -> ProptestConfig {
-    ProptestConfig {
-        cases: env_or("FORCECELL_RANGE_CASES", cases),
-        rng_seed: proptest::test_runner::RngSeed::Fixed(0x0011_2026),
-        failure_persistence: None,
-        max_shrink_iters: env_or("FORCECELL_RANGE_SHRINK", 1024),
-        ..ProptestConfig::default()
-    }
-}
-
-/// The variable `name` parsed, or `default`.
-fn env_or(name: &str, default: u32) -> u32 {
-    std::env::var(name)
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
 
 // 200 seeded cases each for the touch-down and the stiffness changes (a second of CPU); what more
 // cases find is listed above.

@@ -20,8 +20,15 @@ pub const CELLS: [InnerLoopModel; 3] = [
     },
 ];
 
+/// The shipped robust tuning at set-point `f_r` (N); the force limit, the law's and the loop's,
+/// follows the set-point (a 60 N limit means nothing at 50 N).
 pub fn tuning(f_r: f64) -> Tuning {
-    let mut t = load_tuning("robust").expect("shipped tuning");
+    tuning_named("robust", f_r)
+}
+
+/// The shipped tuning `name` at set-point `f_r`, as [`tuning`].
+pub fn tuning_named(name: &str, f_r: f64) -> Tuning {
+    let mut t = load_tuning(name).expect("shipped tuning");
     let LawConfig::Robust(p) = &mut t.law else {
         panic!("robust")
     };
@@ -29,6 +36,26 @@ pub fn tuning(f_r: f64) -> Tuning {
     p.limits.max_force = p.limits.max_force.max(3.0 * f_r);
     t.loop_cfg.process.max_force = p.limits.max_force;
     t
+}
+
+/// `cases` seeded cases, or as many as `FORCECELL_RANGE_CASES` says (a deeper search than CI's);
+/// `FORCECELL_RANGE_SHRINK=0` reports a failing case as drawn, not shrunk.
+pub fn config(cases: u32) -> ProptestConfig {
+    ProptestConfig {
+        cases: env_or("FORCECELL_RANGE_CASES", cases),
+        rng_seed: proptest::test_runner::RngSeed::Fixed(0x0011_2026),
+        failure_persistence: None,
+        max_shrink_iters: env_or("FORCECELL_RANGE_SHRINK", 1024),
+        ..ProptestConfig::default()
+    }
+}
+
+/// The variable `name` parsed, or `default`.
+pub fn env_or(name: &str, default: u32) -> u32 {
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
 }
 
 /// A scenario: start 1 mm short of a surface at 10 mm.
