@@ -780,7 +780,9 @@ fn census<S: Strategy>(
 /// inner loop's lag `τ` counts in the floor too (8, all pressed: a surface approaching at `v` gains
 /// `k_c·v·τ` more while the tool catches up with its command). Then, with a line that misses a clean
 /// force far beyond its noise no stiffness change, 36 faults (0 / 0 / 0 / 11 / 25), `k̂_c` off 0,
-/// lossy 29, RMS p90 0.0970.
+/// lossy 29, RMS p90 0.0970. Since a steady contact's lift-off threshold rises with the measured
+/// noise (which a moving surface's force shows too), 37 (0 / 0 / 0 / 11 / 26), lossy 28, RMS p90
+/// 0.0965: one more run at 500 kN/m starting towards the tool ends on a fault.
 #[test]
 #[ignore = "1080 closed-loop runs: the known limits' figures, not a criterion"]
 fn moving_surfaces() {
@@ -790,7 +792,7 @@ fn moving_surfaces() {
         (30e3, 0, 0, 0, 0.0),
         (100e3, 0, 0, 1, 0.0),
         (300e3, 11, 0, 10, 1.93),
-        (500e3, 25, 0, 18, 2.78),
+        (500e3, 26, 0, 17, 2.78),
     ];
     // The RMS error after 3 s over the set-point of every run without a fault, its 90th percentile
     // measured.

@@ -196,10 +196,17 @@ impl ContactMachine {
             ContactState::Contact => {
                 self.in_contact += dt;
                 self.evidence.raw(s.f, th);
-                if s.f < th.lift {
+                // A steady contact's samples are held at the set-point: a lost one's are noise about
+                // zero, below a threshold raised with the noise (`Thresholds::lift_off`).
+                let (lift, samples) = if self.steady() && !self.landing {
+                    (th.lift_off, th.off_samples)
+                } else {
+                    (th.lift, th.samples)
+                };
+                if s.f < lift {
                     self.below += dt;
                     self.below_samples += 1;
-                    if self.below >= c.lift_time && self.below_samples >= th.samples {
+                    if self.below >= c.lift_time && self.below_samples >= samples {
                         let shown = self.evidence.shown();
                         if self.landing && (self.in_contact < c.bounce_time || !shown) {
                             // A touch-down lost before its stiffness was identified and shown by

@@ -24,6 +24,8 @@ const TH: Thresholds = Thresholds {
     strong: 3.0,
     lift: 0.3,
     samples: 2,
+    lift_off: 0.3,
+    off_samples: 2,
     noise: 0.0,
 };
 const SP: Speeds = Speeds {
@@ -101,6 +103,24 @@ fn thresholds_scale_with_set_point_and_noise_and_speeds_with_stiffness() {
     assert!(
         (noisy.contact - 1.6).abs() < 1e-12 && noisy.samples > 3,
         "{noisy:?}"
+    );
+    // A steady contact lost: its samples are noise about zero, and the lift-off threshold stands
+    // two of the noise's deviations above `lift`, within a quarter of the set-point and four
+    // deviations below it (here those, 1 N: three in a row below it are a lost contact 60 % of the
+    // time, a hold at 5 N ~10⁻¹³). At f_r 39 N under σ 0.9 N: 2.1 N, three samples (six below
+    // 0.3 N before). At f_r 2 N under σ 1 N the hold's own noise reaches zero: `lift`, unchanged.
+    assert!(
+        (noisy.lift - 0.48).abs() < 1e-12 && noisy.lift_off == 1.0,
+        "{noisy:?}"
+    );
+    assert_eq!((noisy.samples, noisy.off_samples), (5, 3), "{noisy:?}");
+    let big = m.thresholds(39.0, 0.9, 0.2);
+    assert!((big.lift_off - 2.1).abs() < 1e-12, "{big:?}");
+    assert_eq!((big.samples, big.off_samples), (5, 3), "{big:?}");
+    let corner = m.thresholds(2.0, 1.0, 0.2);
+    assert_eq!(
+        (corner.lift_off, corner.off_samples),
+        (corner.lift, corner.samples)
     );
     let s = [1.0, 0.0].map(|s| m.thresholds(2.0, s, 0.73 * s).samples);
     assert_eq!(s, [7, 2], "f_r 2 N, σ 1 N: 7 in a row (was 4)");
@@ -389,6 +409,8 @@ fn a_held_contact_shows_in_the_mean_where_the_threshold_is_beyond_the_set_point(
         strong: 12.0,
         lift: 0.72,
         samples: 7,
+        lift_off: 0.72,
+        off_samples: 7,
         noise: 1.0,
     };
     let mut m = ContactMachine::new(params());
@@ -445,4 +467,41 @@ fn a_surface_seen_receding_is_chased_at_its_speed_over_the_gentle_one() {
             "margin {margin}: {v} m/s"
         );
     }
+}
+
+/// A steady contact lost under noise: its samples are noise about zero, which stands above `lift`
+/// as often as not. Under σ 1 N at f_r 5 N these are a lift-off at the sixth, after three in a row
+/// below the steady contact's lift-off threshold (1 N); below `lift` (0.48 N) they never made five,
+/// and the law, still in contact, chased the surface. Right after a contact (a bounce, not steady)
+/// the lift-off still needs `samples` below `lift`.
+#[test]
+fn a_steady_contact_lost_under_noise_is_declared_lost_within_a_few_samples() {
+    let th = ContactMachine::new(params()).thresholds(5.0, 1.0, 0.4);
+    let zero_noise = [0.9, -0.7, 1.1, 0.2, -1.2, 0.8, 1.0, -0.3, 0.6, 1.2];
+    let mut m = ContactMachine::new(params());
+    let held = sig(5.0, 5.0);
+    m.step(&held, &th, 60.0, 0.0, 1e-3);
+    m.identified();
+    for _ in 0..600 {
+        m.step(&held, &th, 60.0, 0.0, 1e-3);
+        land(&mut m, 0.0, 0.0, true, 5.0, 0.004);
+    }
+    assert!(m.steady());
+    let lost_after = zero_noise
+        .iter()
+        .position(|&f| m.step(&sig(f, 1.0), &th, 60.0, 0.0, 1e-3) == Transition::LiftOff);
+    assert_eq!(lost_after, Some(5), "the sixth sample");
+    // Not steady: a contact just made (from the search) is lost only on `samples` below `lift`.
+    let mut m = lost_at(0.0);
+    assert_eq!(
+        m.step(&held, &th, 60.0, 0.0, 1e-3),
+        Transition::Contact {
+            from_approach: false
+        }
+    );
+    assert!(!m.steady());
+    let lost = zero_noise
+        .iter()
+        .any(|&f| m.step(&sig(f, 1.0), &th, 60.0, 0.0, 1e-3) == Transition::LiftOff);
+    assert!(!lost, "{th:?}");
 }
