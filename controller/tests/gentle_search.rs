@@ -109,3 +109,80 @@ fn gentle_retreat_corners() {
         worst.0, worst.1
     );
 }
+
+/// Retreats under sensor noise (ignored: the known limits' figures, asserted no more than measured):
+/// 600 seeded retreats as [`gentle_retreats`] draws them, with σ 0–1 N, under `robust-gentle` and the
+/// shipped `robust`. Under noise the gentle bound is not kept everywhere: where the strong threshold
+/// (`3·max(min(1 N, f_r/2), 4σ)`) is beyond `2·f_r` the search goes at the approach's speed, whose
+/// re-contact that threshold alone exceeds. A steady contact lost under noise far above the lift
+/// force is declared lost on samples below a threshold raised with the noise
+/// ([`controller::robust::contact::LIFT_NOISE`]); below the lift force alone (0.3 N under σ 0.9 N),
+/// it was declared late, and the law, still in contact, chased the surface at the loop's speed (f_r
+/// 39 N, 1.47 mm, P1: 112 N; on the 12 ms cell a trip).
+#[test]
+#[ignore = "1200 closed-loop noisy retreats: the known limits' figures, not a criterion"]
+fn noisy_retreats() {
+    // (tuning, trips, and for the gentle search its overshoots of 2·f_r where the strong threshold is
+    // beyond it and elsewhere) measured; the fast search presses up to its limit by design. Before
+    // the lift-off threshold rose with the noise: gentle 1 trip (61.2 N, f_r 17.3 N on the 12 ms
+    // cell, σ 0.99 N), over 2·f_r 2 and 3 (worst 3.51·f_r), 59 fault 5; robust 2 trips, 8 fault 5.
+    for (name, trips_measured, over_measured) in
+        [("robust-gentle", 0, Some((1, 0))), ("robust", 1, None)]
+    {
+        let mut state: u64 = 0x0011_2026;
+        let mut uniform = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut fault5, mut trips, mut fallback, mut late) = (0, 0, 0, 0);
+        let mut worst = (0.0f64, String::new());
+        for _ in 0..600 {
+            let f_r = 2.0 + 48.0 * uniform();
+            let k_c = (10e3f64.ln() + (500e3f64 / 10e3).ln() * uniform()).exp();
+            let delta = 0.003 * uniform();
+            let plant = &CELLS[((uniform() * 3.0) as usize).min(2)];
+            let noise = uniform();
+            let seed = 1 + (uniform() * 998.0) as u64;
+            let case =
+                format!("f_r {f_r:.1} N, {k_c:.0} N/m, {delta:.5} m, {plant:?}, σ {noise:.2} N");
+            let s = cell(4.0, k_c, 0.0, None, Some((2.0, delta)), noise, seed);
+            let e = scenario::run::run_to_end(&s, plant, &tuning_named(name, f_r)).expect("a law");
+            match e.fault_code {
+                Some(5) => fault5 += 1,
+                Some(_) => {
+                    trips += 1;
+                    println!(
+                        "{name}: {case}: {}",
+                        e.fault.map(|f| f.to_string()).unwrap_or_default()
+                    );
+                }
+                None => {}
+            }
+            let peak = e.run.metrics(2.0, f64::INFINITY).peak_force;
+            if peak > 2.0 * f_r * 1.001 + 0.01 {
+                if 3.0 * (0.5 * f_r).min(1.0).max(4.0 * noise) >= 2.0 * f_r {
+                    fallback += 1;
+                } else {
+                    late += 1;
+                }
+                if peak / f_r > worst.0 {
+                    worst = (peak / f_r, case);
+                }
+            }
+        }
+        println!(
+            "{name}: 600 noisy retreats, {fault5} fault 5, {trips} other faults; over 2·f_r {fallback} \
+             where the strong threshold is beyond it, {late} elsewhere; worst {:.2}·f_r ({})",
+            worst.0, worst.1
+        );
+        assert!(trips <= trips_measured, "{name}: {trips} trips");
+        if let Some((fallback_measured, late_measured)) = over_measured {
+            assert!(
+                fallback <= fallback_measured && late <= late_measured,
+                "{name}: over 2·f_r {fallback} and {late}"
+            );
+        }
+    }
+}
