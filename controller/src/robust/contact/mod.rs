@@ -260,4 +260,4 @@ mod thresholds;
 
 pub use params::ContactParams;
 pub use search::Speeds;
-pub use thresholds::{SIGNIFICANCE, Thresholds};
+pub use thresholds::{LIFT_NOISE, SIGNIFICANCE, Thresholds};
