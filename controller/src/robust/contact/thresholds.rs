@@ -33,10 +33,11 @@ pub const SIGNIFICANCE: f64 = 4.0;
 
 /// Deviations of the raw noise by which a steady contact's lift-off threshold stands above `lift`
 /// (within a quarter of the set-point, and [`SIGNIFICANCE`] deviations below it): a lost contact's
-/// sample, noise about zero, is below it 98 % of the time. Below `lift` alone, under σ 0.9 N with `lift` 0.3 N, a lost contact needed six
-/// samples in a row below 0.3 N, each as likely as not: on P1 80 samples passed without them while
-/// the law, still in contact, chased the retreated surface at the loop's speed into 112 N at f_r
-/// 39 N; on the 12 ms cell such a chase tripped the force limit.
+/// sample, noise about zero, is below it 98 % of the time. Below `lift` alone, under σ 0.9 N with
+/// `lift` 0.3 N, a lost contact needed six samples in a row below 0.3 N, each as likely as not: on
+/// P1 80 samples passed without them while the law, still in contact, chased the retreated surface
+/// at the loop's speed into 112 N at f_r 39 N; on the 12 ms cell such a chase tripped the force
+/// limit.
 pub const LIFT_NOISE: f64 = 2.0;
 
 impl ContactMachine {
@@ -49,7 +50,8 @@ impl ContactMachine {
     /// samples a few noise spikes reach `strong_contact · contact`); a lift-off needs two samples, one
     /// more per `lift_force` of raw noise, and at least as many as make a hold at `f_r` put that many
     /// in a row below `lift` only as a [`SIGNIFICANCE`] event (f_r 2 N under σ 1 N: 7, not 4 — the
-    /// hold's own noise lifted off, and the fast search pressed 15–21 N into the surface still there).
+    /// hold's own noise lifted off, and the fast search pressed 15–21 N into the surface still there);
+    /// a steady contact's lift-off counts samples below `lift_off` instead, as many in a row alike.
     pub fn thresholds(&self, f_r: f64, sigma: f64, sigma_ff: f64) -> Thresholds {
         let c = &self.p;
         let contact = c.contact_force.min(0.5 * f_r).max(SIGNIFICANCE * sigma_ff);
