@@ -11,7 +11,7 @@
 
 mod common;
 
-use common::{CELLS, cell, config, reach_time, tuning_named};
+use common::{CELLS, cell, census, config, reach_time, tuning_named};
 use controller::{LawConfig, Tuning};
 use proptest::prelude::*;
 use scenario::run::run;
@@ -30,9 +30,14 @@ fn gentle(f_r: f64) -> Tuning {
     t
 }
 
+/// Whether `peak` (N) is within `2·f_r`, with one count of the ATI's quantisation and 0.1 % of the
+/// stopping model's interpolation to spare.
+fn within_twice(peak: f64, f_r: f64) -> bool {
+    peak <= 2.0 * f_r * 1.001 + 0.01
+}
+
 /// A retreat of `delta` (m, away from the tool) at 2 s in an `f_r` hold on `k_c`, quiet sensor: the
-/// largest true force after the step stays within `2·f_r` (one count of the ATI's quantisation and
-/// 0.1 % of the model's interpolation to spare), and the force settles within 1 s of the time the
+/// largest true force after the step stays within `2·f_r` ([`within_twice`]), and the force settles within 1 s of the time the
 /// search can first reach the surface; or the surface is farther than the search reaches in 80 % of
 /// the loop's contact-loss time, and the loop ends on fault 5.
 fn retreat(f_r: f64, k_c: f64, delta: f64, plant: &InnerLoopModel) -> Result<f64, TestCaseError> {
@@ -44,7 +49,7 @@ fn retreat(f_r: f64, k_c: f64, delta: f64, plant: &InnerLoopModel) -> Result<f64
         Ok(r) => {
             let after = r.metrics(2.0, f64::INFINITY);
             prop_assert!(
-                after.peak_force <= 2.0 * f_r * 1.001 + 0.01,
+                within_twice(after.peak_force, f_r),
                 "pressed {} N after the step (2·f_r {} N)",
                 after.peak_force,
                 2.0 * f_r
@@ -110,79 +115,95 @@ fn gentle_retreat_corners() {
     );
 }
 
+/// The bound is the gentle search's, not any search's: the shipped fast search presses a surface
+/// found close by past `2·f_r` (a 0.5 mm retreat on 10 kN/m at f_r 2 N on P1, the README's figure).
+#[test]
+fn the_fast_search_presses_past_twice_the_set_point() {
+    let s = cell(4.0, 10e3, 0.0, None, Some((2.0, 0.0005)), 0.0, 1);
+    let r = run(&s, &CELLS[0], &tuning_named("robust", 2.0)).expect("no fault");
+    let peak = r.metrics(2.0, f64::INFINITY).peak_force;
+    println!("robust: {peak:.2} N after the retreat (2·f_r 4 N)");
+    assert!(!within_twice(peak, 2.0), "{peak} N");
+}
+
 /// Retreats under sensor noise (ignored: the known limits' figures, asserted no more than measured):
-/// 600 seeded retreats as [`gentle_retreats`] draws them, with σ 0–1 N, under `robust-gentle` and the
-/// shipped `robust`. Under noise the gentle bound is not kept everywhere: where the strong threshold
-/// (`3·max(min(1 N, f_r/2), 4σ)`) is beyond `2·f_r` the search goes at the approach's speed, whose
-/// re-contact that threshold alone exceeds. A steady contact lost under noise far above the lift
-/// force is declared lost on samples below a threshold raised with the noise
-/// ([`controller::robust::contact::LIFT_NOISE`]); below the lift force alone (0.3 N under σ 0.9 N),
-/// it was declared late, and the law, still in contact, chased the surface at the loop's speed (f_r
-/// 39 N, 1.47 mm, P1: 112 N; on the 12 ms cell a trip).
+/// 600 seeded cases drawn as [`gentle_retreats`] draws them, with σ 0–1 N, under `robust-gentle` and
+/// the shipped `robust`; counted are trips (a fault other than a lost contact), lost contacts (fault
+/// 5: the search did not find the surface within the loss time) and, for the gentle search, forces
+/// after the retreat beyond `2·f_r` — where the law's strong threshold is itself beyond it (the
+/// search then goes at the approach's speed, whose re-contact that threshold alone exceeds) and
+/// elsewhere. A steady contact lost under noise far above the lift force is declared lost on samples
+/// below a threshold raised with the noise ([`controller::robust::contact::LIFT_NOISE`]); below the
+/// lift force alone (0.3 N under σ 0.9 N) it was declared late, and the law, still in contact, chased
+/// the surface at the loop's speed (f_r 39 N, 1.47 mm, P1: 112 N; on the 12 ms cell a trip).
 #[test]
 #[ignore = "1200 closed-loop noisy retreats: the known limits' figures, not a criterion"]
 fn noisy_retreats() {
-    // (tuning, trips, and for the gentle search its overshoots of 2·f_r where the strong threshold is
-    // beyond it and elsewhere) measured; the fast search presses up to its limit by design. Before
-    // the lift-off threshold rose with the noise: gentle 1 trip (61.2 N, f_r 17.3 N on the 12 ms
-    // cell, σ 0.99 N), over 2·f_r 2 and 3 (worst 3.51·f_r), 59 fault 5; robust 2 trips, 8 fault 5.
-    for (name, trips_measured, over_measured) in
-        [("robust-gentle", 0, Some((1, 0))), ("robust", 1, None)]
-    {
-        let mut state: u64 = 0x0011_2026;
-        let mut uniform = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
-        let (mut fault5, mut trips, mut fallback, mut late) = (0, 0, 0, 0);
-        let mut worst = (0.0f64, String::new());
-        for _ in 0..600 {
-            let f_r = 2.0 + 48.0 * uniform();
-            let k_c = (10e3f64.ln() + (500e3f64 / 10e3).ln() * uniform()).exp();
-            let delta = 0.003 * uniform();
-            let plant = &CELLS[((uniform() * 3.0) as usize).min(2)];
-            let noise = uniform();
-            let seed = 1 + (uniform() * 998.0) as u64;
-            let case =
-                format!("f_r {f_r:.1} N, {k_c:.0} N/m, {delta:.5} m, {plant:?}, σ {noise:.2} N");
-            let s = cell(4.0, k_c, 0.0, None, Some((2.0, delta)), noise, seed);
-            let e = scenario::run::run_to_end(&s, plant, &tuning_named(name, f_r)).expect("a law");
-            match e.fault_code {
-                Some(5) => fault5 += 1,
-                Some(_) => {
-                    trips += 1;
-                    println!(
-                        "{name}: {case}: {}",
+    const KINDS: [&str; 4] = [
+        "trip",
+        "fault 5",
+        "beyond 2·f_r, the strong threshold beyond it",
+        "beyond 2·f_r",
+    ];
+    // Measured, of each kind; the fast search's forces beyond 2·f_r are no criterion (it presses up
+    // to its limit by design). Before a steady contact's lift-off threshold rose with the noise:
+    // gentle 0 trips, 47 fault 5, beyond 2·f_r 2 where the strong threshold is beyond it and 5
+    // elsewhere (worst 4.50·f_r: f_r 4.9 N on 40.6 kN/m on the 12 ms cell, σ 0.53 N); fast 0 trips,
+    // 10 fault 5. Since: gentle 0, 48, 0 and 1 (2.11·f_r); fast 2 trips (61.1 and 67.5 N, both on
+    // the 12 ms cell at f_r 11–13 N under σ 0.8 N, where the contact lost is now seen and the fast
+    // search presses on a noisy touch-down's `k̂_c`), 10 fault 5.
+    for (name, measured) in [
+        ("robust-gentle", [0, 48, 0, 1]),
+        ("robust", [2, 10, usize::MAX, usize::MAX]),
+    ] {
+        println!("{name}:");
+        census(
+            600,
+            (
+                2.0f64..50.0,
+                common::stiffness(10e3, 500e3),
+                0.0f64..0.003,
+                0usize..3,
+                0.0f64..1.0,
+                1u64..1000,
+            ),
+            &KINDS,
+            &measured,
+            |(f_r, k_c, delta, cell_i, noise, seed)| {
+                let plant = &CELLS[cell_i];
+                let label = format!(
+                    "f_r {f_r:.1} N, {k_c:.0} N/m, {delta:.5} m, {plant:?}, σ {noise:.2} N"
+                );
+                let s = cell(4.0, k_c, 0.0, None, Some((2.0, delta)), noise, seed);
+                let e =
+                    scenario::run::run_to_end(&s, plant, &tuning_named(name, f_r)).expect("a law");
+                let mut misses = Vec::new();
+                match e.fault_code {
+                    Some(5) => misses.push("fault 5".to_string()),
+                    Some(_) => misses.push(format!(
+                        "trip: {}",
                         e.fault.map(|f| f.to_string()).unwrap_or_default()
+                    )),
+                    None => {}
+                }
+                let peak = e.run.metrics(2.0, f64::INFINITY).peak_force;
+                if name == "robust-gentle" && !within_twice(peak, f_r) {
+                    let machine = controller::robust::ContactMachine::new(
+                        match &tuning_named(name, f_r).law {
+                            LawConfig::Robust(p) => p.contact,
+                            _ => unreachable!(),
+                        },
                     );
+                    let strong = machine.thresholds(f_r, noise, 0.0).strong;
+                    let why = if strong >= 2.0 * f_r {
+                        "beyond 2·f_r, the strong threshold beyond it"
+                    } else {
+                        "beyond 2·f_r"
+                    };
+                    misses.push(format!("{why}: {:.2}·f_r", peak / f_r));
                 }
-                None => {}
-            }
-            let peak = e.run.metrics(2.0, f64::INFINITY).peak_force;
-            if peak > 2.0 * f_r * 1.001 + 0.01 {
-                if 3.0 * (0.5 * f_r).min(1.0).max(4.0 * noise) >= 2.0 * f_r {
-                    fallback += 1;
-                } else {
-                    late += 1;
-                }
-                if peak / f_r > worst.0 {
-                    worst = (peak / f_r, case);
-                }
-            }
-        }
-        println!(
-            "{name}: 600 noisy retreats, {fault5} fault 5, {trips} other faults; over 2·f_r {fallback} \
-             where the strong threshold is beyond it, {late} elsewhere; worst {:.2}·f_r ({})",
-            worst.0, worst.1
+                (label, misses)
+            },
         );
-        assert!(trips <= trips_measured, "{name}: {trips} trips");
-        if let Some((fallback_measured, late_measured)) = over_measured {
-            assert!(
-                fallback <= fallback_measured && late <= late_measured,
-                "{name}: over 2·f_r {fallback} and {late}"
-            );
-        }
     }
 }

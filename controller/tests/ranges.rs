@@ -9,7 +9,7 @@
 mod common;
 
 use common::{
-    CELLS, cell, change_bound, config, env_or, floor, floor_after, mean_error, reach_time, sine,
+    CELLS, cell, census, change_bound, config, floor, floor_after, mean_error, reach_time, sine,
     stiffness, tuning,
 };
 use controller::LawConfig;
@@ -626,6 +626,7 @@ fn touch_down_census() {
     ];
     // No more than measured with 3000 cases: two impacts, eight mean errors, one spread, no fault.
     census(
+        3000,
         cases,
         &kinds,
         &[2, 0, 8, 0, 1, 0, 0],
@@ -671,6 +672,7 @@ fn stiffness_changes_census() {
         "loop ended",
     ];
     census(
+        3000,
         cases,
         &kinds,
         &[0, 3, 0, 0, 0, 0],
@@ -688,46 +690,6 @@ fn stiffness_changes_census() {
             (format!("{c:?}"), change_misses(&c, true))
         },
     );
-}
-
-/// Run the seeded `cases` (3000, or `FORCECELL_RANGE_CASES`) through `misses` (a case's label and
-/// the criteria it misses), print every miss and count it by the first of `kinds` it names, not
-/// stopped at the first failing case as a property test is; with 3000 cases, no more of each kind
-/// than `measured`.
-fn census<S: Strategy>(
-    cases: S,
-    kinds: &[&str],
-    measured: &[usize],
-    misses: impl Fn(S::Value) -> (String, Vec<String>),
-) {
-    let counts = std::cell::RefCell::new(vec![0usize; kinds.len()]);
-    let mut runner = proptest::test_runner::TestRunner::new(config(3000));
-    runner
-        .run(&cases, |case| {
-            let (label, missed) = misses(case);
-            for miss in missed {
-                println!("{label}: {miss}");
-                if let Some(i) = kinds.iter().position(|k| miss.contains(k)) {
-                    counts.borrow_mut()[i] += 1;
-                }
-            }
-            Ok(())
-        })
-        .expect("the census itself asserts nothing");
-    let counts = counts.into_inner();
-    let by: Vec<String> = kinds
-        .iter()
-        .zip(&counts)
-        .map(|(k, n)| format!("{k} {n}"))
-        .collect();
-    println!("misses by criterion: {}", by.join(", "));
-    if env_or("FORCECELL_RANGE_CASES", 3000) == 3000 {
-        assert!(
-            counts.iter().zip(measured).all(|(n, m)| n <= m),
-            "{} (measured {measured:?})",
-            by.join(", ")
-        );
-    }
 }
 
 /// Moving surfaces beyond B5's two files (not a spec'd range, and not the issue's): a sine of 0.2,

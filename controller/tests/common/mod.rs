@@ -58,6 +58,47 @@ pub fn env_or(name: &str, default: u32) -> u32 {
         .unwrap_or(default)
 }
 
+/// Run `n` seeded cases (or `FORCECELL_RANGE_CASES`) of `cases` through `misses` (a case's label
+/// and the criteria it misses), print every miss and count it by the first of `kinds` it names, not
+/// stopped at the first failing case as a property test is; with `n` cases, no more of each kind
+/// than `measured`.
+pub fn census<S: Strategy>(
+    n: u32,
+    cases: S,
+    kinds: &[&str],
+    measured: &[usize],
+    misses: impl Fn(S::Value) -> (String, Vec<String>),
+) {
+    let counts = std::cell::RefCell::new(vec![0usize; kinds.len()]);
+    let mut runner = proptest::test_runner::TestRunner::new(config(n));
+    runner
+        .run(&cases, |case| {
+            let (label, missed) = misses(case);
+            for miss in missed {
+                println!("{label}: {miss}");
+                if let Some(i) = kinds.iter().position(|k| miss.contains(k)) {
+                    counts.borrow_mut()[i] += 1;
+                }
+            }
+            Ok(())
+        })
+        .expect("the census itself asserts nothing");
+    let counts = counts.into_inner();
+    let by: Vec<String> = kinds
+        .iter()
+        .zip(&counts)
+        .map(|(k, n)| format!("{k} {n}"))
+        .collect();
+    println!("misses by criterion: {}", by.join(", "));
+    if env_or("FORCECELL_RANGE_CASES", n) == n {
+        assert!(
+            counts.iter().zip(measured).all(|(n, m)| n <= m),
+            "{} (measured {measured:?})",
+            by.join(", ")
+        );
+    }
+}
+
 /// A scenario: start 1 mm short of a surface at 10 mm.
 #[allow(clippy::too_many_arguments)]
 pub fn cell(
