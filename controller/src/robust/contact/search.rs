@@ -33,7 +33,8 @@ pub const TRIP_CONFIDENCE: f64 = 3.0;
 pub struct Speeds {
     /// Approach and slow search, m/s.
     pub approach: f64,
-    /// Search near where contact was lost: stops within twice the set-point, m/s.
+    /// Search past the fast distance, and a landing the force does not touch: stops within twice the
+    /// set-point, the detection not counted (as the approach), m/s.
     pub near: f64,
     /// Search within `margin`: stops within twice the set-point counting what the force reaches
     /// before the contact is certainly seen (the approach's speed where seeing it takes more), m/s.
