@@ -39,13 +39,13 @@
 
 use std::net::{IpAddr, SocketAddr};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use anyhow::{Context, Result, anyhow, bail};
-use controller::compensated::{CompensatedSensor, OrientationTap, shared_orientation};
+use controller::run::{End, RunLimits, RobotSession, Sink};
 use controller::gravity::{Compensator, GravityModel};
-use controller::{ControlLoop, LoopError, LoopStats, Tuning};
+use controller::{ControlLoop, LoopStats, Tuning};
 use hal::{ForceSensor, RobotLink, UnitQuaternion, Vector3};
 use kuka_rsi::{CorrectionMode, EthernetConfig, Limits, LinkConfig, PoscorrLimits, RobotFilter};
 use serde::Deserialize;
@@ -85,7 +85,7 @@ pub struct RobotConfig {
     #[serde(default = "default_max_speed")]
     pub max_speed: f64,
     /// The robot program commands the process over RSI's process channels (`FcCmd` in, `FcState`
-    /// out; `shared/specs/rsi-process.md`), as `forcecell rsi-config` configures a robot by default.
+    /// out; docs/wire-rsi.md), as `forcecell rsi-config` configures a robot by default.
     /// Used when `ethernet_config` is not given (a given file says it itself). `false`: force
     /// control from the first cycle at the tuning's set-point.
     #[serde(default)]
@@ -591,7 +591,7 @@ pub fn run_cell_recorded<R, S>(
     robot: R,
     sensor: S,
     stop: &AtomicBool,
-    mut recorder: Option<Recorder>,
+    recorder: Option<Recorder>,
 ) -> Result<CellOutcome>
 where
     R: RobotLink,
@@ -600,70 +600,70 @@ where
     S::Error: Send + Sync + 'static,
 {
     let law = tuning.law.build().map_err(|e| anyhow!(e))?;
-    let orientation = shared_orientation();
-    let robot = OrientationTap::new(robot, orientation.clone());
-    let sensor = CompensatedSensor::new(sensor, cfg.compensator(), orientation);
-    let mut lp = ControlLoop::new(robot, sensor, law, tuning.loop_config());
-    let mut rows = Vec::new();
-    let (ended, end) = loop {
-        if stop.load(Ordering::Relaxed) {
-            break ("stopped by the operator".to_string(), CellEnd::Stopped);
-        }
-        match lp.cycle() {
-            Ok(r) => {
-                if let Some(tx) = &mut recorder {
-                    let mut rec = Record::from_report(&r, r.set_point);
-                    if let Some(raw) = lp.sensor_mut().last_raw() {
-                        rec.wrench_raw = raw.to_array();
-                    }
-                    tx.push(rec);
-                } else {
-                    rows.push(Row::from_report(&r, r.set_point));
-                }
-                if cfg.duration.is_some_and(|d| r.cycle.t >= d) {
-                    break (format!("{} s of robot time done", r.cycle.t), CellEnd::Done);
-                }
-            }
-            // A wait for the robot that the stop ended: no cycle to answer with `Stop`.
-            Err(e) if stop.load(Ordering::Relaxed) => {
-                return Ok(CellOutcome {
-                    rows,
-                    stats: lp.stats(),
-                    ended: format!("stopped by the operator: {e}"),
-                    stopped: false,
-                    end: CellEnd::Stopped,
-                });
-            }
-            Err(e) => {
-                // The robot falling silent ends a run without a duration: that is its end. A sensor
-                // fault or a hold timeout ends it early.
-                let end = match e {
-                    LoopError::Robot(_) if cfg.duration.is_none() && lp.stats().cycles > 0 => {
-                        CellEnd::Done
-                    }
-                    _ => CellEnd::EndedEarly,
-                };
-                // A sensor fault or a hold timeout has already backed the tool off: end the robot's
-                // correction cleanly. A failed robot link has no one left to tell.
-                let stopped = !matches!(e, LoopError::Robot(_)) && lp.stop().is_ok();
-                return Ok(CellOutcome {
-                    rows,
-                    stats: lp.stats(),
-                    ended: format!("the loop ended: {e}"),
-                    stopped,
-                    end,
-                });
-            }
-        }
+    let mut lp = ControlLoop::new(robot, sensor, law, tuning.loop_config())
+        .with_gravity(cfg.compensator());
+    let mut sink = RecordSink::new(recorder);
+    let limits = RunLimits {
+        duration: cfg.duration,
+        stop: Some(stop),
+        // Without a duration the robot's program decides: its link falling silent is the end.
+        robot_session: if cfg.duration.is_none() {
+            RobotSession::Robot
+        } else {
+            RobotSession::Run
+        },
+        ..RunLimits::default()
     };
-    let stopped = lp.stop().is_ok();
+    let o = controller::run::run(&mut lp, limits, &mut sink);
+    let (ended, end) = match &o.end {
+        End::Done | End::Program(None) => (
+            format!("{} s of robot time done", sink.last_t),
+            CellEnd::Done,
+        ),
+        End::Stopped(None) => ("stopped by the operator".to_string(), CellEnd::Stopped),
+        End::Stopped(Some(e)) => (format!("stopped by the operator: {e}"), CellEnd::Stopped),
+        End::RobotEnded(e) => (format!("the loop ended: {e}"), CellEnd::Done),
+        End::Fault(e) | End::LinkLost(e) => (format!("the loop ended: {e}"), CellEnd::EndedEarly),
+        End::Program(Some(why)) => (why.clone(), CellEnd::EndedEarly),
+    };
     Ok(CellOutcome {
-        rows,
+        rows: sink.rows,
         stats: lp.stats(),
         ended,
-        stopped,
+        stopped: o.stopped(),
         end,
     })
+}
+
+/// The sink of a cell run: every cycle's [`Record`] to the recorder, or (without one) its [`Row`]
+/// collected.
+struct RecordSink {
+    recorder: Option<Recorder>,
+    rows: Vec<Row>,
+    last_t: f64,
+}
+
+impl RecordSink {
+    fn new(recorder: Option<Recorder>) -> Self {
+        Self {
+            recorder,
+            rows: Vec::new(),
+            last_t: 0.0,
+        }
+    }
+}
+
+impl Sink for RecordSink {
+    fn record(&mut self, r: &controller::CycleReport) -> bool {
+        self.last_t = r.cycle.t;
+        match &mut self.recorder {
+            Some(tx) => {
+                tx.push(Record::from_report(r, r.set_point));
+            }
+            None => self.rows.push(Row::from_report(r, r.set_point)),
+        }
+        true
+    }
 }
 
 /// Start the configured sensor (optionally taking a bias) and bind the robot link.
@@ -811,7 +811,6 @@ pub fn calibrate(path: &Path, poses: usize) -> Result<()> {
         .map_or(0, |d| d.as_secs());
     let mcap = cfg.record.join(format!("calibrate-{stamp}.mcap"));
     let (tx, recording) = crate::recorder::start(&mcap, recording_options(path, &tuning), None)?;
-    let (mut link, mut sensor) = crate::tap::tap(link, sensor, tx);
     let mount = cfg
         .gravity
         .as_ref()
@@ -822,16 +821,23 @@ pub fn calibrate(path: &Path, poses: usize) -> Result<()> {
         "listening on {} for the robot at {}: run a program that holds the tool still (≥ 0.5 s, in free air) in {poses} orientations at least 10° apart, turning about two axes",
         cfg.robot.listen, cfg.robot.robot_ip
     );
+    crate::stop::install()?;
+    let mut sink = RecordSink::new(Some(tx));
     let c = controller::calibration::calibrate(
-        &mut link,
-        &mut sensor,
+        link,
+        sensor,
         mount,
         poses,
         controller::calibration::CollectorConfig::default(),
         &mut |n| println!("pose {n} of {poses}"),
+        RunLimits {
+            stop: Some(crate::stop::flag()),
+            ..RunLimits::default()
+        },
+        &mut sink,
     )
     .map_err(|e| anyhow!("{e}"));
-    drop((link, sensor));
+    drop(sink);
     println!("recorded {}", recording.finish(Vec::new())?);
     let c = c?;
     let m = c.model;

@@ -16,7 +16,6 @@ pub mod robotiq;
 pub mod rsi;
 pub mod runner;
 pub mod stop;
-pub mod tap;
 pub mod tune;
 
 pub use ::scenario::{metrics, record, scenario};

@@ -122,14 +122,20 @@ impl Record {
     /// The record of an answered cycle with set-point `f_r`; the process segment, command and state
     /// come from the cycle and the correction sent ([`Row::from_report`]).
     pub fn from_report(r: &CycleReport, f_r: f64) -> Self {
-        let (wrench, sensor_seq, sensor_age) = match r.sample {
+        let (raw, sensor_seq, sensor_age) = match r.sample {
             Some(s) => (s.wrench.to_array(), s.seq, s.age.as_secs_f64()),
             None => (NAN6, 0, f64::NAN),
+        };
+        // Where the loop compensates gravity, the wrench it used and the raw one beside it.
+        let (wrench, wrench_raw) = if r.compensated {
+            (r.wrench.map_or(NAN6, |w| w.to_array()), raw)
+        } else {
+            (raw, NAN6)
         };
         Self {
             row: Row::from_report(r, f_r),
             wrench,
-            wrench_raw: NAN6,
+            wrench_raw,
             sensor_seq,
             sensor_age,
             robot_seq: r.cycle.seq,

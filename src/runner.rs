@@ -4,9 +4,11 @@
 use std::time::{Duration, Instant};
 
 use anyhow::{Result, anyhow};
-use controller::{ControlLoop, EventCounts, ForceLaw, LoopStats, Tuning};
+use ::scenario::run::WorldSink;
+use controller::run::{End, RunLimits, Outcome, RobotSession};
+use controller::{CellLaw, ControlLoop, EventCounts, LoopStats, Tuning};
 use hal::{ForceSensor, RobotLink};
-use sim::{InProcRobot, InProcSensor, InnerLoopModel, SharedWorld, World};
+use sim::{InProcRobot, InProcSensor, InnerLoopModel, SharedWorld};
 
 use crate::metrics::Metrics;
 use crate::record::Row;
@@ -37,12 +39,12 @@ impl RunSpec {
             None => scenario.plant.clone(),
         };
         let model = spec.model()?;
-        let mut tuning = load_tuning(tuning.unwrap_or(&scenario.tuning))?;
-        tuning.law.apply(&scenario.controller);
         // The law's model of the cell is the cell's: here, the simulated plant's and sensor's.
-        tuning
-            .law
-            .set_cell(::scenario::run::cell_model(&model, &scenario.sensor));
+        let tuning = ::scenario::run::resolve_tuning(
+            &scenario,
+            &model,
+            &load_tuning(tuning.unwrap_or(&scenario.tuning))?,
+        );
         tuning
             .validate()
             .map_err(|e| anyhow!("tuning {} with the scenario's overrides: {e}", tuning.name))?;
@@ -74,18 +76,7 @@ impl RunSpec {
 
     /// A fresh simulated world for this run.
     pub fn world(&self) -> SharedWorld {
-        let w = World::new(
-            self.scenario.environment.plant(),
-            self.plant,
-            self.scenario.sensor.clone(),
-            self.scenario.start_position(),
-        )
-        .with_form(self.scenario.environment.form.clone());
-        match &self.scenario.program {
-            Some(p) => w.with_program(p.clone()),
-            None => w,
-        }
-        .shared()
+        ::scenario::run::world(&self.scenario, &self.plant)
     }
 
     /// `NAME` or `NAME-PLANT-TUNING` when either differs from the scenario's defaults.
@@ -174,99 +165,39 @@ where
     let law = spec.tuning.law.build().map_err(|e| anyhow!(e))?;
     let mut lp = ControlLoop::new(robot, sensor, law, spec.tuning.loop_config());
     let steps = spec.steps();
-    let mut rows = Vec::with_capacity(steps as usize);
     let started = Instant::now();
-    let mut ended_early = None;
     let every = (steps / 200).max(1);
-    let mut interrupted = None;
-    // Whether the world runs a program is fixed for the run: only then is its end looked up each cycle.
-    let has_program = sim::world::lock(world).program().is_some();
-    let program_done = || {
-        has_program
-            .then(|| {
-                sim::world::lock(world)
-                    .program()
-                    .map(|p| (p.done(), p.aborted().map(str::to_string)))
-            })
-            .flatten()
-    };
-    let mut finished = false;
-    // An outside robot that sends `FcCmd` runs its own program: the session is its to end.
-    let mut robot_driven = false;
     let mut k = 0u64;
-    loop {
-        if k >= steps && !robot_driven {
-            finished = true;
-            break;
+    let mut also = |r: &controller::CycleReport, _: &Row| {
+        if let Some(tx) = &mut recorder {
+            tx.push(Record::from_report(r, r.set_point));
         }
         k += 1;
-        if crate::stop::requested() {
-            break;
-        }
-        if let Some((true, aborted)) = program_done() {
-            // The robot program ended (its `RSI_OFF`): end the correction motion cleanly.
-            if let Some(why) = aborted {
-                ended_early = Some(format!("the robot program aborted: {why}"));
-            }
-            finished = true;
-            break;
-        }
-        match lp.cycle() {
-            Ok(r) => {
-                robot_driven = spec.external && r.cycle.process.is_some() && !has_program;
-                let rec = Record::from_report(&r, r.set_point);
-                rows.push(rec.row);
-                if let Some(tx) = &mut recorder {
-                    tx.push(rec);
-                }
-            }
-            Err(e) => {
-                let robot_gone = matches!(e, controller::LoopError::Robot(_));
-                if robot_driven && robot_gone {
-                    // The robot program ended its session (RSI_OFF): the normal end of its pass.
-                    println!("the robot ended its session ({e})");
-                } else if !crate::stop::requested() {
-                    ended_early = Some(e.to_string());
-                    if !robot_gone {
-                        // A fault has backed the tool off: end the robot's correction motion
-                        // with `Stop` (and the fault's code in `FcState` where the link has it).
-                        if let Err(stop) = lp.stop() {
-                            ended_early = Some(format!("{e}; could not send Stop: {stop}"));
-                        }
-                    }
-                }
-                break;
-            }
-        }
         if k.is_multiple_of(every) {
             progress(k as f64 / steps as f64);
         }
-    }
-    if finished {
-        // The scenario's course or the simulated program is over: end the robot's correction
-        // motion cleanly with `Stop` rather than falling silent (a timeout stop on a real KRC).
-        if let Err(e) = lp.stop() {
-            ended_early.get_or_insert(format!("could not send Stop at the end: {e}"));
-        }
-    } else if let (false, Some((false, _))) = (crate::stop::requested(), program_done()) {
-        ended_early.get_or_insert(format!(
-            "the robot program did not finish within the scenario's {} s",
-            spec.scenario.duration
-        ));
-    }
-    if crate::stop::requested() {
-        // The operator's stop: end the robot's correction motion as `run` does (bounded: the link's
-        // waits end on the stop flag).
-        interrupted = Some(lp.stop().is_ok());
-    }
+    };
+    let mut sink = WorldSink::new(world, steps as usize, &mut also);
+    let limits = RunLimits {
+        cycles: Some(steps),
+        stop: Some(crate::stop::flag()),
+        // An outside robot that sends `FcCmd` runs its own program: the session is its to end.
+        robot_session: if spec.external && spec.scenario.program.is_none() {
+            RobotSession::RobotWhenProcess
+        } else {
+            RobotSession::Run
+        },
+        ..RunLimits::default()
+    };
+    let outcome = controller::run::run(&mut lp, limits, &mut sink);
+    let (ended_early, interrupted) = sim_end(&outcome);
+    let rows = sink.finish(spec.plant.period);
     progress(1.0);
     let wall = started.elapsed();
     drop(recorder);
     let stats = lp.stats();
     let law_events = lp.law().counters();
     drop(lp);
-    let truth = sim::world::lock(world).truth_log();
-    ::scenario::run::fill_truth(&mut rows, &truth, spec.plant.period);
     let metrics = Metrics::compute(&rows, 0.0, f64::INFINITY);
     Ok(RunResult {
         rows,
@@ -277,6 +208,35 @@ where
         ended_early,
         interrupted,
     })
+}
+
+/// What a simulated run's end means to its summary: why it ended early (if it did), and whether the
+/// operator stopped it (`Some(true)` when the robot then got `Stop`).
+fn sim_end<E: std::fmt::Display>(o: &Outcome<E>) -> (Option<String>, Option<bool>) {
+    let stop_failed = match &o.stop {
+        Some(Err(e)) => Some(e.to_string()),
+        _ => None,
+    };
+    match &o.end {
+        End::Stopped(_) => (None, Some(o.stopped())),
+        End::RobotEnded(_) => {
+            println!("{}", o.end);
+            (None, None)
+        }
+        End::Fault(e) => (
+            Some(match stop_failed {
+                Some(s) => format!("{e}; could not send Stop: {s}"),
+                None => e.to_string(),
+            }),
+            None,
+        ),
+        End::LinkLost(e) => (Some(e.to_string()), None),
+        End::Program(Some(_)) => (Some(o.end.to_string()), None),
+        End::Done | End::Program(None) => (
+            stop_failed.map(|s| format!("could not send Stop at the end: {s}")),
+            None,
+        ),
+    }
 }
 
 /// Run with the in-process robot and sensor (no wire).

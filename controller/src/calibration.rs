@@ -9,6 +9,10 @@ use core::fmt;
 
 use hal::{Correction, Error as HalError, ForceSensor, RobotLink, UnitQuaternion, Vector3, Wrench};
 
+use crate::control_loop::CycleReport;
+use crate::law::Output;
+use crate::run::{Cycler, End, RunLimits, Sink, run};
+
 use crate::gravity::{GravityError, GravityModel};
 
 /// When a pose counts as static and new.
@@ -116,6 +120,11 @@ pub enum CalibrationError<E> {
     },
     /// The fit refused the poses.
     Fit(GravityError),
+    /// The operator stopped the calibration before enough poses were seen.
+    Stopped {
+        /// Poses recorded until then.
+        poses: usize,
+    },
 }
 
 impl<E: fmt::Display> fmt::Display for CalibrationError<E> {
@@ -125,6 +134,7 @@ impl<E: fmt::Display> fmt::Display for CalibrationError<E> {
                 f,
                 "the robot link ended after {poses} static poses: {error}"
             ),
+            Self::Stopped { poses } => write!(f, "stopped by the operator after {poses} static poses"),
             Self::Fit(e) => write!(
                 f,
                 "{e} (hold the tool still in orientations rotated about at least two different axes)"
@@ -146,50 +156,145 @@ pub struct Calibration {
     pub worst_force_residual: f64,
 }
 
+/// The calibration's cycle for the [run loop](crate::run): answer each robot cycle with a zero
+/// correction, then read the sensor and feed the collector (sensor orientation = the robot's measured
+/// orientation · `mount`). Sensor errors skip the sample. Done once `wanted` poses are in.
+pub struct Collecting<'a, R, S> {
+    robot: R,
+    sensor: S,
+    mount: UnitQuaternion<f64>,
+    wanted: usize,
+    collector: PoseCollector,
+    on_pose: &'a mut dyn FnMut(usize),
+    cycles: u64,
+}
+
+impl<'a, R: RobotLink, S: ForceSensor> Collecting<'a, R, S> {
+    /// Collect `wanted` poses; `on_pose` is told the count after each new pose.
+    pub fn new(
+        robot: R,
+        sensor: S,
+        mount: UnitQuaternion<f64>,
+        wanted: usize,
+        cfg: CollectorConfig,
+        on_pose: &'a mut dyn FnMut(usize),
+    ) -> Self {
+        Self {
+            robot,
+            sensor,
+            mount,
+            wanted,
+            collector: PoseCollector::new(cfg),
+            on_pose,
+            cycles: 0,
+        }
+    }
+
+    /// The poses collected so far.
+    pub fn poses(&self) -> &[(UnitQuaternion<f64>, Wrench)] {
+        self.collector.poses()
+    }
+
+    fn next(&mut self) -> Result<hal::Cycle, R::Error> {
+        loop {
+            match self.robot.next_cycle() {
+                Ok(c) => return Ok(c),
+                Err(e) if e.kind().is_transient() => continue,
+                Err(e) => return Err(e),
+            }
+        }
+    }
+}
+
+impl<R: RobotLink, S: ForceSensor> Cycler for Collecting<'_, R, S> {
+    type Error = R::Error;
+
+    fn cycle(&mut self) -> Result<CycleReport, R::Error> {
+        let cycle = self.next()?;
+        let command = Correction::default();
+        self.robot.reply(&command)?;
+        self.cycles += 1;
+        let sample = self.sensor.read().ok();
+        if let Some(s) = sample
+            && self
+                .collector
+                .push(cycle.t, cycle.actual.orientation * self.mount, &s.wrench)
+        {
+            (self.on_pose)(self.collector.poses().len());
+        }
+        Ok(CycleReport {
+            cycle,
+            x: cycle.tool_offset().z,
+            f: sample.map(|s| s.wrench.force.z),
+            sample,
+            wrench: sample.map(|s| s.wrench),
+            compensated: false,
+            out: Output {
+                x_cmd: 0.0,
+                x_r: f64::NAN,
+                kc_hat: f64::NAN,
+                xc_hat: f64::NAN,
+                ..Output::default()
+            },
+            command,
+            set_point: 0.0,
+            fault: None,
+        })
+    }
+
+    fn stop(&mut self) -> Result<(), R::Error> {
+        self.next()?;
+        self.robot.reply(&Correction {
+            stop: true,
+            ..Correction::default()
+        })?;
+        self.cycles += 1;
+        Ok(())
+    }
+
+    fn robot_gone(_: &R::Error) -> bool {
+        // Transient errors are skipped in `next`: what reaches the runner is the link's end.
+        true
+    }
+
+    fn cycles(&self) -> u64 {
+        self.cycles
+    }
+
+    fn done(&self) -> bool {
+        self.collector.poses().len() >= self.wanted
+    }
+}
+
 /// Answer the robot's cycles with a zero correction, collect `wanted` static poses (sensor orientation =
 /// the robot's measured orientation · `mount`), end the correction motion with `Stop`, and fit.
-/// `on_pose` is told the count after each new pose. Sensor errors skip the sample.
+/// `on_pose` is told the count after each new pose; every cycle goes to `sink`. Sensor errors skip the
+/// sample. Runs through the one [run loop](crate::run::run), with `limits` (the operator's stop).
 pub fn calibrate<R: RobotLink, S: ForceSensor>(
-    robot: &mut R,
-    sensor: &mut S,
+    robot: R,
+    sensor: S,
     mount: UnitQuaternion<f64>,
     wanted: usize,
     cfg: CollectorConfig,
     on_pose: &mut dyn FnMut(usize),
+    limits: RunLimits<'_>,
+    sink: &mut dyn Sink,
 ) -> Result<Calibration, CalibrationError<R::Error>> {
-    let mut collector = PoseCollector::new(cfg);
-    let mut done = false;
-    loop {
-        let c = match robot.next_cycle() {
-            Ok(c) => c,
-            Err(e) if e.kind().is_transient() => continue,
-            Err(error) => {
-                return Err(CalibrationError::Robot {
-                    error,
-                    poses: collector.poses().len(),
-                });
-            }
-        };
-        let reply = Correction {
-            stop: done,
-            ..Correction::default()
-        };
-        robot
-            .reply(&reply)
-            .map_err(|error| CalibrationError::Robot {
-                error,
-                poses: collector.poses().len(),
-            })?;
-        if done {
-            break;
+    let mut collecting = Collecting::new(robot, sensor, mount, wanted, cfg, on_pose);
+    let outcome = run(&mut collecting, limits, sink);
+    let poses = collecting.poses().len();
+    let failed = |error| CalibrationError::Robot { error, poses };
+    match outcome.end {
+        End::Done => {}
+        End::LinkLost(e) | End::RobotEnded(e) | End::Fault(e) | End::Stopped(Some(e)) => {
+            return Err(failed(e));
         }
-        if let Ok(s) = sensor.read()
-            && collector.push(c.t, c.actual.orientation * mount, &s.wrench)
-        {
-            on_pose(collector.poses().len());
-            done = collector.poses().len() >= wanted;
-        }
+        End::Stopped(None) | End::Program(_) => return Err(CalibrationError::Stopped { poses }),
     }
+    if let Some(Err(e)) = outcome.stop {
+        return Err(failed(e));
+    }
+    let collector = collecting.collector;
     let poses = collector.poses().to_vec();
     let model = GravityModel::identify(&poses).map_err(CalibrationError::Fit)?;
     let worst_force_residual = poses
@@ -342,6 +447,8 @@ mod tests {
             8,
             CollectorConfig::default(),
             &mut |n| seen.push(n),
+            RunLimits::default(),
+            &mut (),
         )
         .unwrap();
         assert_eq!(seen, (1..=8).collect::<Vec<_>>());
@@ -371,6 +478,8 @@ mod tests {
             8,
             CollectorConfig::default(),
             &mut |_| {},
+            RunLimits::default(),
+            &mut (),
         )
         .unwrap_err();
         assert!(matches!(e, CalibrationError::Robot { poses: 2, .. }), "{e}");

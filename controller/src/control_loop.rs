@@ -1,9 +1,11 @@
 //! The control loop: one robot cycle in, one newest force sample, one law step, exactly one reply out.
 //! Written against the HAL only; every device is a [`RobotLink`] and a [`ForceSensor`].
 
-use hal::{Correction, Cycle, Error as _, ErrorKind, ForceSensor, RobotLink, Sample};
+use hal::{Correction, Cycle, Error as _, ErrorKind, ForceSensor, RobotLink, Sample, Wrench};
 
-use crate::law::{ForceLaw, Output};
+use crate::compensated::Gravity;
+use crate::gravity::Compensator;
+use crate::law::{AlongNormal, CellLaw, ForceLaw, Output};
 
 mod config;
 mod error;
@@ -47,9 +49,15 @@ pub struct CycleReport {
     pub x: f64,
     /// Measured compressive normal force, N, when the sensor gave a usable sample.
     pub f: Option<f64>,
-    /// The sensor's sample as read this cycle (wrench in the sensor frame, its counter and age), when
-    /// it gave one, finite or not; for recordings and diagnostics.
+    /// The sensor's sample as read this cycle (the raw wrench in the sensor frame, its counter and
+    /// age), when it gave one, finite or not; for recordings and diagnostics.
     pub sample: Option<Sample>,
+    /// The wrench the loop used: the sample's, with the tool's weight and the sensor bias removed
+    /// where the loop compensates gravity ([`ControlLoop::with_gravity`]); `None` when there was none
+    /// usable (no sample, not finite, not compensable).
+    pub wrench: Option<Wrench>,
+    /// True when the loop compensates gravity (then `wrench` differs from the raw `sample`).
+    pub compensated: bool,
     /// The law's output (on a held cycle, the last output).
     pub out: Output,
     /// The correction sent (with the process state reported to the robot program).
@@ -65,6 +73,7 @@ pub struct CycleReport {
 struct Reading<SE> {
     f: Option<f64>,
     sample: Option<Sample>,
+    wrench: Option<Wrench>,
     fault: Option<Fault>,
     fatal: Option<SE>,
 }
@@ -103,11 +112,24 @@ pub struct ControlLoop<R, S: ForceSensor, L> {
     process: Process,
     /// Force limit, correction limit and contact watch of a loop without process channels.
     guard: Guard,
+    /// The gravity-compensation stage, where the cell compensates.
+    gravity: Option<Gravity>,
+    /// The law's last correction off the tool normal (tangential translation, rotation), limited;
+    /// held while the loop backs off along the normal.
+    side: Correction,
 }
 
-impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
-    /// A loop that has not seen its first cycle yet.
+impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, AlongNormal<L>> {
+    /// A loop running the 1-DOF `law` along the tool normal ([`AlongNormal`], with the loop's
+    /// `force_sign`) that has not seen its first cycle yet.
     pub fn new(robot: R, sensor: S, law: L, cfg: LoopConfig) -> Self {
+        Self::with_law(robot, sensor, AlongNormal::new(law, cfg.force_sign), cfg)
+    }
+}
+
+impl<R: RobotLink, S: ForceSensor, L: CellLaw> ControlLoop<R, S, L> {
+    /// A loop running `law` that has not seen its first cycle yet.
+    pub fn with_law(robot: R, sensor: S, law: L, cfg: LoopConfig) -> Self {
         Self {
             robot,
             sensor,
@@ -122,7 +144,18 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             stepped_t: None,
             process: cfg.new_process(),
             guard: Guard::default(),
+            gravity: None,
+            side: Correction::default(),
         }
+    }
+
+    /// Compensate gravity: every cycle, the tool's weight for the cycle's measured orientation and
+    /// the sensor bias are removed from the sample before anything uses it. A wrench that cannot be
+    /// compensated (no orientation, or one older than the compensator's `max_age`) is held as a
+    /// stale sample is ([`Fault::Sensor`] with [`ErrorKind::Stale`]).
+    pub fn with_gravity(mut self, compensator: Compensator) -> Self {
+        self.gravity = Some(Gravity::new(compensator));
+        self
     }
 
     /// Counters so far.
@@ -172,6 +205,9 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
                 Err(e) => return Err(LoopError::Robot(e)),
             }
         };
+        if let Some(g) = &mut self.gravity {
+            g.observe(&cycle);
+        }
         let x = cycle.tool_offset().z;
         if let Some(pc) = cycle.process {
             return self.process_cycle(cycle, x, pc);
@@ -182,7 +218,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         }
         let pose_ok = pose_ok(&cycle, x);
         if self.begin_session(&cycle, pose_ok, x) {
-            self.law.start(x);
+            self.law.start(&cycle, &Correction::along_z(x));
             self.stepped_t = None;
             self.guard.reset();
         }
@@ -190,6 +226,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         let Reading {
             f,
             sample,
+            wrench,
             mut fault,
             fatal: fatal_sensor,
         } = self.read_sensor(pose_ok);
@@ -197,11 +234,11 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         let mut out = self.last_out;
         let mut cmd = self.last_cmd;
         let mut tripped = None;
-        match (fault, f) {
-            (None, Some(f)) if self.started => {
+        match (fault, f, wrench) {
+            (None, Some(f), Some(w)) if self.started => {
                 let dt = self.law_dt(&cycle);
                 self.guard.observe(&self.cfg.process, f, dt);
-                if let Some((o, c)) = self.step_law(x, f, dt, &mut fault) {
+                if let Some((o, c)) = self.step_law(&cycle, &w, dt, &mut fault) {
                     (out, cmd) = (o, c);
                     let f_r = self.law.set_point();
                     tripped = match self.guard.check(&self.cfg.process, &o, f, f_r, dt) {
@@ -218,7 +255,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         let held = self.count(fault);
         self.held = if held { self.held + cycle.period } else { 0.0 };
 
-        let command = Correction::along_z(cmd);
+        let command = self.command(cmd);
         self.reply(&command, out)?;
         let end = match (fatal_sensor, fault, tripped) {
             (Some(e), _, _) => Some(Ending::Sensor(e)),
@@ -242,6 +279,8 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             x,
             f,
             sample,
+            wrench,
+            compensated: self.gravity.is_some(),
             out,
             command,
             set_point: self.law.set_point(),
@@ -260,6 +299,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         }
         self.started = true;
         self.last_cmd = x;
+        self.side = Correction::default();
         self.last_out = Output {
             x_cmd: x,
             ..Output::default()
@@ -267,24 +307,50 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         true
     }
 
-    /// The law's step on `(x, f)` over `dt`, its command within the loop's limits (a limit that
-    /// acted is noted in `fault`); `None` and [`Fault::NonFiniteCommand`] when the law gave no finite
-    /// command.
+    /// The law's step on the cycle and the wrench over `dt`, its command within the loop's limits (a
+    /// limit that acted is noted in `fault`); `None` and [`Fault::NonFiniteCommand`] when the law gave
+    /// no finite correction. Returns the output and the command along the normal; the law's
+    /// correction off the normal is kept, limited, for [`command`](Self::command).
     fn step_law(
         &mut self,
-        x: f64,
-        f: f64,
+        cycle: &Cycle,
+        wrench: &Wrench,
         dt: f64,
         fault: &mut Option<Fault>,
     ) -> Option<(Output, f64)> {
-        let o = self.law.step(x, f, dt);
-        if o.x_cmd.is_finite() {
-            let cmd = self.limit(o.x_cmd, fault);
-            Some((o, cmd))
+        let s = self.law.step(cycle, wrench, dt);
+        if s.correction.is_finite() {
+            let cmd = self.limit(s.correction.translation.z, fault);
+            self.limit_side(&s.correction, fault);
+            Some((s.out, cmd))
         } else {
             *fault = Some(Fault::NonFiniteCommand);
             None
         }
+    }
+
+    /// The correction to send for the normal command `z`: the law's last correction off the normal
+    /// (zero for a 1-DOF law) with `z` along it.
+    fn command(&self, z: f64) -> Correction {
+        let mut c = self.side;
+        c.translation.z = z;
+        c
+    }
+
+    /// Keep the law's tangential translation and rotation, the translation within the same step and
+    /// envelope limits as the normal command (a limit that acted is noted in `fault`).
+    fn limit_side(&mut self, want: &Correction, fault: &mut Option<Fault>) {
+        let (step, lim) = (self.cfg.max_step, self.cfg.max_offset);
+        for i in 0..2 {
+            let last = self.side.translation[i];
+            let v = want.translation[i].clamp(last - step, last + step);
+            let v = v.clamp(-lim, lim);
+            if v != want.translation[i] {
+                *fault = fault.or(Some(Fault::StepLimited));
+            }
+            self.side.translation[i] = v;
+        }
+        self.side.rotation = want.rotation;
     }
 
     /// Answer the robot with `command`, the law's output `out` behind it.
@@ -305,10 +371,17 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
     fn read_sensor(&mut self, pose_ok: bool) -> Reading<S::Error> {
         let mut fatal = None;
         let mut sample = None;
+        let mut wrench = None;
         let (f, mut fault) = match self.sensor.read() {
             Ok(s) if s.wrench.is_finite() => {
                 sample = Some(s);
-                (Some(self.cfg.force_sign * s.wrench.force.z), None)
+                match self.compensate(&s.wrench) {
+                    Some(w) => {
+                        wrench = Some(w);
+                        (Some(self.cfg.force_sign * w.force.z), None)
+                    }
+                    None => (None, Some(Fault::Sensor(ErrorKind::Stale))),
+                }
             }
             Ok(s) => {
                 sample = Some(s);
@@ -331,8 +404,17 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         Reading {
             f,
             sample,
+            wrench,
             fault,
             fatal,
+        }
+    }
+
+    /// The wrench with gravity removed where the loop compensates (`None`: it cannot be, now).
+    fn compensate(&self, raw: &Wrench) -> Option<Wrench> {
+        match &self.gravity {
+            Some(g) => g.apply(raw).ok(),
+            None => Some(*raw),
         }
     }
 
@@ -405,7 +487,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         let command = Correction {
             stop: true,
             process: self.process.state(),
-            ..Correction::along_z(self.last_cmd)
+            ..self.command(self.last_cmd)
         };
         self.robot.reply(&command).map_err(LoopError::Robot)?;
         self.stats.cycles += 1;
@@ -421,13 +503,12 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         cycle: Cycle,
         x: f64,
     ) -> Result<CycleReport, LoopError<R::Error, S::Error>> {
-        let (f, sample) = match self.sensor.read() {
-            Ok(s) if s.wrench.is_finite() => {
-                (Some(self.cfg.force_sign * s.wrench.force.z), Some(s))
-            }
+        let (wrench, sample) = match self.sensor.read() {
+            Ok(s) if s.wrench.is_finite() => (self.compensate(&s.wrench), Some(s)),
             Ok(s) => (None, Some(s)),
             Err(_) => (None, None),
         };
+        let f = wrench.map(|w| self.cfg.force_sign * w.force.z);
         let floor = -self.cfg.max_offset;
         let step = self.cfg.retract_step(cycle.period);
         let target = match &mut self.phase {
@@ -447,7 +528,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         let cmd = (self.last_cmd - step).max(target);
         let command = Correction {
             process: self.process.state(),
-            ..Correction::along_z(cmd)
+            ..self.command(cmd)
         };
         let out = Output {
             x_cmd: cmd,
@@ -466,6 +547,8 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             x,
             f,
             sample,
+            wrench,
+            compensated: self.gravity.is_some(),
             out: self.last_out,
             command,
             set_point: self.law.set_point(),

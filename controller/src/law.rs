@@ -20,6 +20,7 @@
 //!
 //! The step is a handful of multiplications on `f64`s held in the struct: no allocation, no I/O, no clock.
 
+use hal::{Correction, Cycle, Wrench};
 use serde::{Deserialize, Serialize};
 
 /// Impedance filter parameters and the force set-point.
@@ -273,6 +274,87 @@ impl<L: ForceLaw + ?Sized> ForceLaw for Box<L> {
     }
     fn counters(&self) -> EventCounts {
         (**self).counters()
+    }
+}
+
+/// What a [`CellLaw`] returns for one cycle: the correction it wants (translation and rotation, tool
+/// frame, absolute from the programmed path) and what it computed, for the record.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LawStep {
+    /// The correction the law wants; the loop limits it before it is sent. Its `stop` and `process`
+    /// fields are the loop's and are ignored.
+    pub correction: Correction,
+    /// The law's output (along the tool normal for a 1-DOF law).
+    pub out: Output,
+}
+
+/// A force control law over what the cell gives and what the robot takes: the robot's cycle (poses,
+/// time, process command) and the wrench in, a [`Correction`] out.
+///
+/// Contract: `step` is called with a finite cycle and wrench only (the loop gates bad input) and a
+/// positive `dt`; it must not allocate, block or read a clock. `start` (re)initialises the law at rest
+/// with the correction standing at `at`, so the first command is what the robot already has (bumpless).
+pub trait CellLaw {
+    /// Initialise at rest for `cycle`, with the correction standing at `at`.
+    fn start(&mut self, cycle: &Cycle, at: &Correction);
+    /// One control step on `cycle` with the (compensated) `wrench` over `dt` s.
+    fn step(&mut self, cycle: &Cycle, wrench: &Wrench, dt: f64) -> LawStep;
+    /// The force set-point, N (along the tool normal, compressive).
+    fn set_point(&self) -> f64;
+    /// Change the force set-point while running, without a bump; an invalid value is refused and
+    /// changes nothing.
+    fn set_set_point(&mut self, f_r: f64) -> Result<(), String>;
+    /// Events counted since `start`.
+    fn counters(&self) -> EventCounts;
+}
+
+/// The one adapter from a 1-DOF [`ForceLaw`] to a [`CellLaw`]: the law acts along the tool's normal
+/// (z) axis, on the tool's offset from the programmed path along it ([`Cycle::tool_offset`]) and on the
+/// compressive normal force `force_sign · F_z`; its command is a correction along z only.
+#[derive(Clone, Debug)]
+pub struct AlongNormal<L> {
+    law: L,
+    force_sign: f64,
+}
+
+impl<L> AlongNormal<L> {
+    /// `law` along the tool normal; `force_sign` turns the sensor's `F_z` into a compressive force
+    /// (`+1` when pressing reads positive).
+    pub fn new(law: L, force_sign: f64) -> Self {
+        Self { law, force_sign }
+    }
+
+    /// The 1-DOF law.
+    pub fn inner(&self) -> &L {
+        &self.law
+    }
+}
+
+impl<L: ForceLaw> CellLaw for AlongNormal<L> {
+    fn start(&mut self, _: &Cycle, at: &Correction) {
+        self.law.start(at.translation.z);
+    }
+
+    fn step(&mut self, cycle: &Cycle, wrench: &Wrench, dt: f64) -> LawStep {
+        let x = cycle.tool_offset().z;
+        let f = self.force_sign * wrench.force.z;
+        let out = self.law.step(x, f, dt);
+        LawStep {
+            correction: Correction::along_z(out.x_cmd),
+            out,
+        }
+    }
+
+    fn set_point(&self) -> f64 {
+        self.law.set_point()
+    }
+
+    fn set_set_point(&mut self, f_r: f64) -> Result<(), String> {
+        self.law.set_set_point(f_r)
+    }
+
+    fn counters(&self) -> EventCounts {
+        self.law.counters()
     }
 }
 

@@ -22,6 +22,7 @@ pub mod law;
 pub mod onset;
 pub mod predictor;
 pub mod robust;
+pub mod run;
 pub mod tune;
 
 pub use config::{LawConfig, Overrides, Tuning};
@@ -29,7 +30,8 @@ pub use control_loop::{
     ControlLoop, CycleReport, Fault, LoopConfig, LoopError, LoopStats, ProcessConfig,
 };
 pub use law::{
-    AdaptiveParams, ContactState, EventCounts, Events, ForceLaw, ImpedanceLaw, ImpedanceParams,
+    AdaptiveParams, AlongNormal, CellLaw, ContactState, EventCounts, Events, ForceLaw, ImpedanceLaw,
+    ImpedanceParams, LawStep,
     Output, Reference, fixed_reference_steady_state_error,
 };
 pub use robust::{CellParams, ContactParams, LimitParams, ResponseParams, RobustLaw, RobustParams};

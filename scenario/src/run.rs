@@ -4,8 +4,9 @@
 //! controller's closed-loop tests use this, so a scenario file and a metric mean the same thing in both.
 
 use anyhow::{Result, anyhow};
-use controller::{CellParams, ControlLoop, EventCounts, ForceLaw, LoopStats, Tuning};
-use sim::{InProcRobot, InProcSensor, InnerLoopModel, SensorParams, World};
+use controller::run::{End, RunLimits, Program, Sink};
+use controller::{CellLaw, CellParams, ControlLoop, CycleReport, EventCounts, LoopStats, Tuning};
+use sim::{InProcRobot, InProcSensor, InnerLoopModel, SensorParams, SharedWorld, World};
 
 use crate::metrics::Metrics;
 use crate::record::Row;
@@ -113,13 +114,8 @@ pub fn run(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) -> Resu
     }
 }
 
-/// [`run`], keeping the steps of a run that a fault ended (what led to it, its peak force); an error
-/// only when the law cannot be built.
-pub fn run_to_end(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) -> Result<Ended> {
-    let mut tuning = tuning.clone();
-    tuning.law.apply(&scenario.controller);
-    tuning.law.set_cell(cell_model(plant, &scenario.sensor));
-    let law = tuning.law.build().map_err(|e| anyhow!(e))?;
+/// The simulated world for `scenario` on `plant`: its environment, sensor, start and program.
+pub fn world(scenario: &Scenario, plant: &InnerLoopModel) -> SharedWorld {
     let world = World::new(
         scenario.environment.plant(),
         *plant,
@@ -127,42 +123,112 @@ pub fn run_to_end(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) 
         scenario.start_position(),
     )
     .with_form(scenario.environment.form.clone());
-    let world = match &scenario.program {
+    match &scenario.program {
         Some(p) => world.with_program(p.clone()),
         None => world,
     }
-    .shared();
+    .shared()
+}
+
+/// `tuning` as it runs `scenario` on `plant`: the scenario's overrides applied and the law's model of
+/// the cell taken from the simulated plant and sensor.
+pub fn resolve_tuning(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) -> Tuning {
+    let mut tuning = tuning.clone();
+    tuning.law.apply(&scenario.controller);
+    tuning.law.set_cell(cell_model(plant, &scenario.sensor));
+    tuning
+}
+
+/// The sink of a simulated run: one [`Row`] per answered cycle, the simulated robot program's end,
+/// and whatever else the caller hands each cycle to (a recorder, a progress bar).
+pub struct WorldSink<'a> {
+    /// One row per answered cycle (truth columns filled by [`WorldSink::finish`]).
+    pub rows: Vec<Row>,
+    world: &'a SharedWorld,
+    has_program: bool,
+    also: &'a mut dyn FnMut(&CycleReport, &Row),
+}
+
+impl<'a> WorldSink<'a> {
+    /// A sink watching `world`'s program, room for `steps` rows; `also` sees every cycle and its row.
+    pub fn new(
+        world: &'a SharedWorld,
+        steps: usize,
+        also: &'a mut dyn FnMut(&CycleReport, &Row),
+    ) -> Self {
+        // Whether the world runs a program is fixed for the run: only then is its end looked up.
+        let has_program = sim::world::lock(world).program().is_some();
+        Self {
+            rows: Vec::with_capacity(steps),
+            world,
+            has_program,
+            also,
+        }
+    }
+
+    /// The rows, with the truth of the world's log filled in.
+    pub fn finish(mut self, period: f64) -> Vec<Row> {
+        let truth = sim::world::lock(self.world).truth_log();
+        fill_truth(&mut self.rows, &truth, period);
+        self.rows
+    }
+}
+
+impl Sink for WorldSink<'_> {
+    fn record(&mut self, report: &CycleReport) -> bool {
+        let row = Row::from_report(report, report.set_point);
+        (self.also)(report, &row);
+        self.rows.push(row);
+        true
+    }
+
+    fn program(&mut self) -> Program {
+        if !self.has_program {
+            return Program::Running;
+        }
+        match sim::world::lock(self.world).program() {
+            Some(p) if p.done() => match p.aborted() {
+                Some(why) => Program::Aborted(why.to_string()),
+                None => Program::Done,
+            },
+            _ => Program::Running,
+        }
+    }
+}
+
+/// [`run`], keeping the steps of a run that a fault ended (what led to it, its peak force); an error
+/// only when the law cannot be built.
+pub fn run_to_end(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) -> Result<Ended> {
+    let tuning = resolve_tuning(scenario, plant, tuning);
+    let law = tuning.law.build().map_err(|e| anyhow!(e))?;
+    let world = world(scenario, plant);
     let mut lp = ControlLoop::new(
         InProcRobot::new(world.clone()),
         InProcSensor::new(world.clone()),
         law,
         tuning.loop_config(),
     );
-    let steps = (scenario.duration / plant.period).round().max(1.0) as usize;
-    let mut rows = Vec::with_capacity(steps);
-    let (mut fault, mut fault_code) = (None, None);
-    for _ in 0..steps {
-        // A robot program ends the run when it ends (as `forcecell sim` does).
-        if sim::world::lock(&world).program().is_some_and(|p| p.done()) {
-            break;
-        }
-        match lp.cycle() {
-            Ok(r) => rows.push(Row::from_report(&r, r.set_point)),
-            Err(e) => {
-                fault_code = e.code().map(|c| c.code());
-                fault = Some(anyhow!("the loop ended after {} steps: {e}", rows.len()));
-                break;
-            }
-        }
-    }
+    let steps = (scenario.duration / plant.period).round().max(1.0) as u64;
+    let mut nothing = |_: &CycleReport, _: &Row| {};
+    let mut sink = WorldSink::new(&world, steps as usize, &mut nothing);
+    let limits = RunLimits {
+        cycles: Some(steps),
+        ..RunLimits::default()
+    };
+    let outcome = controller::run::run(&mut lp, limits, &mut sink);
+    let (fault, fault_code) = match &outcome.end {
+        End::Fault(e) | End::LinkLost(e) => (
+            Some(anyhow!("the loop ended after {} steps: {e}", sink.rows.len())),
+            e.code().map(|c| c.code()),
+        ),
+        _ => (None, None),
+    };
     let counters = lp.law().counters();
     let stats = lp.stats();
     drop(lp);
-    let truth = sim::world::lock(&world).truth_log();
-    fill_truth(&mut rows, &truth, plant.period);
     Ok(Ended {
         run: Run {
-            rows,
+            rows: sink.finish(plant.period),
             counters,
             stats,
         },

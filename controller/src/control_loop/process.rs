@@ -1,5 +1,5 @@
 //! The force process the robot program commands (RSI `FcCmd` → `FcState`): OFF, PRESS and RELEASE with
-//! ramps, latched faults that retract and re-arm on OFF. Contract: `shared/specs/rsi-process.md`.
+//! ramps, latched faults that retract and re-arm on OFF. Contract: the process channels in `docs/wire-rsi.md`.
 //!
 //! The loop runs this only on cycles that carry a [`ProcessCommand`]; without one it keeps its old
 //! behaviour (force control from the first cycle at the tuning's set-point).

@@ -2,14 +2,14 @@
 //! drives the process ([`super::process`]), which decides whether the law controls or the command
 //! moves to a target.
 
-use hal::{Correction, Cycle, ForceSensor, ProcessCommand, ProcessFault, RobotLink};
+use hal::{Correction, Cycle, ForceSensor, ProcessCommand, ProcessFault, RobotLink, Wrench};
 
 use super::error::{hold_code, hold_reason};
 use super::process::Act;
 use super::{ControlLoop, CycleReport, Fault, LoopError, Reading, guard, pose_ok};
-use crate::law::{ForceLaw, Output};
+use crate::law::{CellLaw, Output};
 
-impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
+impl<R: RobotLink, S: ForceSensor, L: CellLaw> ControlLoop<R, S, L> {
     /// One cycle of a process the robot program commands (the cycle carries a [`ProcessCommand`]):
     /// OFF returns the correction to zero, PRESS approaches, ramps and holds the program's force,
     /// RELEASE ramps down, lifts off and returns to zero; a fault latches, backs off and holds there
@@ -27,13 +27,14 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         let Reading {
             f,
             sample,
+            wrench,
             mut fault,
             fatal,
         } = self.read_sensor(pose_ok);
         if let Some(f) = f {
             self.process.observe(f, cycle.period);
         }
-        self.take_process_command(&pc, if pose_ok { x } else { self.last_cmd });
+        self.take_process_command(&pc, &cycle, if pose_ok { x } else { self.last_cmd });
         if let Some(e) = &fatal {
             let why = || format!("force sensor: {e}");
             self.process
@@ -52,8 +53,8 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
                 (out, cmd, false)
             }
             Act::Control => {
-                let (out, cmd) = match (fault, f) {
-                    (None, Some(fv)) => self.process_law_step(&cycle, x, fv, &mut fault),
+                let (out, cmd) = match (fault, f, wrench) {
+                    (None, Some(fv), Some(w)) => self.process_law_step(&cycle, &w, fv, &mut fault),
                     _ => (self.last_out, self.last_cmd),
                 };
                 (out, cmd, true)
@@ -62,7 +63,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
         self.bound_process_hold(fault, controlling, cycle.period, cmd);
         let command = Correction {
             process: self.process.state(),
-            ..Correction::along_z(cmd)
+            ..self.command(cmd)
         };
         self.reply(&command, out)?;
         Ok(CycleReport {
@@ -70,6 +71,8 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
             x,
             f,
             sample,
+            wrench,
+            compensated: self.gravity.is_some(),
             out,
             command,
             set_point: self.process.recorded_set_point(),
@@ -79,13 +82,13 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
 
     /// The robot program's command `pc` to the process: a PRESS that starts force control starts the
     /// law afresh at `x` (bumpless), a command the process refuses latches a fault.
-    fn take_process_command(&mut self, pc: &ProcessCommand, x: f64) {
+    fn take_process_command(&mut self, pc: &ProcessCommand, cycle: &Cycle, x: f64) {
         match self.process.command(pc) {
             Ok(true) => {
                 self.law
                     .set_set_point(self.process.sp)
                     .expect("a checked PRESS force is a valid set-point");
-                self.law.start(x);
+                self.law.start(cycle, &Correction::along_z(x));
                 self.stepped_t = None;
                 self.held = 0.0;
             }
@@ -121,7 +124,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
     fn process_law_step(
         &mut self,
         cycle: &Cycle,
-        x: f64,
+        wrench: &Wrench,
         f: f64,
         fault: &mut Option<Fault>,
     ) -> (Output, f64) {
@@ -132,7 +135,7 @@ impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, L> {
                 .set_set_point(self.process.sp)
                 .expect("a ramp between checked forces is a valid set-point");
         }
-        let Some((o, cmd)) = self.step_law(x, f, dt, fault) else {
+        let Some((o, cmd)) = self.step_law(cycle, wrench, dt, fault) else {
             return (self.last_out, self.last_cmd);
         };
         if let Err((code, why)) = self.process.after_step(&o, f, dt) {

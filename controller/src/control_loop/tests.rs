@@ -89,12 +89,12 @@ fn sensor_timeout_holds_without_a_step_and_counts() {
     let mut lp = ControlLoop::new(robot, sensor, ImpedanceLaw::paper(), LoopConfig::default());
     let first = lp.cycle().unwrap();
     assert_eq!(first.fault, None);
-    let law_before = lp.law().clone();
+    let law_before = lp.law().inner().clone();
     let second = lp.cycle().unwrap();
     assert_eq!(second.fault, Some(Fault::Sensor(ErrorKind::Timeout)));
     assert_eq!(lp.stats().sensor_faults, 1);
     assert_eq!(
-        lp.law(),
+        lp.law().inner(),
         &law_before,
         "the law must not step on a held cycle"
     );
@@ -176,7 +176,7 @@ fn run_until_end(
     panic!("the loop never ended")
 }
 
-type MockLoop = ControlLoop<MockRobot, MockSensor, ImpedanceLaw>;
+type MockLoop = ControlLoop<MockRobot, MockSensor, AlongNormal<ImpedanceLaw>>;
 type SentLog = std::sync::Arc<std::sync::Mutex<Vec<Correction>>>;
 
 /// A robot at a fixed pose whose replies are logged, and a sensor that answers `read` in turn.
@@ -592,6 +592,7 @@ fn the_laws_clock_is_the_robots_stamps_held_and_skipped_cycles_included() {
     }
     let steps: Vec<u64> = lp
         .law()
+        .inner()
         .dts
         .iter()
         .map(|dt| (dt / 0.004).round() as u64)
@@ -600,16 +601,17 @@ fn the_laws_clock_is_the_robots_stamps_held_and_skipped_cycles_included() {
         steps,
         [1, 1, 1, 3, 2],
         "periods per step: {:?}",
-        lp.law().dts
+        lp.law().inner().dts
     );
     // Whole periods, exactly: the stamps' float error stays out of the law.
     let whole = lp
         .law()
+        .inner()
         .dts
         .iter()
         .zip(&steps)
         .all(|(dt, n)| *dt == *n as f64 * 0.004);
-    assert!(whole, "{:?}", lp.law().dts);
+    assert!(whole, "{:?}", lp.law().inner().dts);
 }
 
 /// A law in contact for its first `contact_steps` steps, then approaching again (it took the contact
@@ -676,10 +678,10 @@ fn a_contact_the_law_takes_back_hands_it_the_entry_force_again() {
     for _ in 0..5 {
         lp.cycle().unwrap();
     }
-    assert!(lp.law().sp > 3.0, "ramping: {}", lp.law().sp);
+    assert!(lp.law().inner().sp > 3.0, "ramping: {}", lp.law().inner().sp);
     for _ in 0..3 {
         lp.cycle().unwrap();
     }
     assert_eq!(lp.process_state().phase, hal::ProcessPhase::Approach);
-    assert_eq!(lp.law().sp, 2.0);
+    assert_eq!(lp.law().inner().sp, 2.0);
 }
