@@ -43,8 +43,8 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use anyhow::{Context, Result, anyhow, bail};
-use controller::run::{End, RunLimits, RobotSession, Sink};
 use controller::gravity::{Compensator, GravityModel};
+use controller::run::{End, RobotSession, RunLimits, Sink};
 use controller::{ControlLoop, LoopStats, Tuning};
 use hal::{ForceSensor, RobotLink, UnitQuaternion, Vector3};
 use kuka_rsi::{CorrectionMode, EthernetConfig, Limits, LinkConfig, PoscorrLimits, RobotFilter};
@@ -600,8 +600,8 @@ where
     S::Error: Send + Sync + 'static,
 {
     let law = tuning.law.build().map_err(|e| anyhow!(e))?;
-    let mut lp = ControlLoop::new(robot, sensor, law, tuning.loop_config())
-        .with_gravity(cfg.compensator());
+    let mut lp =
+        ControlLoop::new(robot, sensor, law, tuning.loop_config()).with_gravity(cfg.compensator());
     let mut sink = RecordSink::new(recorder);
     let limits = RunLimits {
         duration: cfg.duration,
@@ -823,13 +823,17 @@ pub fn calibrate(path: &Path, poses: usize) -> Result<()> {
     );
     crate::stop::install()?;
     let mut sink = RecordSink::new(Some(tx));
-    let c = controller::calibration::calibrate(
+    let mut on_pose = |n| println!("pose {n} of {poses}");
+    let collecting = controller::calibration::Collecting::new(
         link,
         sensor,
         mount,
         poses,
         controller::calibration::CollectorConfig::default(),
-        &mut |n| println!("pose {n} of {poses}"),
+        &mut on_pose,
+    );
+    let c = controller::calibration::calibrate(
+        collecting,
         RunLimits {
             stop: Some(crate::stop::flag()),
             ..RunLimits::default()

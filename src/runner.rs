@@ -3,9 +3,9 @@
 
 use std::time::{Duration, Instant};
 
-use anyhow::{Result, anyhow};
 use ::scenario::run::WorldSink;
-use controller::run::{End, RunLimits, Outcome, RobotSession};
+use anyhow::{Result, anyhow};
+use controller::run::{End, Outcome, RobotSession, RunLimits};
 use controller::{CellLaw, ControlLoop, EventCounts, LoopStats, Tuning};
 use hal::{ForceSensor, RobotLink};
 use sim::{InProcRobot, InProcSensor, InnerLoopModel, SharedWorld};

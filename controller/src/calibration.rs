@@ -134,7 +134,9 @@ impl<E: fmt::Display> fmt::Display for CalibrationError<E> {
                 f,
                 "the robot link ended after {poses} static poses: {error}"
             ),
-            Self::Stopped { poses } => write!(f, "stopped by the operator after {poses} static poses"),
+            Self::Stopped { poses } => {
+                write!(f, "stopped by the operator after {poses} static poses")
+            }
             Self::Fit(e) => write!(
                 f,
                 "{e} (hold the tool still in orientations rotated about at least two different axes)"
@@ -266,21 +268,13 @@ impl<R: RobotLink, S: ForceSensor> Cycler for Collecting<'_, R, S> {
     }
 }
 
-/// Answer the robot's cycles with a zero correction, collect `wanted` static poses (sensor orientation =
-/// the robot's measured orientation · `mount`), end the correction motion with `Stop`, and fit.
-/// `on_pose` is told the count after each new pose; every cycle goes to `sink`. Sensor errors skip the
-/// sample. Runs through the one [run loop](crate::run::run), with `limits` (the operator's stop).
+/// Run `collecting` (answer the robot's cycles with a zero correction until it has its static poses),
+/// end the correction motion with `Stop`, and fit; every cycle goes to `sink`. Runs through the one [run loop](crate::run::run), with `limits` (the operator's stop).
 pub fn calibrate<R: RobotLink, S: ForceSensor>(
-    robot: R,
-    sensor: S,
-    mount: UnitQuaternion<f64>,
-    wanted: usize,
-    cfg: CollectorConfig,
-    on_pose: &mut dyn FnMut(usize),
+    mut collecting: Collecting<'_, R, S>,
     limits: RunLimits<'_>,
     sink: &mut dyn Sink,
 ) -> Result<Calibration, CalibrationError<R::Error>> {
-    let mut collecting = Collecting::new(robot, sensor, mount, wanted, cfg, on_pose);
     let outcome = run(&mut collecting, limits, sink);
     let poses = collecting.poses().len();
     let failed = |error| CalibrationError::Robot { error, poses };
@@ -441,12 +435,14 @@ mod tests {
         let mut sensor = Hanging::new(&program);
         let mut seen = Vec::new();
         let result = calibrate(
-            &mut program,
-            &mut sensor,
-            UnitQuaternion::identity(),
-            8,
-            CollectorConfig::default(),
-            &mut |n| seen.push(n),
+            Collecting::new(
+                &mut program,
+                &mut sensor,
+                UnitQuaternion::identity(),
+                8,
+                CollectorConfig::default(),
+                &mut |n| seen.push(n),
+            ),
             RunLimits::default(),
             &mut (),
         )
@@ -472,12 +468,14 @@ mod tests {
         };
         let mut sensor = Hanging::new(&program);
         let e = calibrate(
-            &mut program,
-            &mut sensor,
-            UnitQuaternion::identity(),
-            8,
-            CollectorConfig::default(),
-            &mut |_| {},
+            Collecting::new(
+                &mut program,
+                &mut sensor,
+                UnitQuaternion::identity(),
+                8,
+                CollectorConfig::default(),
+                &mut |_| {},
+            ),
             RunLimits::default(),
             &mut (),
         )

@@ -113,8 +113,7 @@ mod tests {
         // A good cycle, then non-finite poses: the orientation ages by a period each cycle until stale.
         g.observe(&cycle(UnitQuaternion::identity()));
         assert!(g.apply(&w).is_ok());
-        let bad =
-            UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(f64::NAN, 0.0, 0.0, 0.0));
+        let bad = UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(f64::NAN, 0.0, 0.0, 0.0));
         g.observe(&cycle(bad));
         g.observe(&cycle(bad));
         assert!(g.apply(&w).is_ok(), "8 ms old is within 10 ms");

@@ -30,8 +30,7 @@ pub use control_loop::{
     ControlLoop, CycleReport, Fault, LoopConfig, LoopError, LoopStats, ProcessConfig,
 };
 pub use law::{
-    AdaptiveParams, AlongNormal, CellLaw, ContactState, EventCounts, Events, ForceLaw, ImpedanceLaw,
-    ImpedanceParams, LawStep,
-    Output, Reference, fixed_reference_steady_state_error,
+    AdaptiveParams, AlongNormal, CellLaw, ContactState, EventCounts, Events, ForceLaw,
+    ImpedanceLaw, ImpedanceParams, LawStep, Output, Reference, fixed_reference_steady_state_error,
 };
 pub use robust::{CellParams, ContactParams, LimitParams, ResponseParams, RobustLaw, RobustParams};

@@ -188,7 +188,11 @@ impl<E> Outcome<E> {
 
 /// Run `cycler` until an end condition holds, hand every answered cycle to `sink`, and end the
 /// robot's correction motion cleanly wherever the link still stands.
-pub fn run<C: Cycler>(cycler: &mut C, limits: RunLimits<'_>, sink: &mut dyn Sink) -> Outcome<C::Error> {
+pub fn run<C: Cycler>(
+    cycler: &mut C,
+    limits: RunLimits<'_>,
+    sink: &mut dyn Sink,
+) -> Outcome<C::Error> {
     let stopped = || limits.stop.is_some_and(|s| s.load(Ordering::Relaxed));
     let mut robot_owns = limits.robot_session == RobotSession::Robot;
     let mut k = 0u64;

@@ -180,4 +180,3 @@ pub struct ProcessState {
     /// The latched fault, [`ProcessFault::None`] unless `phase` is [`ProcessPhase::Fault`].
     pub fault: ProcessFault,
 }
-

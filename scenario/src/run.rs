@@ -4,7 +4,7 @@
 //! controller's closed-loop tests use this, so a scenario file and a metric mean the same thing in both.
 
 use anyhow::{Result, anyhow};
-use controller::run::{End, RunLimits, Program, Sink};
+use controller::run::{End, Program, RunLimits, Sink};
 use controller::{CellLaw, CellParams, ControlLoop, CycleReport, EventCounts, LoopStats, Tuning};
 use sim::{InProcRobot, InProcSensor, InnerLoopModel, SensorParams, SharedWorld, World};
 
@@ -218,7 +218,10 @@ pub fn run_to_end(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) 
     let outcome = controller::run::run(&mut lp, limits, &mut sink);
     let (fault, fault_code) = match &outcome.end {
         End::Fault(e) | End::LinkLost(e) => (
-            Some(anyhow!("the loop ended after {} steps: {e}", sink.rows.len())),
+            Some(anyhow!(
+                "the loop ended after {} steps: {e}",
+                sink.rows.len()
+            )),
             e.code().map(|c| c.code()),
         ),
         _ => (None, None),

@@ -678,7 +678,11 @@ fn a_contact_the_law_takes_back_hands_it_the_entry_force_again() {
     for _ in 0..5 {
         lp.cycle().unwrap();
     }
-    assert!(lp.law().inner().sp > 3.0, "ramping: {}", lp.law().inner().sp);
+    assert!(
+        lp.law().inner().sp > 3.0,
+        "ramping: {}",
+        lp.law().inner().sp
+    );
     for _ in 0..3 {
         lp.cycle().unwrap();
     }
