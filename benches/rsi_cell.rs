@@ -4,7 +4,7 @@
 //! first, then divan's timings.
 
 use divan::Bencher;
-use forcecell::rsi::{RobotBackend, RsiArgs};
+use forcecell::args::{RobotBackend, RsiArgs};
 use forcecell::runner::RunSpec;
 use forcecell::scenario::Scenario;
 

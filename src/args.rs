@@ -1,5 +1,129 @@
-//! Command-line numbers, bounded where they are parsed: each parser accepts only what the physical
+//! The command line's argument types shared by the binary, the benches and the tests, and its numbers,
+//! bounded where they are parsed: each parser accepts only what the physical
 //! quantity can be, and says why in its error (clap prints it as `error: invalid value … for '--flag'`).
+
+use std::net::{Ipv4Addr, SocketAddr};
+use std::path::PathBuf;
+
+use clap::{Args, ValueEnum};
+
+/// Which robot backend `forcecell sim` drives.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum RobotBackend {
+    /// The KUKA RSI driver over loopback UDP against the simulated KUKA controller.
+    Rsi,
+    /// The in-process robot (no wire).
+    Inproc,
+}
+
+/// `forcecell sim` options for the robot side.
+#[derive(Args, Clone, Debug)]
+pub struct RsiArgs {
+    /// Robot backend.
+    #[arg(long, value_enum, default_value = "rsi")]
+    pub robot: RobotBackend,
+    /// Run the simulated controller on the wall clock (one datagram per period) instead of lockstep.
+    #[arg(long)]
+    pub realtime: bool,
+    /// Start no simulated controller: listen on ADDR:PORT for any RSI client (a real KRC, another
+    /// simulator); the simulated sensor computes force from the pose that client reports.
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub external_robot: Option<SocketAddr>,
+    /// With `--external-robot`: the client runs its own robot program over the process channels
+    /// (sends `FcCmd`, reads `FcState`, as `forcecell rsi-config` configures a robot by default); the
+    /// run lasts until it ends its session. Without it the client sends plain `<Rob>` datagrams and
+    /// gets the scenario's own course (its program, if it has one, run on the client's behalf).
+    #[arg(long, requires = "external_robot")]
+    pub process_channels: bool,
+}
+
+/// The default wire: the RSI driver against the simulated KUKA controller over loopback UDP, in lockstep.
+impl Default for RsiArgs {
+    fn default() -> Self {
+        Self {
+            robot: RobotBackend::Rsi,
+            realtime: false,
+            external_robot: None,
+            process_channels: false,
+        }
+    }
+}
+
+/// Correction mode on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ModeArg {
+    /// `RSI_ON(#ABSOLUTE)`, HOLDON 1 (recommended).
+    Absolute,
+    /// `RSI_ON(#RELATIVE)`, HOLDON 0.
+    Relative,
+}
+
+/// `forcecell rsi-config` options.
+#[derive(Args, Clone, Debug)]
+pub struct RsiConfigArgs {
+    /// The PC's address as the robot sees it (IP_NUMBER).
+    #[arg(long, default_value = "192.168.1.10")]
+    pub ip: Ipv4Addr,
+    /// UDP port (PORT).
+    #[arg(long, default_value_t = 49152, allow_negative_numbers = true, value_parser = robot_port)]
+    pub port: u16,
+    /// Correction mode.
+    #[arg(long, value_enum, default_value = "absolute")]
+    pub mode: ModeArg,
+    /// Use the 12 ms `#IPO` cycle instead of 4 ms `#IPO_FAST`.
+    #[arg(long)]
+    pub ipo12: bool,
+    /// ETHERNET Timeout: late replies tolerated before RSI stops.
+    #[arg(long, default_value_t = 100)]
+    pub timeout: u32,
+    /// Built-in tuning name or tuning TOML file: its loop limits set POSCORR and POSCORRMON.
+    /// Without it, RSI's defaults (5 mm / 5°, 6 mm / 6°).
+    #[arg(long)]
+    pub tuning: Option<String>,
+    /// Base name of the files.
+    #[arg(long, default_value = "forcecell_rsi")]
+    pub name: String,
+    /// Output directory.
+    #[arg(long, default_value = "out/rsi")]
+    pub out: PathBuf,
+    /// Leave out the process channels (FcCmd/FcState) and write the plain RSI_MOVECORR template:
+    /// force control then runs from the first cycle at the tuning's set-point.
+    #[arg(long)]
+    pub no_process: bool,
+    /// Polishing segments for the KRL template: FORCE_N:LENGTH_MM, comma-separated.
+    #[arg(long, default_value = "10:50,30:100,10:50")]
+    pub segments: String,
+    /// Feed speed along the path, mm/s.
+    #[arg(long, default_value_t = 20.0)]
+    pub feed_mm_s: f64,
+    /// FcCmd.Ramp for every set-point change, s (0: the tuning's own rate).
+    #[arg(long, default_value_t = 0.5)]
+    pub ramp: f64,
+    /// How long the program waits for PRESSING and for OFF before it ends the pass cleanly, s.
+    #[arg(long, default_value_t = 10.0)]
+    pub wait_timeout: f64,
+    /// $SEN_PINT index the program writes FcCmd.Mode to.
+    #[arg(long, default_value_t = 1)]
+    pub pint_mode: u8,
+    /// $SEN_PINT index the program writes FcCmd.Seg to.
+    #[arg(long, default_value_t = 2)]
+    pub pint_seg: u8,
+    /// $SEN_PINT index RSI writes FcState.State to.
+    #[arg(long, default_value_t = 3)]
+    pub pint_state: u8,
+    /// $SEN_PINT index RSI writes FcState.Fault to.
+    #[arg(long, default_value_t = 4)]
+    pub pint_fault: u8,
+    /// $SEN_PREA index the program writes FcCmd.F to.
+    #[arg(long, default_value_t = 1)]
+    pub prea_force: u8,
+    /// $SEN_PREA index the program writes FcCmd.Ramp to.
+    #[arg(long, default_value_t = 2)]
+    pub prea_ramp: u8,
+    /// $SEN_PREA index RSI writes FcState.F (measured force) to.
+    #[arg(long, default_value_t = 3)]
+    pub prea_measured: u8,
+}
 
 /// Parse a finite number in `[lo, hi]`; `why` is the physical reason for the bounds.
 fn bounded(s: &str, lo: f64, hi: f64, unit: &str, why: &str) -> Result<f64, String> {

@@ -12,9 +12,10 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 
+use crate::args::RsiArgs;
 use crate::plot;
 use crate::record;
-use crate::rsi::{RobotSide, RsiArgs};
+use crate::rsi::RobotSide;
 use crate::runner::RunSpec;
 use crate::scenario::{PlantSpec, Scenario, builtin_names};
 

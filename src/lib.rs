@@ -11,6 +11,7 @@ pub mod live;
 pub mod plot;
 pub mod readout;
 pub mod recorder;
+pub mod report;
 pub mod rig;
 pub mod robotiq;
 pub mod rsi;

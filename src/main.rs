@@ -1,12 +1,12 @@
 //! `forcecell` — simulate a polishing cell, or deploy the controller on a real one.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
-use forcecell::runner::{RunResult, RunSpec};
+use forcecell::runner::RunSpec;
 use forcecell::scenario::Scenario;
 use forcecell::{plot, record};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -32,7 +32,7 @@ enum Command {
     /// Simulate a cell: run a scenario, print a summary, write DIR/NAME.csv and DIR/NAME.png.
     Sim(SimArgs),
     /// Write the robot-side KUKA RSI files (Ethernet config XML, KRL template) for this configuration.
-    RsiConfig(forcecell::rsi::RsiConfigArgs),
+    RsiConfig(forcecell::args::RsiConfigArgs),
     /// Plot a recorded trace (MCAP or CSV written by `sim` or `run`) to PNG and print its metrics.
     Plot(PlotArgs),
     /// Export an MCAP recording as a CSV trace (the columns `sim` and `run` write).
@@ -304,7 +304,7 @@ struct SimArgs {
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = LIVE_DEFAULT)]
     live: Option<std::net::SocketAddr>,
     #[command(flatten)]
-    robot: forcecell::rsi::RsiArgs,
+    robot: forcecell::args::RsiArgs,
 }
 
 fn main() -> ExitCode {
@@ -437,7 +437,7 @@ fn sim(mut a: SimArgs) -> Result<ExitCode> {
     println!("robot: {}", a.robot.describe());
     let live = match a.live {
         Some(addr) => {
-            if a.robot.robot == forcecell::rsi::RobotBackend::Rsi {
+            if a.robot.robot == forcecell::args::RobotBackend::Rsi {
                 a.robot.realtime = true;
             }
             let server = forcecell::live::LiveServer::bind(addr)?;
@@ -468,7 +468,7 @@ fn sim(mut a: SimArgs) -> Result<ExitCode> {
         w.print();
     }
     let recorded = recording.finish(run.rows.clone())?;
-    let code = report(&spec, &run, &a.out, a.check)?;
+    let code = ExitCode::from(forcecell::report::sim(&spec, &run, &a.out, a.check)?);
     println!("recorded {recorded}");
     Ok(code)
 }
@@ -597,172 +597,6 @@ fn list() -> Result<()> {
         println!("  {:<22} {}", t.name, t.description);
     }
     Ok(())
-}
-
-fn report(spec: &RunSpec, run: &RunResult, out: &Path, check: bool) -> Result<ExitCode> {
-    let m = &run.metrics;
-    let steps = run.rows.len();
-    let rate = steps as f64 / run.wall.as_secs_f64().max(1e-9);
-    println!(
-        "ran {steps} steps in {:.2} s wall ({:.0} steps/s)",
-        run.wall.as_secs_f64(),
-        rate
-    );
-    if let Some(why) = &run.ended_early {
-        println!("the loop ended early: {why}");
-    }
-    if let Some(stop_sent) = run.interrupted {
-        println!(
-            "stopped by SIGINT/SIGTERM after {steps} steps; Stop {}",
-            if stop_sent {
-                "sent to the robot"
-            } else {
-                "not sent (no robot cycle to answer)"
-            }
-        );
-    }
-    let f_r = run.rows.last().map_or(f64::NAN, |r| r.f_r);
-    let settle = if m.settle_time.is_finite() {
-        format!("{:.3} s after first contact", m.settle_time)
-    } else {
-        "not settled".to_string()
-    };
-    let last = run.rows.last();
-    let table = [
-        (
-            "first contact",
-            if m.first_contact.is_nan() {
-                "never".into()
-            } else {
-                format!("{:.3} s", m.first_contact)
-            },
-        ),
-        (
-            "peak force",
-            format!("{:.2} N (set-point {f_r} N)", m.peak_force),
-        ),
-        ("settling (±2 %)", settle),
-        ("overshoot", format!("{:.1} %", m.overshoot_pct)),
-        (
-            "steady-state error",
-            format!(
-                "{:.4} N (|mean f − f_r| over the last 0.1 s; ripple ±{:.4} N)",
-                m.ss_error, m.ss_ripple
-            ),
-        ),
-        (
-            "RMS error",
-            format!("{:.4} N (from first contact)", m.rms_error),
-        ),
-        (
-            "contact losses",
-            format!(
-                "{} (longest {:.3} s)",
-                m.contact_losses, m.contact_loss_time
-            ),
-        ),
-        (
-            "final k̂_c",
-            format!(
-                "{:.0} N/m (true {:.0} N/m)",
-                m.kc_hat,
-                last.map_or(f64::NAN, |r| r.k_c)
-            ),
-        ),
-        (
-            "final x̂_c",
-            format!(
-                "{:.4} mm (true {:.4} mm)",
-                m.xc_hat * 1e3,
-                last.map_or(f64::NAN, |r| r.x_c * 1e3)
-            ),
-        ),
-        (
-            "faults",
-            format!(
-                "{} sensor, {} non-finite, {} limited",
-                run.stats.sensor_faults, run.stats.nonfinite_inputs, run.stats.limited
-            ),
-        ),
-        ("law events", {
-            let e = &run.law_events;
-            format!(
-                "{} contacts, {} lift-offs, {} force-limit retracts; limited: {} velocity, {} acceleration, {} deviation, {} estimator bound",
-                e.contacts,
-                e.lift_offs,
-                e.force_limits,
-                e.velocity_limits,
-                e.acceleration_limits,
-                e.deviation_limits,
-                e.estimator_bounds
-            )
-        }),
-    ];
-    println!();
-    for (k, v) in table {
-        println!("  {k:<20} {v}");
-    }
-    let verdicts = run.verdicts(&spec.scenario.targets);
-    if !verdicts.is_empty() {
-        println!("\ntargets:");
-        for v in &verdicts {
-            let t = &v.target;
-            let window = format!(
-                "[{}, {}] s",
-                t.after.unwrap_or(0.0),
-                t.until.map_or("end".to_string(), |u| u.to_string())
-            );
-            let limit = match (t.min, t.max) {
-                (Some(lo), Some(hi)) => format!("in [{lo}, {hi}]"),
-                (Some(lo), None) => format!("≥ {lo}"),
-                (None, Some(hi)) => format!("≤ {hi}"),
-                (None, None) => String::new(),
-            };
-            println!(
-                "  {:<18} {:<14} {:<12} {:>12.4}  {}",
-                t.metric,
-                window,
-                limit,
-                v.value,
-                if v.pass { "pass" } else { "FAIL" }
-            );
-        }
-    }
-    let stem = spec.file_stem();
-    let csv = out.join(format!("{stem}.csv"));
-    let png = out.join(format!("{stem}.png"));
-    record::write_csv_file(&csv, &run.rows)?;
-    plot::write_png(
-        &png,
-        &format!(
-            "{} · plant {} · tuning {}",
-            spec.scenario.name, spec.plant_label, spec.tuning.name
-        ),
-        &run.rows,
-    )?;
-    println!("\nwrote {} and {}", csv.display(), png.display());
-    if run.rows.iter().any(|r| r.segment.is_some()) {
-        let pass_png = out.join(format!("{stem}-pass.png"));
-        plot::write_pass_png(
-            &pass_png,
-            &format!(
-                "{} along the path · plant {} · tuning {}",
-                spec.scenario.name, spec.plant_label, spec.tuning.name
-            ),
-            &run.rows,
-        )?;
-        println!("wrote {} (the pass along the path)", pass_png.display());
-    }
-    let failed = verdicts.iter().any(|v| !v.pass);
-    Ok(ExitCode::from(if run.interrupted.is_some() {
-        forcecell::stop::INTERRUPTED
-    } else if run.ended_early.is_some() {
-        forcecell::stop::ENDED_EARLY
-    } else if check && failed {
-        forcecell::stop::CHECK_FAILED
-    } else {
-        forcecell::stop::OK
-    }))
 }
 
 /// A progress bar that appears only when a run takes more than a moment (and stderr is a terminal).

@@ -6,6 +6,7 @@ use std::net::{SocketAddr, UdpSocket};
 use std::thread::{self, JoinHandle};
 use std::time::Duration;
 
+use controller::run::{End, RunLimits};
 use controller::{ControlLoop, ImpedanceLaw, ImpedanceParams, LoopConfig, LoopError, Reference};
 use hal::{Correction, Cycle, Error as _, ErrorKind, Pose, RobotLink, Vector3};
 use kuka_rsi::{
@@ -409,20 +410,16 @@ fn closed_loop_new_session_and_silence() {
         LoopConfig::default(),
     );
     let mut reports = Vec::new();
-    let end = loop {
-        match lp.cycle() {
-            Ok(r) => reports.push(r),
-            Err(e) => break e,
-        }
-    };
+    let outcome = controller::run::run(&mut lp, RunLimits::default(), &mut reports);
     let r = h.join().unwrap();
     assert_eq!(r.end, KrcEnd::Silent);
     assert_eq!(r.late, 0);
     assert_eq!(reports.len(), 80);
-    match end {
-        LoopError::Robot(e) => assert_eq!(e.kind(), ErrorKind::LinkLost),
+    match outcome.end {
+        End::LinkLost(LoopError::Robot(e)) => assert_eq!(e.kind(), ErrorKind::LinkLost),
         other => panic!("expected link lost, got {other}"),
     }
+    assert!(outcome.stop.is_none(), "no Stop to a link that is gone");
     assert_eq!(lp.stats().sessions, 1, "references captured again once");
     assert!(reports[40].cycle.new_session);
     assert_eq!(reports[40].cycle.seq, 9_000_000_000);

@@ -15,6 +15,7 @@ use std::time::{Duration, Instant};
 
 use ati_can::{Base, Config, Driver, Frame, Lockstep, MemBus, Responder};
 use controller::ControlLoop;
+use controller::run::{Each, RunLimits};
 use forcecell::record::{Row, write_csv};
 use kuka_rsi::{EthernetConfig, LinkConfig, RobotFilter, RsiLink};
 use sim::ati_node::{AtiNode, NodeConfig, SharedNode, WorldSource};
@@ -200,21 +201,22 @@ fn a_million_lockstep_cycles_with_faults_on_both_wires() {
     let started = Instant::now();
     let mut rss_mid = 0;
     let mut answered = 0u64;
-    let end = loop {
-        match lp.cycle() {
-            Ok(r) => {
-                answered += 1;
-                chunk.push(Row::from_report(&r, f_r));
-                if chunk.len() == chunk.capacity() {
-                    flush(&mut chunk, &mut first);
-                }
-                if answered == cycles / 10 {
-                    rss_mid = rss_kib();
-                }
+    let outcome = controller::run::run(
+        &mut lp,
+        RunLimits::default(),
+        &mut Each(|r: &controller::CycleReport| {
+            answered += 1;
+            chunk.push(Row::from_report(r, f_r));
+            if chunk.len() == chunk.capacity() {
+                flush(&mut chunk, &mut first);
             }
-            Err(e) => break e.to_string(),
-        }
-    };
+            if answered == cycles / 10 {
+                rss_mid = rss_kib();
+            }
+            true
+        }),
+    );
+    let end = outcome.end.to_string();
     flush(&mut chunk, &mut first);
     csv.flush().unwrap();
     let wall = started.elapsed();

@@ -100,6 +100,15 @@ impl Sink for Vec<CycleReport> {
     }
 }
 
+/// A closure as a sink: called with every report; `false` ends the run after that cycle.
+pub struct Each<F>(pub F);
+
+impl<F: FnMut(&CycleReport) -> bool> Sink for Each<F> {
+    fn record(&mut self, report: &CycleReport) -> bool {
+        (self.0)(report)
+    }
+}
+
 /// How long a run lasts, and who may end it.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RunLimits<'a> {

@@ -2,7 +2,8 @@
 //! can end — the program's own RELEASE and every fault of the contract — with the state and fault code
 //! the program sees, the back-off, and re-arming by OFF. Simulated time only.
 
-use controller::{ControlLoop, ForceLaw, Tuning};
+use controller::run::{Each, End, RunLimits};
+use controller::{ControlLoop, CycleReport, ForceLaw, Tuning};
 use hal::{ErrorKind, ProcessFault, ProcessPhase};
 use sim::program::{FormStep, SegmentMode};
 use sim::{
@@ -83,21 +84,31 @@ fn run(
         done: false,
     };
     let mut after = 0;
-    for _ in 0..(t / 0.001) as usize {
-        let r = lp.cycle().expect("a process fault never ends the loop");
-        seen.phases.push(r.command.process.phase);
-        seen.faults.push(r.command.process.fault);
-        seen.commands.push(r.command.translation.z);
-        seen.forces.push(sim::world::lock(&world).true_force());
-        // Half a second past the program's end: the correction's way home after its last OFF.
-        if sim::world::lock(&world).program().unwrap().done() {
-            seen.done = true;
-            after += 1;
-            if after > 500 {
-                break;
+    let limits = RunLimits {
+        cycles: Some((t / 0.001) as u64),
+        ..RunLimits::default()
+    };
+    let outcome = controller::run::run(
+        &mut lp,
+        limits,
+        &mut Each(|r: &CycleReport| {
+            seen.phases.push(r.command.process.phase);
+            seen.faults.push(r.command.process.fault);
+            seen.commands.push(r.command.translation.z);
+            seen.forces.push(sim::world::lock(&world).true_force());
+            // Half a second past the program's end: the correction's way home after its last OFF.
+            if sim::world::lock(&world).program().unwrap().done() {
+                seen.done = true;
+                after += 1;
             }
-        }
-    }
+            after <= 500
+        }),
+    );
+    assert!(
+        matches!(outcome.end, End::Done),
+        "a process fault never ends the loop: {}",
+        outcome.end
+    );
     seen
 }
 

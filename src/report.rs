@@ -1,0 +1,178 @@
+//! What `forcecell sim` prints and writes after a run: the summary, the targets' verdicts, the CSV and
+//! the plots. The binary only calls it.
+
+use std::path::Path;
+
+use anyhow::Result;
+
+use crate::runner::{RunResult, RunSpec};
+use crate::{plot, record};
+
+/// Print the summary of a simulated run (speed, how it ended, the metrics, every target's verdict),
+/// write its CSV and plots into `out`, and return the exit status ([`crate::stop`]): an interrupted or
+/// early-ended run first, then (with `check`) a missed target.
+pub fn sim(spec: &RunSpec, run: &RunResult, out: &Path, check: bool) -> Result<u8> {
+    let m = &run.metrics;
+    let steps = run.rows.len();
+    let rate = steps as f64 / run.wall.as_secs_f64().max(1e-9);
+    println!(
+        "ran {steps} steps in {:.2} s wall ({:.0} steps/s)",
+        run.wall.as_secs_f64(),
+        rate
+    );
+    if let Some(why) = &run.ended_early {
+        println!("the loop ended early: {why}");
+    }
+    if let Some(stop_sent) = run.interrupted {
+        println!(
+            "stopped by SIGINT/SIGTERM after {steps} steps; Stop {}",
+            if stop_sent {
+                "sent to the robot"
+            } else {
+                "not sent (no robot cycle to answer)"
+            }
+        );
+    }
+    let f_r = run.rows.last().map_or(f64::NAN, |r| r.f_r);
+    let settle = if m.settle_time.is_finite() {
+        format!("{:.3} s after first contact", m.settle_time)
+    } else {
+        "not settled".to_string()
+    };
+    let last = run.rows.last();
+    let table = [
+        (
+            "first contact",
+            if m.first_contact.is_nan() {
+                "never".into()
+            } else {
+                format!("{:.3} s", m.first_contact)
+            },
+        ),
+        (
+            "peak force",
+            format!("{:.2} N (set-point {f_r} N)", m.peak_force),
+        ),
+        ("settling (±2 %)", settle),
+        ("overshoot", format!("{:.1} %", m.overshoot_pct)),
+        (
+            "steady-state error",
+            format!(
+                "{:.4} N (|mean f − f_r| over the last 0.1 s; ripple ±{:.4} N)",
+                m.ss_error, m.ss_ripple
+            ),
+        ),
+        (
+            "RMS error",
+            format!("{:.4} N (from first contact)", m.rms_error),
+        ),
+        (
+            "contact losses",
+            format!(
+                "{} (longest {:.3} s)",
+                m.contact_losses, m.contact_loss_time
+            ),
+        ),
+        (
+            "final k̂_c",
+            format!(
+                "{:.0} N/m (true {:.0} N/m)",
+                m.kc_hat,
+                last.map_or(f64::NAN, |r| r.k_c)
+            ),
+        ),
+        (
+            "final x̂_c",
+            format!(
+                "{:.4} mm (true {:.4} mm)",
+                m.xc_hat * 1e3,
+                last.map_or(f64::NAN, |r| r.x_c * 1e3)
+            ),
+        ),
+        (
+            "faults",
+            format!(
+                "{} sensor, {} non-finite, {} limited",
+                run.stats.sensor_faults, run.stats.nonfinite_inputs, run.stats.limited
+            ),
+        ),
+        ("law events", {
+            let e = &run.law_events;
+            format!(
+                "{} contacts, {} lift-offs, {} force-limit retracts; limited: {} velocity, {} acceleration, {} deviation, {} estimator bound",
+                e.contacts,
+                e.lift_offs,
+                e.force_limits,
+                e.velocity_limits,
+                e.acceleration_limits,
+                e.deviation_limits,
+                e.estimator_bounds
+            )
+        }),
+    ];
+    println!();
+    for (k, v) in table {
+        println!("  {k:<20} {v}");
+    }
+    let verdicts = run.verdicts(&spec.scenario.targets);
+    if !verdicts.is_empty() {
+        println!("\ntargets:");
+        for v in &verdicts {
+            let t = &v.target;
+            let window = format!(
+                "[{}, {}] s",
+                t.after.unwrap_or(0.0),
+                t.until.map_or("end".to_string(), |u| u.to_string())
+            );
+            let limit = match (t.min, t.max) {
+                (Some(lo), Some(hi)) => format!("in [{lo}, {hi}]"),
+                (Some(lo), None) => format!("≥ {lo}"),
+                (None, Some(hi)) => format!("≤ {hi}"),
+                (None, None) => String::new(),
+            };
+            println!(
+                "  {:<18} {:<14} {:<12} {:>12.4}  {}",
+                t.metric,
+                window,
+                limit,
+                v.value,
+                if v.pass { "pass" } else { "FAIL" }
+            );
+        }
+    }
+    let stem = spec.file_stem();
+    let csv = out.join(format!("{stem}.csv"));
+    let png = out.join(format!("{stem}.png"));
+    record::write_csv_file(&csv, &run.rows)?;
+    plot::write_png(
+        &png,
+        &format!(
+            "{} · plant {} · tuning {}",
+            spec.scenario.name, spec.plant_label, spec.tuning.name
+        ),
+        &run.rows,
+    )?;
+    println!("\nwrote {} and {}", csv.display(), png.display());
+    if run.rows.iter().any(|r| r.segment.is_some()) {
+        let pass_png = out.join(format!("{stem}-pass.png"));
+        plot::write_pass_png(
+            &pass_png,
+            &format!(
+                "{} along the path · plant {} · tuning {}",
+                spec.scenario.name, spec.plant_label, spec.tuning.name
+            ),
+            &run.rows,
+        )?;
+        println!("wrote {} (the pass along the path)", pass_png.display());
+    }
+    let failed = verdicts.iter().any(|v| !v.pass);
+    Ok(if run.interrupted.is_some() {
+        crate::stop::INTERRUPTED
+    } else if run.ended_early.is_some() {
+        crate::stop::ENDED_EARLY
+    } else if check && failed {
+        crate::stop::CHECK_FAILED
+    } else {
+        crate::stop::OK
+    })
+}
