@@ -250,3 +250,308 @@ pub fn run<C: Cycler>(
         cycles: cycler.cycles(),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::law::Output;
+    use hal::{Correction, Cycle, Pose, ProcessCommand, ProcessMode};
+
+    /// What a scripted cycle does.
+    #[derive(Clone, Copy, Debug, PartialEq)]
+    enum Step {
+        Ok,
+        /// Answered, carrying a process command.
+        Process,
+        /// The robot link is gone.
+        Gone,
+        /// A fault that backed the tool off (the link stands).
+        Fault,
+    }
+
+    #[derive(Debug, PartialEq)]
+    enum Err {
+        Gone,
+        Fault,
+    }
+
+    impl fmt::Display for Err {
+        fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+            write!(f, "{self:?}")
+        }
+    }
+
+    /// A cycler that plays a script (then answers `Ok` forever), 4 ms a cycle.
+    struct Script {
+        steps: Vec<Step>,
+        k: usize,
+        answered: u64,
+        stops: u32,
+        stop_fails: bool,
+    }
+
+    impl Script {
+        fn new(steps: &[Step]) -> Self {
+            Self {
+                steps: steps.to_vec(),
+                k: 0,
+                answered: 0,
+                stops: 0,
+                stop_fails: false,
+            }
+        }
+    }
+
+    fn report(k: usize, process: bool) -> CycleReport {
+        CycleReport {
+            cycle: Cycle {
+                seq: k as u64,
+                t: k as f64 * 0.004,
+                period: 0.004,
+                actual: Pose::identity(),
+                programmed: Pose::identity(),
+                late_replies: 0,
+                new_session: k == 0,
+                process: process.then_some(ProcessCommand {
+                    mode: ProcessMode::Press,
+                    force: 10.0,
+                    ramp: 0.0,
+                    segment: 1,
+                }),
+            },
+            x: 0.0,
+            f: Some(0.0),
+            sample: None,
+            wrench: None,
+            compensated: false,
+            out: Output::default(),
+            command: Correction::default(),
+            set_point: 0.0,
+            fault: None,
+        }
+    }
+
+    impl Cycler for Script {
+        type Error = Err;
+        fn cycle(&mut self) -> Result<CycleReport, Err> {
+            let step = self.steps.get(self.k).copied().unwrap_or(Step::Ok);
+            let k = self.k;
+            self.k += 1;
+            match step {
+                Step::Gone => Err(Err::Gone),
+                Step::Fault => {
+                    self.answered += 1;
+                    Err(Err::Fault)
+                }
+                Step::Ok | Step::Process => {
+                    self.answered += 1;
+                    Ok(report(k, step == Step::Process))
+                }
+            }
+        }
+        fn stop(&mut self) -> Result<(), Err> {
+            self.stops += 1;
+            if self.stop_fails {
+                return Err(Err::Gone);
+            }
+            self.answered += 1;
+            Ok(())
+        }
+        fn robot_gone(e: &Err) -> bool {
+            *e == Err::Gone
+        }
+        fn cycles(&self) -> u64 {
+            self.answered
+        }
+    }
+
+    fn limits(cycles: Option<u64>) -> RunLimits<'static> {
+        RunLimits {
+            cycles,
+            ..RunLimits::default()
+        }
+    }
+
+    #[test]
+    fn a_cycle_count_runs_that_many_cycles_then_stops_the_robot_once() {
+        let mut c = Script::new(&[]);
+        let mut seen = Vec::new();
+        let o = run(&mut c, limits(Some(5)), &mut seen);
+        assert!(matches!(o.end, End::Done), "{}", o.end);
+        assert_eq!(seen.len(), 5);
+        assert_eq!((c.stops, o.cycles), (1, 6), "5 cycles and the Stop cycle");
+        assert!(o.stopped() && !o.end.is_early());
+    }
+
+    #[test]
+    fn a_duration_ends_after_the_cycle_that_reaches_it() {
+        let mut c = Script::new(&[]);
+        let mut seen = Vec::new();
+        let l = RunLimits {
+            duration: Some(0.010),
+            ..RunLimits::default()
+        };
+        let o = run(&mut c, l, &mut seen);
+        assert!(matches!(o.end, End::Done));
+        // t = 0, 4, 8, 12 ms: the fourth cycle reaches 10 ms.
+        assert_eq!(seen.len(), 4);
+        assert_eq!(c.stops, 1);
+    }
+
+    #[test]
+    fn the_operators_stop_ends_before_the_next_cycle_with_a_stop() {
+        let flag = AtomicBool::new(false);
+        let mut c = Script::new(&[]);
+        let mut n = 0;
+        let l = RunLimits {
+            stop: Some(&flag),
+            ..RunLimits::default()
+        };
+        let o = run(
+            &mut c,
+            l,
+            &mut Each(|_: &CycleReport| {
+                n += 1;
+                if n == 3 {
+                    flag.store(true, Ordering::Relaxed);
+                }
+                true
+            }),
+        );
+        assert!(matches!(o.end, End::Stopped(None)), "{}", o.end);
+        assert_eq!(n, 3);
+        assert!(o.stopped());
+    }
+
+    #[test]
+    fn a_wait_the_stop_interrupted_sends_no_stop_to_a_gone_link() {
+        let flag = AtomicBool::new(true);
+        // The flag is checked before the cycle: set it during the wait instead.
+        struct Interrupted<'a>(Script, &'a AtomicBool);
+        impl Cycler for Interrupted<'_> {
+            type Error = Err;
+            fn cycle(&mut self) -> Result<CycleReport, Err> {
+                self.1.store(true, Ordering::Relaxed);
+                Err(Err::Gone)
+            }
+            fn stop(&mut self) -> Result<(), Err> {
+                self.0.stop()
+            }
+            fn robot_gone(e: &Err) -> bool {
+                Script::robot_gone(e)
+            }
+            fn cycles(&self) -> u64 {
+                self.0.cycles()
+            }
+        }
+        flag.store(false, Ordering::Relaxed);
+        let mut c = Interrupted(Script::new(&[]), &flag);
+        let l = RunLimits {
+            stop: Some(&flag),
+            ..RunLimits::default()
+        };
+        let o = run(&mut c, l, &mut ());
+        assert!(matches!(o.end, End::Stopped(Some(Err::Gone))), "{}", o.end);
+        assert!(o.stop.is_none());
+        assert_eq!(c.0.stops, 0);
+    }
+
+    #[test]
+    fn a_lost_link_is_an_early_end_without_stop_unless_the_robot_owns_the_session() {
+        let mut c = Script::new(&[Step::Ok, Step::Ok, Step::Gone]);
+        let o = run(&mut c, limits(Some(10)), &mut ());
+        assert!(matches!(o.end, End::LinkLost(Err::Gone)));
+        assert!(o.end.is_early() && o.stop.is_none());
+        assert_eq!(c.stops, 0);
+
+        let mut c = Script::new(&[Step::Ok, Step::Ok, Step::Gone]);
+        let l = RunLimits {
+            robot_session: RobotSession::Robot,
+            ..RunLimits::default()
+        };
+        let o = run(&mut c, l, &mut ());
+        assert!(matches!(o.end, End::RobotEnded(Err::Gone)), "{}", o.end);
+        assert!(!o.end.is_early() && o.stop.is_none());
+
+        // Silent from the first cycle: never a session, so a lost link even when the robot owns it.
+        let mut c = Script::new(&[Step::Gone]);
+        let o = run(&mut c, l, &mut ());
+        assert!(matches!(o.end, End::LinkLost(_)), "{}", o.end);
+    }
+
+    #[test]
+    fn a_robot_running_its_own_process_outlasts_the_cycle_count() {
+        let mut script = vec![Step::Process; 8];
+        script.push(Step::Gone);
+        let mut c = Script::new(&script);
+        let mut seen = Vec::new();
+        let l = RunLimits {
+            cycles: Some(3),
+            robot_session: RobotSession::RobotWhenProcess,
+            ..RunLimits::default()
+        };
+        let o = run(&mut c, l, &mut seen);
+        assert!(matches!(o.end, End::RobotEnded(_)), "{}", o.end);
+        assert_eq!(seen.len(), 8);
+
+        // Without process commands the count applies.
+        let mut c = Script::new(&[]);
+        let o = run(&mut c, l, &mut ());
+        assert!(matches!(o.end, End::Done));
+        assert_eq!(o.cycles, 4);
+    }
+
+    #[test]
+    fn a_fault_ends_early_and_the_robot_still_gets_its_stop() {
+        let mut c = Script::new(&[Step::Ok, Step::Fault]);
+        let o = run(&mut c, limits(Some(10)), &mut ());
+        assert!(matches!(o.end, End::Fault(Err::Fault)));
+        assert!(o.end.is_early() && o.stopped());
+
+        let mut c = Script::new(&[Step::Fault]);
+        c.stop_fails = true;
+        let o = run(&mut c, limits(Some(10)), &mut ());
+        assert!(matches!(o.stop, Some(Err(Err::Gone))));
+        assert!(!o.stopped());
+    }
+
+    #[test]
+    fn the_program_and_the_sink_end_the_run() {
+        struct Prog(u32, Option<&'static str>);
+        impl Sink for Prog {
+            fn record(&mut self, _: &CycleReport) -> bool {
+                self.0 += 1;
+                true
+            }
+            fn program(&mut self) -> Program {
+                match (self.0, self.1) {
+                    (0..3, _) => Program::Running,
+                    (_, None) => Program::Done,
+                    (_, Some(why)) => Program::Aborted(why.into()),
+                }
+            }
+        }
+        let mut c = Script::new(&[]);
+        let o = run(&mut c, limits(Some(10)), &mut Prog(0, None));
+        assert!(matches!(o.end, End::Program(None)));
+        assert!(!o.end.is_early() && o.stopped());
+        let mut c = Script::new(&[]);
+        let o = run(&mut c, limits(Some(10)), &mut Prog(0, Some("timeout")));
+        assert!(matches!(&o.end, End::Program(Some(w)) if w == "timeout"));
+        assert!(o.end.is_early());
+        assert_eq!(o.end.to_string(), "the robot program aborted: timeout");
+
+        let mut c = Script::new(&[]);
+        let mut n = 0;
+        let o = run(
+            &mut c,
+            limits(Some(10)),
+            &mut Each(|_: &CycleReport| {
+                n += 1;
+                n < 2
+            }),
+        );
+        assert!(matches!(o.end, End::Done));
+        assert_eq!(n, 2);
+    }
+}

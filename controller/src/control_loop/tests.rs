@@ -689,3 +689,72 @@ fn a_contact_the_law_takes_back_hands_it_the_entry_force_again() {
     assert_eq!(lp.process_state().phase, hal::ProcessPhase::Approach);
     assert_eq!(lp.law().inner().sp, 2.0);
 }
+
+/// A law that asks for a tangential offset and a rotation beside a fixed normal command.
+struct SideLaw {
+    want: Vector3<f64>,
+    rotation: Vector3<f64>,
+}
+
+impl CellLaw for SideLaw {
+    fn start(&mut self, _: &Cycle, _: &Correction) {}
+    fn step(&mut self, _: &Cycle, _: &Wrench, _: f64) -> crate::law::LawStep {
+        crate::law::LawStep {
+            correction: Correction {
+                translation: self.want,
+                rotation: self.rotation,
+                ..Correction::default()
+            },
+            out: Output::default(),
+        }
+    }
+    fn set_point(&self) -> f64 {
+        0.0
+    }
+    fn set_set_point(&mut self, _: f64) -> Result<(), String> {
+        Ok(())
+    }
+    fn counters(&self) -> crate::law::EventCounts {
+        crate::law::EventCounts::default()
+    }
+}
+
+#[test]
+fn a_cell_laws_tangential_correction_is_step_and_envelope_limited_and_its_rotation_sent() {
+    let (robot, sensor, sent) = devices(0.0, |_| Ok(sample(0.0)));
+    let cfg = LoopConfig::default();
+    let law = SideLaw {
+        want: Vector3::new(1.0, -1.0, 0.0),
+        rotation: Vector3::new(0.0, 0.01, 0.0),
+    };
+    let mut lp = ControlLoop::with_law(robot, sensor, law, cfg);
+    let r = lp.cycle().unwrap();
+    assert_eq!(r.fault, Some(Fault::StepLimited));
+    let c = sent.lock().unwrap()[0];
+    assert!((c.translation.x - cfg.max_step).abs() < 1e-15, "{c:?}");
+    assert!((c.translation.y + cfg.max_step).abs() < 1e-15, "{c:?}");
+    assert_eq!(c.rotation, Vector3::new(0.0, 0.01, 0.0));
+    for _ in 0..10_000 {
+        lp.cycle().unwrap();
+    }
+    let last = *sent.lock().unwrap().last().unwrap();
+    assert!(
+        (last.translation.x - cfg.max_offset).abs() < 1e-12
+            && (last.translation.y + cfg.max_offset).abs() < 1e-12,
+        "within the envelope: {last:?}"
+    );
+}
+
+#[test]
+fn the_normal_adapter_steps_the_1dof_law_on_the_tool_offset_and_the_signed_force() {
+    let cycle = cycle_at(3, 0.0012);
+    let w = Wrench::from_array([0.3, 0.2, -4.0, 0.0, 0.0, 0.0]);
+    let mut bare = fixed_law(0.001);
+    let mut adapted = AlongNormal::new(fixed_law(0.001), -1.0);
+    bare.start(0.0012);
+    adapted.start(&cycle, &Correction::along_z(0.0012));
+    let want = bare.step(0.0012, 4.0, 0.004);
+    let got = adapted.step(&cycle, &w, 0.004);
+    assert_eq!((got.out.x_cmd, got.out.x_r), (want.x_cmd, want.x_r));
+    assert_eq!(got.correction, Correction::along_z(want.x_cmd));
+}
