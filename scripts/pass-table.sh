@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The README's pass table, from the shipped command over the default wires (RSI to the simulated KRC over
+# The pass table of docs/controller.md, from the shipped command over the default wires (RSI to the simulated KRC over
 # loopback UDP, ATI over the in-memory CAN bus): `forcecell sim --scenario NAME --plant P --check` for every
 # pass on P1 and P2. Usage: scripts/pass-table.sh [path/to/forcecell]   (default: target/release/forcecell)
 set -euo pipefail

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The README's "Choosing the re-acquire search" table: the shipped fast search (tuning `robust`) against
+# The re-acquire table of docs/controller.md ("Choosing the re-acquire search"): the shipped fast search (tuning `robust`) against
 # the gentle one (`robust-gentle`, which stops within 2·f_r), run as a user runs them — `forcecell sim
 # --scenario S --plant P --tuning T` over the default wires — on P1 and P2. Rows: B3a (the surface 1 mm
 # away at 3 s, 70 kN/m, f_r 5 N), B8 (160 kN/m: 0.05 mm towards the tool at 1.2 s, back at 1.8 s) and,

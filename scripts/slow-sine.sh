@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The slow-sine table of docs/robust-law-limits.md (the README's known limits link it): a surface 1 mm from the start that moves as 0.2 mm·sin(2π·0.5 Hz·t)
+# The slow-sine table of docs/robust-law-limits.md (docs/known-limits.md links it): a surface 1 mm from the start that moves as 0.2 mm·sin(2π·0.5 Hz·t)
 # from t = 2 s (0.63 mm/s at most, under the estimator's `max_surface_speed`), held at f_r 20 N for 6 s,
 # run as a user runs it — `forcecell sim --scenario FILE --plant P --tuning robust` over the default
 # wires — on P1 and P2. Each cell: the peak force, the RMS error from first contact, the final k̂_c and

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The stiff-curve table of docs/robust-law-limits.md (the README's known limits link it): B5's two curved-surface files (`scenarios/b05a-curve-slow.toml`,
+# The stiff-curve table of docs/robust-law-limits.md (docs/known-limits.md links it): B5's two curved-surface files (`scenarios/b05a-curve-slow.toml`,
 # `b05b-curve-fast.toml`) with the surface's stiffness changed, run as a user runs them — `forcecell sim
 # --scenario FILE --plant P --tuning robust --check` over the default wires — on P1 and P2. Each cell: the
 # RMS error after 3 s (or how the run ended), contact losses (and the longest), final k̂_c. Not spec'd cases: a measurement of

@@ -2,9 +2,9 @@
 # Runs the ATI CAN driver's integration tests on a real SocketCAN interface (vcan0). It picks the first
 # of these that works on this machine, and says which it picked and why:
 #   1. native  - this kernel has CAN (a developer's Linux box): vcan0 on the host;
-#   2. uml     - User-Mode Linux (shared/specs/vcan-in-uml.md), only after a short boot probe shows that
+#   2. uml     - User-Mode Linux (docs/testing.md), only after a short boot probe shows that
 #                its init runs (it cannot on a CPU with AMX: "ptrace set fp regs failed");
-#   3. qemu    - Debian's own kernel under QEMU's software emulation (shared/specs/vcan-in-qemu.md), the
+#   3. qemu    - Debian's own kernel under QEMU's software emulation (docs/testing.md), the
 #                host's root filesystem shared over virtio-9p. The kernel is unpacked from its .deb into
 #                target/vcan-qemu/ (never installed into /boot) and the initramfs is built there from
 #                busybox-static, both cached. KVM is not used: /dev/kvm exists on the build machines but

@@ -1,6 +1,6 @@
 //! A robot program for the simulated controller: segments that command the force process over RSI's
 //! process channels (`FcCmd`) and move the tool along the workpiece at feed speed, and the workpiece's
-//! form along that path. Contract: `shared/specs/rsi-process.md`.
+//! form along that path. Contract: `docs/wire-rsi.md`.
 //!
 //! The surface under the tool is the plant's surface (a function of time) plus [`SurfaceForm::height`]
 //! at the path position, so at feed speed `v` a waviness of wavelength `λ` is a disturbance of `v/λ` Hz.

@@ -1,4 +1,4 @@
-//! The process channels (`/work/shared/specs/rsi-process.md`): the robot program's command
+//! The process channels (contract: `docs/wire-rsi.md`): the robot program's command
 //! `<FcCmd Mode=".." F=".." Ramp=".." Seg=".."/>` in `<Rob>` and forcecell's state
 //! `<FcState State=".." F=".." Fault=".."/>` in `<Sen>`.
 //!
