@@ -231,7 +231,7 @@ const LIVE_DEFAULT: &str = "127.0.0.1:8765";
 
 #[derive(Args)]
 struct RunArgs {
-    /// The cell configuration (TOML; see the README's "Deploying on a cell").
+    /// The cell configuration (TOML; see docs/deploying.md).
     #[arg(long, short)]
     config: PathBuf,
     /// Serve the run live over the Foxglove WebSocket protocol on ADDR (default 127.0.0.1:8765).

@@ -2,7 +2,7 @@
 //! feature), the exit statuses the binary returns, and a robot link whose wait for the robot's first
 //! datagram ends when a stop is asked for or the robot's process is gone.
 //!
-//! Exit statuses (the README's "Exit statuses and stopping" lists them for users):
+//! Exit statuses (docs/cli.md, "Exit statuses", lists them for users):
 //! [`OK`], [`CHECK_FAILED`], [`ERROR`], [`ENDED_EARLY`], [`INTERRUPTED`].
 
 use std::fmt;

@@ -1,4 +1,4 @@
-//! The paper's reproduction protocol (controller.md): Table I, P0, 1 ms, start at rest 0.9 mm short of
+//! The paper's reproduction protocol (docs/controller.md): Table I, P0, 1 ms, start at rest 0.9 mm short of
 //! the surface, 2 s, the event at 1 s — run through the whole stack (scenario → runner → control loop →
 //! in-process backends → contact plant).
 
@@ -43,7 +43,7 @@ fn adaptive_law_removes_the_steady_state_error_fig9_and_fig10() {
 
 #[test]
 fn stiffness_drop_lowers_the_force_then_the_law_recovers() {
-    // controller.md: with a pure spring, a stiffness decrease lowers the force at the same x.
+    // docs/controller.md: with a pure spring, a stiffness decrease lowers the force at the same x.
     let r = run("paper-fig9", None);
     let dip = r
         .rows

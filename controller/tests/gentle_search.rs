@@ -7,7 +7,7 @@
 //! loop's contact-loss time allows, the loop ends on fault 5, backed off. Never a trip.
 //!
 //! What it costs against the shipped fast search is the time to find a surface that went away
-//! (`reach_time`): the README's "Choosing the re-acquire search" measures both over the default wires.
+//! (`reach_time`): docs/controller.md's "Choosing the re-acquire search" measures both over the default wires.
 
 mod common;
 
@@ -116,7 +116,7 @@ fn gentle_retreat_corners() {
 }
 
 /// The bound is the gentle search's, not any search's: the shipped fast search presses a surface
-/// found close by past `2·f_r` (a 0.5 mm retreat on 10 kN/m at f_r 2 N on P1, the README's figure).
+/// found close by past `2·f_r` (a 0.5 mm retreat on 10 kN/m at f_r 2 N on P1, the figure in docs/controller.md).
 #[test]
 fn the_fast_search_presses_past_twice_the_set_point() {
     let s = cell(4.0, 10e3, 0.0, None, Some((2.0, 0.0005)), 0.0, 1);

@@ -696,7 +696,7 @@ fn stiffness_changes_census() {
 /// 0.5 or 1 mm at 0.25, 0.5 or 1 Hz, starting at full speed at 2 s away from the tool or towards it,
 /// on 10–500 kN/m, f_r 2–50 N, the three cells, 6 s each. Counted per stiffness: runs that end on a
 /// fault, runs that end with `k̂_c` more than 15 % off, and runs that lose contact after 3 s — no more
-/// than measured when this was written (README, known limits). Starting away from the tool only, at
+/// than measured when this was written (docs/known-limits.md). Starting away from the tool only, at
 /// the commit before the re-contact's wait and the drift test: 132 faults, 56 off, 17 lossy; before
 /// `identify.max_refit_change` 93, 38, 22; before the fast search's re-contact waited 72, 23, 22
 /// (towards it: 101, 30, 17); before a drifting surface kept re-fits from opening 69, 17, 22 (98, 32,
@@ -1229,7 +1229,7 @@ fn a_window_that_rejects_the_stale_stiffness_is_no_hold() {
 }
 
 /// The change `c` holds the contact and ends with `k̂_c` within `bound` (relative); the error is
-/// printed (`--nocapture`: the figure the README quotes).
+/// printed (`--nocapture`: the figure docs/known-limits.md quotes).
 fn identified_within(c: &Change, bound: f64) {
     let after = c.run().unwrap().metrics(c.at, f64::INFINITY);
     println!("k̂_c off by {:.4} (bound {bound:.3})", after.kc_rel_error);
@@ -1281,7 +1281,7 @@ fn a_trip_on_an_approaching_stiff_surface_presses_little_past_the_limit() {
 }
 
 /// The tool's own stopping time after a fast re-contact, the figures behind the search's speed bound
-/// ([`controller::robust::stopping`], README "Search speeds"): a 1 mm retreat at f_r 2 N re-contacted
+/// ([`controller::robust::stopping`], docs/known-limits.md): a 1 mm retreat at f_r 2 N re-contacted
 /// by the fast search, the force limit lifted to 1000 N (the search at its configured 50 mm/s, or at
 /// what the limiter lets through), on every cell and 20–500 kN/m. The stopping time is the peak
 /// penetration over the tool's speed when it touched (its last step before the contact), printed
@@ -1290,7 +1290,7 @@ fn a_trip_on_an_approaching_stiff_surface_presses_little_past_the_limit() {
 /// presses to it on purpose. Asserted: every run re-contacts and stops, and from 100 kN/m up the
 /// model is never short (on softer surfaces the law, seeing a small force, does not brake hard).
 #[test]
-#[ignore = "figures for the README's known limits, not a criterion"]
+#[ignore = "figures for docs/known-limits.md, not a criterion"]
 fn stopping_times() {
     for plant in &CELLS {
         let model_cell = scenario::run::cell_model(plant, &sim::SensorParams::default());

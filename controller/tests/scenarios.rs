@@ -1,4 +1,4 @@
-//! Scenarios B1–B9 of `specs/controller.md` in closed loop against the simulated cell, robust tuning,
+//! Scenarios B1–B9 of docs/controller.md in closed loop against the simulated cell, robust tuning,
 //! on P1 and on P2. Deterministic: seeded sensor, simulated time only. (B10 gravity lives with
 //! `controller::gravity`; B11 cost is `benches/step.rs` and `tests/no_alloc.rs`.)
 //!
@@ -173,7 +173,7 @@ fn b5_a_re_contact_on_the_moving_surface_learns_no_stiffness() {
 /// the re-contact, bounded by what stops within `2·f_r`: without contact for at most 0.15 s in all
 /// (not a B5 target; 0.108 s in process, was 0.236 s), and every re-contact after that first bounce
 /// within `2·f_r`
-/// (the first, the fast search's, is bounded by the force limit only: see the README's known limits).
+/// (the first, the fast search's, is bounded by the force limit only: see docs/known-limits.md).
 #[test]
 fn b5_the_sine_start_on_p2_is_caught_up_with_within_twice_the_set_point() {
     let s = scenario("b05b-curve-fast");

@@ -17,7 +17,7 @@
 //!   contact);
 //! * `kc_hat`, `xc_hat` — estimates at the window's end; `kc_rel_error` — `|k̂_c − k_c|/k_c` there.
 //!
-//! Of a pass the robot program commands (rows with a process phase, see `rsi-process.md`):
+//! Of a pass the robot program commands (rows with a process phase, see docs/wire-rsi.md):
 //! * `pressing_time` — time reported `PRESSING`, s;
 //! * `pressing_in_band_pct` — share of that time with the force within ±5 % of the program's `F`, %;
 //! * `press_overshoot_pct` — the largest overshoot of the force past the program's `F` while

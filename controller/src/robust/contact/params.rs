@@ -41,7 +41,7 @@ pub struct ContactParams {
     /// the lost one moved a little; farther on it went away, and the search is fast. Each
     /// penetration costs a retreating surface about the stopping time
     /// ([`Stopping`](crate::robust::Stopping)) before it is found again; what the choice costs and
-    /// buys on P1 and P2 is measured in the README ("Choosing the re-acquire search").
+    /// buys on P1 and P2 is measured in docs/controller.md ("Choosing the re-acquire search").
     #[serde(default)]
     pub reacquire_margin: f64,
     /// Once the search is past `reacquire_distance`, it moves faster than the approach by this many
