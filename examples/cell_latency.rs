@@ -407,7 +407,7 @@ fn main() -> Result<()> {
     } else {
         None
     };
-    let driver: Arc<Mutex<Option<Latency>>> = Arc::default();
+    let driver: Arc<Mutex<Option<(Latency, Latency)>>> = Arc::default();
     let (cell_addr, world, looping) =
         match o.cell.as_str() {
             "none" => (None, None, None),
@@ -440,7 +440,8 @@ fn main() -> Result<()> {
                         let out = forcecell::cell::run_cell_recorded(
                             &cfg, &tuning, &mut link, sensor, &stop, tx,
                         )?;
-                        *driver.lock().unwrap() = Some(link.diagnostics().latency.clone());
+                        let d = link.diagnostics();
+                        *driver.lock().unwrap() = Some((d.latency.clone(), d.before_send.clone()));
                         let recorded = rec.map(|r| r.finish(Vec::new())).transpose()?;
                         Ok(format!(
                             "{}; {} cycles, {} sensor faults, {} limited; recorded {}",
@@ -493,7 +494,9 @@ fn main() -> Result<()> {
                             k => bail!("--sensor {k}: inproc, robotiq or ati with --cell external"),
                         };
                         if let Some(w) = &wire {
-                            *driver.lock().unwrap() = Some(w.diagnostics.latency.clone());
+                            let d = &w.diagnostics;
+                            *driver.lock().unwrap() =
+                                Some((d.latency.clone(), d.before_send.clone()));
                         }
                         let recorded = recording.map(|r| r.finish(run.rows.clone())).transpose()?;
                         Ok(format!(
@@ -562,8 +565,9 @@ fn main() -> Result<()> {
             f[3] / e[3]
         );
     }
-    if let Some(l) = driver.lock().unwrap().as_ref() {
+    if let Some((l, b)) = driver.lock().unwrap().as_ref() {
         println!("forcecell's own receive→send, µs: {}", driver_line(l));
+        println!("  of which before the send call, µs: {}", driver_line(b));
     }
     Ok(())
 }
