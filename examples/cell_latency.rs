@@ -26,6 +26,10 @@
 //! reply on the wall clock. `--period-us P` waits P µs between cycles (a real robot's 4000); default
 //! 0: lockstep.
 //!
+//! `--recorder-sched idle` runs the recorder's writer thread under `SCHED_IDLE` (`chrt --idle`),
+//! `--recorder-sched nice` at nice 19 (`renice`): on a CPU it shares with the loop it then yields to
+//! the loop as soon as a datagram wakes it.
+//!
 //! `--loop-cpu C` pins forcecell's loop thread and the echo to CPU C; `--other-cpu D` pins every other
 //! thread (the stand-in, the recorder, the sensor's reader and the simulated sensor) to D;
 //! `--standin-cpu S` then moves the stand-in to S (the loop's CPU: lockstep on one CPU, no
@@ -61,6 +65,7 @@ struct Opts {
     standin_cpu: Option<usize>,
     echo: bool,
     record: bool,
+    recorder_sched: Option<String>,
 }
 
 fn parse_opts() -> Result<Opts> {
@@ -75,6 +80,7 @@ fn parse_opts() -> Result<Opts> {
         standin_cpu: None,
         echo: true,
         record: true,
+        recorder_sched: None,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -90,6 +96,7 @@ fn parse_opts() -> Result<Opts> {
             "--standin-cpu" => o.standin_cpu = Some(val()?.parse()?),
             "--no-echo" => o.echo = false,
             "--no-record" => o.record = false,
+            "--recorder-sched" => o.recorder_sched = Some(val()?),
             _ => bail!("unknown option {a} (see the file's documentation)"),
         }
     }
@@ -316,6 +323,41 @@ fn echo_server(sock: UdpSocket, done: Arc<AtomicBool>) {
     }
 }
 
+/// Give this process's threads named `recorder` the scheduling `how` asks for, through `chrt` or
+/// `renice` (util-linux).
+fn resched_recorder(how: &str) -> Result<()> {
+    let mut found = 0;
+    for task in std::fs::read_dir("/proc/self/task")? {
+        let task = task?.path();
+        if std::fs::read_to_string(task.join("comm"))?.trim() != "recorder" {
+            continue;
+        }
+        let tid = task
+            .file_name()
+            .context("tid")?
+            .to_string_lossy()
+            .into_owned();
+        let status = match how {
+            "idle" => std::process::Command::new("chrt")
+                .args(["--idle", "-p", "0", &tid])
+                .status()?,
+            "nice" => std::process::Command::new("renice")
+                .args(["-n", "19", "-p", &tid])
+                .stdout(std::process::Stdio::null())
+                .status()?,
+            _ => bail!("--recorder-sched {how}: idle or nice"),
+        };
+        if !status.success() {
+            bail!("could not reschedule the recorder thread {tid}");
+        }
+        found += 1;
+    }
+    if found == 0 {
+        bail!("--recorder-sched: no recorder thread");
+    }
+    Ok(())
+}
+
 fn free_port() -> Result<SocketAddr> {
     Ok(UdpSocket::bind("127.0.0.1:0")?.local_addr()?)
 }
@@ -513,6 +555,11 @@ fn main() -> Result<()> {
             }
             c => bail!("--cell {c}: run, external or none"),
         };
+    if let Some(how) = &o.recorder_sched {
+        // The writer thread exists once the cell started.
+        thread::sleep(Duration::from_millis(200));
+        resched_recorder(how)?;
+    }
     pin(o.standin_cpu)?;
     let mut times = stand_in(&o, echo, cell_addr, world)?;
     done.store(true, Ordering::Relaxed);
