@@ -496,8 +496,10 @@ impl RobotLink for ExternalRobot<'_> {
     }
 
     fn reply(&mut self, correction: &Correction) -> Result<(), LinkError> {
+        // The answer first: the world's bookkeeping (a lock) is no part of the turnaround.
+        let sent = self.link.reply(correction);
         sim::world::lock(&self.world).process_reply(correction.process);
-        self.link.reply(correction)
+        sent
     }
 }
 
