@@ -87,6 +87,17 @@ pub fn print_link(d: &Diagnostics) {
         l.quantile(0.999),
         l.max()
     );
+    // The rest is the send call: on loopback it also delivers to the robot's socket and wakes it.
+    let b = &d.before_send;
+    if b.count() > 0 {
+        println!(
+            "  of which before the send call (user space): p50 {:?}, p99 {:?}, p99.9 {:?}, max {:?}",
+            b.quantile(0.5),
+            b.quantile(0.99),
+            b.quantile(0.999),
+            b.max()
+        );
+    }
 }
 
 /// Robot-side limits wide enough for a tuning's own loop limits, so the driver never acts before the
@@ -443,8 +454,10 @@ impl RobotLink for ExternalRobot<'_> {
     }
 
     fn reply(&mut self, correction: &Correction) -> Result<(), LinkError> {
+        // The answer first: the world's bookkeeping (a lock) is no part of the turnaround.
+        let sent = self.link.reply(correction);
         sim::world::lock(&self.world).process_reply(correction.process);
-        self.link.reply(correction)
+        sent
     }
 }
 

@@ -193,6 +193,9 @@ pub struct AtiNode {
     requests: u64,
     next_base: Option<u8>,
     next_bitrate: Option<u8>,
+    /// Scratch lists of [`AtiNode::handle`].
+    answer_buf: Vec<Answer>,
+    frame_buf: Vec<Frame>,
 }
 
 impl AtiNode {
@@ -227,6 +230,8 @@ impl AtiNode {
             requests: 0,
             next_base: None,
             next_bitrate: None,
+            answer_buf: Vec::with_capacity(8),
+            frame_buf: Vec::with_capacity(16),
         })
     }
 
@@ -317,68 +322,58 @@ impl AtiNode {
         Gauges(g)
     }
 
-    fn answers(&mut self, req: Request, now: Duration) -> Vec<Answer> {
+    /// The answers to `req` at `now`, pushed onto `out`.
+    fn answers(&mut self, req: Request, now: Duration, out: &mut Vec<Answer>) {
         let fw = self.cfg.firmware;
         let cal = self.cfg.slots[usize::from(self.active)];
         match req {
             Request::Poll => {
                 self.polls += 1;
                 let Some(w) = self.source.wrench(now) else {
-                    return vec![];
+                    return;
                 };
                 let g = self.gauges_for(&w, now);
                 let (first, second) = split(&g);
-                vec![
+                out.extend([
                     Answer::PollFirst {
                         status: Status(self.status),
                         gauges: first,
                     },
                     Answer::PollSecond { gauges: second },
-                ]
+                ]);
             }
             Request::MatrixRow(r) => {
                 let row = cal.matrix[usize::from(r)];
-                (0..3u8)
-                    .map(|part| Answer::MatrixPart {
-                        part,
-                        coefficients: [row[usize::from(2 * part)], row[usize::from(2 * part + 1)]],
-                    })
-                    .collect()
+                out.extend((0..3u8).map(|part| Answer::MatrixPart {
+                    part,
+                    coefficients: [row[usize::from(2 * part)], row[usize::from(2 * part + 1)]],
+                }));
             }
-            Request::Serial => vec![Answer::Serial(self.cfg.serial)],
+            Request::Serial => out.push(Answer::Serial(self.cfg.serial)),
             Request::SelectSlot(s) => {
                 if self.cfg.missing_slots & (1 << s) == 0 {
                     self.active = s;
                 }
                 let s = self.active;
                 self.status &= !Status::WATCHDOG_RESET;
-                vec![Answer::SlotEcho(s)]
+                out.push(Answer::SlotEcho(s));
             }
-            Request::CountsPerUnit if fw.has_counts_per_unit() => vec![Answer::Counts {
+            Request::CountsPerUnit if fw.has_counts_per_unit() => out.push(Answer::Counts {
                 per_force: cal.counts_per_force,
                 per_torque: cal.counts_per_torque,
-            }],
-            Request::Units => vec![Answer::Units {
+            }),
+            Request::Units => out.push(Answer::Units {
                 force: cal.force_unit.code(),
                 torque: cal.torque_unit.code(),
-            }],
+            }),
             Request::AdcVoltage(i) if (fw.major, fw.minor) >= (3, 8) => {
-                vec![Answer::Adc(2500 + u16::from(i))]
+                out.push(Answer::Adc(2500 + u16::from(i)));
             }
-            Request::Reset => {
-                self.reset();
-                vec![]
-            }
-            Request::SetBase(b) => {
-                self.next_base = Some(b);
-                vec![]
-            }
-            Request::SetBitrate(c) => {
-                self.next_bitrate = Some(c);
-                vec![]
-            }
-            Request::Firmware => vec![Answer::Firmware(fw)],
-            Request::CountsPerUnit | Request::AdcVoltage(_) => vec![],
+            Request::Reset => self.reset(),
+            Request::SetBase(b) => self.next_base = Some(b),
+            Request::SetBitrate(c) => self.next_bitrate = Some(c),
+            Request::Firmware => out.push(Answer::Firmware(fw)),
+            Request::CountsPerUnit | Request::AdcVoltage(_) => {}
         }
     }
 
@@ -389,19 +384,25 @@ impl AtiNode {
             return;
         };
         self.requests += 1;
-        let answers = self.answers(req, now);
-        if self.silent || answers.is_empty() {
-            return;
+        // Both lists are kept between frames: an answer allocates nothing.
+        let mut answers = core::mem::take(&mut self.answer_buf);
+        answers.clear();
+        self.answers(req, now, &mut answers);
+        if !(self.silent || answers.is_empty()) {
+            let base = self.cfg.base;
+            let mut frames = core::mem::take(&mut self.frame_buf);
+            frames.clear();
+            frames.extend(answers.iter().filter_map(|a| a.encode(base).ok()));
+            let mut delay = Duration::ZERO;
+            if let Some(fault) = self.faults.pop_front() {
+                apply(fault, base, &mut frames, &mut delay);
+            }
+            for &f in &frames {
+                out(delay, f);
+            }
+            self.frame_buf = frames;
         }
-        let base = self.cfg.base;
-        let mut frames: Vec<Frame> = answers.iter().filter_map(|a| a.encode(base).ok()).collect();
-        let mut delay = Duration::ZERO;
-        if let Some(fault) = self.faults.pop_front() {
-            apply(fault, base, &mut frames, &mut delay);
-        }
-        for f in frames {
-            out(delay, f);
-        }
+        self.answer_buf = answers;
     }
 }
 

@@ -197,6 +197,8 @@ pub fn plausible_counts(c: u32) -> bool {
 pub struct Converter {
     /// SI per count: row `i` gives component `i` (N or N·m) from the six gauges.
     si_per_count: [[f64; 6]; 6],
+    /// Its inverse (`None`: singular), computed once: a simulated sensor converts every sample back.
+    count_per_si: Option<Matrix6<f64>>,
 }
 
 impl Calibration {
@@ -220,7 +222,11 @@ impl Calibration {
                 *o = f64::from(c) * scale;
             }
         }
-        Ok(Converter { si_per_count: m })
+        let count_per_si = Matrix6::from_fn(|r, c| m[r][c]).try_inverse();
+        Ok(Converter {
+            si_per_count: m,
+            count_per_si,
+        })
     }
 }
 
@@ -244,8 +250,7 @@ impl Converter {
     /// The exact (unrounded) gauge counts that read as `wrench` with no bias: the inverse conversion,
     /// for simulated sensors. Fails on a singular matrix.
     pub fn counts_for(&self, wrench: &Wrench) -> Result<[f64; 6], CalibrationError> {
-        let m = Matrix6::from_fn(|r, c| self.si_per_count[r][c]);
-        let inv = m.try_inverse().ok_or(CalibrationError::Singular)?;
+        let inv = self.count_per_si.ok_or(CalibrationError::Singular)?;
         let g = inv * Vector6::from_column_slice(&wrench.to_array());
         Ok([g[0], g[1], g[2], g[3], g[4], g[5]])
     }

@@ -135,6 +135,7 @@ impl MemBus {
         MemPort {
             inner: Arc::clone(&self.inner),
             id,
+            answers: Vec::with_capacity(8),
         }
     }
 
@@ -159,6 +160,8 @@ impl MemBus {
 pub struct MemPort {
     inner: Arc<Inner>,
     id: u64,
+    /// The responders' answers to one sent frame (kept: a send allocates nothing).
+    answers: Vec<(Duration, Frame)>,
 }
 
 impl MemPort {
@@ -184,16 +187,18 @@ impl CanTransport for MemPort {
         self.inner
             .deliver(Some(self.id), now, BusEvent::Frame(*frame));
         // Responders run one at a time, in the sender's thread, outside the queue lock.
-        let mut answers: Vec<(Duration, Frame)> = Vec::new();
+        let mut answers = core::mem::take(&mut self.answers);
+        answers.clear();
         {
             let mut responders = lock(&self.inner.responders);
             for r in responders.iter_mut() {
                 r.on_frame(frame, now, &mut |delay, f| answers.push((now + delay, f)));
             }
         }
-        for (due, f) in answers {
+        for &(due, f) in &answers {
             self.inner.deliver(None, due, BusEvent::Frame(f));
         }
+        self.answers = answers;
         Ok(())
     }
 

@@ -127,8 +127,15 @@ pub struct Diagnostics {
     pub robot_delay: u32,
     /// The reason the last malformed datagram was dropped.
     pub last_malformed: Option<ParseError>,
-    /// Receive→send turnaround of every reply sent.
+    /// Receive→send turnaround of every reply sent: from the datagram's receipt to the return of the
+    /// send call.
     pub latency: Latency,
+    /// The part of [`latency`](Self::latency) before the send call: parsing, the application's cycle
+    /// and the reply's encoding, all in user space. The rest is the send call itself, which on
+    /// loopback also delivers the datagram to the peer and wakes it (an idle peer on another CPU of
+    /// a virtual machine costs tens of µs there), and which includes any time the woken peer
+    /// preempts the sender on a shared CPU.
+    pub before_send: Latency,
 }
 
 #[cfg(test)]

@@ -460,6 +460,7 @@ impl RobotLink for RsiLink {
         let Some(out) = self.session.reply(correction, &mut self.tx)? else {
             return Ok(());
         };
+        self.session.sending(Instant::now());
         match self.sock.send_to(&self.tx[..out.len], out.to) {
             Ok(_) => {
                 self.session.sent(Instant::now());

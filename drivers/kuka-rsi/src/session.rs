@@ -134,9 +134,9 @@ pub struct RsiSession {
     candidate: Option<Accepted>,
     /// The cycle handed out and not yet answered.
     pending: Option<Accepted>,
-    /// Receive time of the reply just written, and whether it carries `Stop`, until the shell says
-    /// it left (or failed).
-    in_flight: Option<(Instant, bool)>,
+    /// Receive time of the reply just written, whether it carries `Stop`, and when the shell handed
+    /// it to the socket, until the shell says it left (or failed).
+    in_flight: Option<(Instant, bool, Option<Instant>)>,
     shaper: Shaper,
     last_wire: [f64; 6],
     stopped: bool,
@@ -489,19 +489,33 @@ impl RsiSession {
             .sen
             .write(&self.tx_frame, out)
             .map_err(LinkError::Encode)?;
-        self.in_flight = Some((p.rx_at, correction.stop));
+        self.in_flight = Some((p.rx_at, correction.stop, None));
         Ok(Some(Outgoing { len, to: p.peer }))
     }
 
+    /// The shell hands the reply written last to the socket at `now` (optional: it splits the
+    /// turnaround [`sent`](Self::sent) records into the time before the send call and the call).
+    pub fn sending(&mut self, now: Instant) {
+        if let Some((_, _, handed)) = &mut self.in_flight {
+            *handed = Some(now);
+        }
+    }
+
     /// The reply written last left at `now`: its receive→send turnaround is recorded (late above
-    /// `late_after`); a reply carrying `Stop` finishes the session.
+    /// `late_after`), and the part of it before the send call when the shell said
+    /// ([`sending`](Self::sending)); a reply carrying `Stop` finishes the session.
     pub fn sent(&mut self, now: Instant) {
-        let Some((rx_at, stop)) = self.in_flight.take() else {
+        let Some((rx_at, stop, handed)) = self.in_flight.take() else {
             return;
         };
         self.stopped |= stop;
         let turnaround = now.saturating_duration_since(rx_at);
         self.diag.latency.record(turnaround);
+        if let Some(h) = handed {
+            self.diag
+                .before_send
+                .record(h.saturating_duration_since(rx_at));
+        }
         let c = &mut self.diag.counters;
         c.answered += 1;
         if turnaround > self.cfg.late_after {
@@ -708,13 +722,18 @@ mod tests {
             .unwrap()
             .unwrap();
         assert_eq!(o.to, robot());
+        s.sending(t0 + Duration::from_micros(20));
         s.sent(t0 + Duration::from_micros(50));
         assert!(matches!(
             s.reply(&Correction::default(), &mut out),
             Err(LinkError::NoCycle)
         ));
-        let c = s.diagnostics().counters;
-        assert_eq!((c.answered, c.late), (1, 0));
+        let d = s.diagnostics();
+        assert_eq!((d.counters.answered, d.counters.late), (1, 0));
+        // The turnaround, and its part before the send call.
+        assert_eq!(d.latency.max(), Duration::from_micros(50));
+        assert_eq!(d.before_send.max(), Duration::from_micros(20));
+        assert_eq!(d.before_send.count(), 1);
     }
 
     #[test]

@@ -1,0 +1,620 @@
+//! What one control cycle of the whole cell costs on the wire: forcecell's real loop (the RSI driver
+//! on a loopback UDP socket, a force sensor, the control law, the recorder) answering a lockstep robot
+//! stand-in, side by side with a bare UDP echo answered from the same CPU.
+//!
+//! ```text
+//! cargo build --release --example cell_latency
+//! target/release/examples/cell_latency --cell run --sensor robotiq --cycles 50000 --loop-cpu 0 --other-cpu 1
+//! target/release/examples/cell_latency --cell external --cycles 50000 --loop-cpu 0 --other-cpu 1
+//! target/release/examples/cell_latency --cell run --cycles 50000 --loop-cpu 0 --other-cpu 0   # all on one CPU
+//! ```
+//!
+//! * `--cell run`: [`forcecell::cell::run_cell_recorded`] as `forcecell run` calls it — the RSI link
+//!   bound from a cell file (tuning `robust-100hz`), the sensor, the MCAP recorder thread.
+//! * `--cell external`: `forcecell sim --external-robot` — [`forcecell::rsi::RobotSide`] on
+//!   `paper-fig9` with tuning `robust`, recorded, the world following the pose the stand-in reports.
+//! * `--cell none`: the echo alone.
+//! * `--sensor inproc` (the world's sensor model read in the cycle), `robotiq` (the FT 300 driver
+//!   reading a simulated FT 300 that streams at 100 Hz on a pseudo-terminal, as on a cell) or, with
+//!   `--cell external`, `ati` (the ATI driver against the simulated node on the in-memory bus, the
+//!   command's default).
+//!
+//! The stand-in is a robot in `#ABSOLUTE` mode with an ideal position loop: it sends `<Rob>` with a
+//! fresh IPOC (4 per cycle) and the tool where the last `<Sen>` put it, waits for the answer, and —
+//! for `--cell run` — moves the spring world the sensor measures. Each cycle it sends the same
+//! datagram to the echo first (`--no-echo` leaves it out), then to forcecell, and times each send →
+//! reply on the wall clock. `--period-us P` waits P µs between cycles (a real robot's 4000); default
+//! 0: lockstep.
+//!
+//! `--recorder-sched idle` runs the recorder's writer thread under `SCHED_IDLE` (`chrt --idle`),
+//! `--recorder-sched nice` at nice 19 (`renice`): on a CPU it shares with the loop it then yields to
+//! the loop as soon as a datagram wakes it.
+//!
+//! `--loop-cpu C` pins forcecell's loop thread and the echo to CPU C; `--other-cpu D` pins every other
+//! thread (the stand-in, the recorder, the sensor's reader and the simulated sensor) to D;
+//! `--standin-cpu S` then moves the stand-in to S (the loop's CPU: lockstep on one CPU, no
+//! cross-CPU wake-up in the round trip). Prints the
+//! stand-in's round trips (p50, p99, p99.9, max, µs) of the echo and of forcecell and their ratio,
+//! and the driver's own receive→send distribution.
+
+use std::net::{Ipv4Addr, SocketAddr, UdpSocket};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, anyhow, bail};
+use hal::Correction;
+use kuka_rsi::{EthernetConfig, Frame, Ipoc, Latency, RsiLink};
+use nix::sched::{CpuSet, sched_setaffinity};
+use nix::unistd::Pid;
+use sim::{ContactPlant, InProcSensor, InnerLoopModel, SensorParams, SharedWorld, World};
+
+const POSE: [&str; 6] = ["X", "Y", "Z", "A", "B", "C"];
+const AXES: [&str; 6] = ["A1", "A2", "A3", "A4", "A5", "A6"];
+
+#[derive(Clone, Debug)]
+struct Opts {
+    cell: String,
+    sensor: String,
+    cycles: usize,
+    warmup: usize,
+    period: Duration,
+    loop_cpu: Option<usize>,
+    other_cpu: Option<usize>,
+    standin_cpu: Option<usize>,
+    echo: bool,
+    record: bool,
+    recorder_sched: Option<String>,
+}
+
+fn parse_opts() -> Result<Opts> {
+    let mut o = Opts {
+        cell: "run".into(),
+        sensor: String::new(),
+        cycles: 20_000,
+        warmup: 2_000,
+        period: Duration::ZERO,
+        loop_cpu: None,
+        other_cpu: None,
+        standin_cpu: None,
+        echo: true,
+        record: true,
+        recorder_sched: None,
+    };
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        let mut val = || args.next().ok_or_else(|| anyhow!("{a} needs a value"));
+        match a.as_str() {
+            "--cell" => o.cell = val()?,
+            "--sensor" => o.sensor = val()?,
+            "--cycles" => o.cycles = val()?.parse()?,
+            "--warmup" => o.warmup = val()?.parse()?,
+            "--period-us" => o.period = Duration::from_micros(val()?.parse()?),
+            "--loop-cpu" => o.loop_cpu = Some(val()?.parse()?),
+            "--other-cpu" => o.other_cpu = Some(val()?.parse()?),
+            "--standin-cpu" => o.standin_cpu = Some(val()?.parse()?),
+            "--no-echo" => o.echo = false,
+            "--no-record" => o.record = false,
+            "--recorder-sched" => o.recorder_sched = Some(val()?),
+            _ => bail!("unknown option {a} (see the file's documentation)"),
+        }
+    }
+    if o.sensor.is_empty() {
+        o.sensor = if o.cell == "external" {
+            "ati"
+        } else {
+            "inproc"
+        }
+        .into();
+    }
+    Ok(o)
+}
+
+/// Pin the calling thread (and the threads it spawns from now on) to `cpu`.
+fn pin(cpu: Option<usize>) -> Result<()> {
+    if let Some(cpu) = cpu {
+        let mut set = CpuSet::new();
+        set.set(cpu)?;
+        sched_setaffinity(Pid::from_raw(0), &set)?;
+    }
+    Ok(())
+}
+
+fn percentiles(t: &mut [u32]) -> [f64; 4] {
+    t.sort_unstable();
+    let p = |q: f64| f64::from(t[((t.len() as f64 - 1.0) * q).round() as usize]) / 1000.0;
+    [p(0.5), p(0.99), p(0.999), p(1.0)]
+}
+
+/// The robot stand-in's world for `--cell run`: a spring 1 mm from the tool's start, the tool where
+/// each answer puts it.
+fn spring_world() -> SharedWorld {
+    World::new(
+        ContactPlant::spring(70_000.0, 0.001),
+        InnerLoopModel::P0,
+        SensorParams::default(),
+        0.0,
+    )
+    .shared()
+}
+
+struct Standin {
+    sock: UdpSocket,
+    rob: kuka_rsi::Schema,
+    sen: kuka_rsi::Schema,
+    frame: Frame,
+    rist: [usize; 6],
+    rsol: [usize; 6],
+    rkorr_z: usize,
+    stop: usize,
+    sen_frame: Frame,
+}
+
+impl Standin {
+    fn new() -> Result<Self> {
+        let eth = EthernetConfig::forcecell(Ipv4Addr::LOCALHOST, 0, false);
+        let rob = eth.rob_schema(4).map_err(|e| anyhow!("{e}"))?;
+        let sen = eth.sen_schema(4).map_err(|e| anyhow!("{e}"))?;
+        let mut frame = Frame::new();
+        let rist = rob.six("RIst", POSE).context("RIst")?;
+        let rsol = rob.six("RSol", POSE).context("RSol")?;
+        for t in ["AIPos", "ASPos"] {
+            frame.set6(
+                rob.six(t, AXES).context("axes")?,
+                [0.0, -90.0, 90.0, 0.0, 90.0, 0.0],
+            );
+        }
+        frame.set(rob.slot("Delay", "D").context("Delay")?, 0.0);
+        let sock = UdpSocket::bind("127.0.0.1:0")?;
+        sock.set_read_timeout(Some(Duration::from_secs(2)))?;
+        Ok(Self {
+            sock,
+            rkorr_z: sen.slot("RKorr", "Z").context("RKorr")?,
+            stop: sen.slot("Stop", "").context("Stop")?,
+            rob,
+            sen,
+            frame,
+            rist,
+            rsol,
+            sen_frame: Frame::new(),
+        })
+    }
+
+    /// Write the `<Rob>` of cycle `k` with the tool `z_mm` off its path.
+    fn rob(&mut self, k: usize, z_mm: f64, out: &mut [u8]) -> Result<usize> {
+        let path = [500.0, 0.0, 300.0, 0.0, 0.0, 0.0];
+        let mut actual = path;
+        actual[2] += z_mm;
+        self.frame.set6(self.rsol, path);
+        self.frame.set6(self.rist, actual);
+        self.frame.set_ipoc(Ipoc::new(1_000_000 + 4 * k as u64));
+        Ok(self.rob.write(&self.frame, out)?)
+    }
+
+    /// The answer's `RKorr.Z` (mm) and `Stop`.
+    fn answer(&mut self, bytes: &[u8]) -> Result<(f64, bool)> {
+        self.sen.parse(bytes, &mut self.sen_frame)?;
+        Ok((
+            self.sen_frame.get(self.rkorr_z),
+            self.sen_frame.get(self.stop) != 0.0,
+        ))
+    }
+}
+
+struct Times {
+    echo: Vec<u32>,
+    cell: Vec<u32>,
+}
+
+/// Drive the cell at `cell` (and the echo at `echo`) until `cycles` after the warm-up are timed or
+/// the cell says `Stop`; `world`: the spring to move with each answer.
+fn stand_in(
+    o: &Opts,
+    echo: Option<SocketAddr>,
+    cell: Option<SocketAddr>,
+    world: Option<SharedWorld>,
+) -> Result<Times> {
+    let mut s = Standin::new()?;
+    let mut out = [0u8; 2048];
+    let mut inp = [0u8; 4096];
+    let mut times = Times {
+        echo: Vec::with_capacity(o.cycles),
+        cell: Vec::with_capacity(o.cycles),
+    };
+    let mut z_mm = 0.0;
+    let mut next = Instant::now();
+    for k in 0..o.warmup + o.cycles {
+        if !o.period.is_zero() {
+            next += o.period;
+            while Instant::now() < next {
+                thread::sleep(next - Instant::now());
+            }
+        }
+        let n = s.rob(k, z_mm, &mut out)?;
+        // On the wall clock the echo answers half a period after the cell: each round trip follows
+        // the same idle time (the one that follows the other would find the kernel's paths warm).
+        let echo_first = o.period.is_zero();
+        let timed = k >= o.warmup;
+        if !echo_first {
+            let stop = cell_round(
+                &mut s,
+                &out[..n],
+                &mut inp,
+                cell,
+                world.as_ref(),
+                timed,
+                &mut times.cell,
+                &mut z_mm,
+            )?;
+            if stop {
+                break;
+            }
+            let half = next + o.period / 2;
+            while Instant::now() < half {
+                thread::sleep(half - Instant::now());
+            }
+        }
+        if let Some(addr) = echo {
+            let t0 = Instant::now();
+            s.sock.send_to(&out[..n], addr)?;
+            s.sock.recv_from(&mut inp)?;
+            let dt = t0.elapsed();
+            if timed {
+                times
+                    .echo
+                    .push(u32::try_from(dt.as_nanos()).unwrap_or(u32::MAX));
+            }
+        }
+        if echo_first
+            && cell_round(
+                &mut s,
+                &out[..n],
+                &mut inp,
+                cell,
+                world.as_ref(),
+                timed,
+                &mut times.cell,
+                &mut z_mm,
+            )?
+        {
+            break;
+        }
+    }
+    Ok(times)
+}
+
+/// One round trip to the cell at `cell` (if any): times it into `times` when `timed`, takes the
+/// correction into `z_mm` and moves `world`. True when the answer says `Stop`.
+#[allow(clippy::too_many_arguments)]
+fn cell_round(
+    s: &mut Standin,
+    datagram: &[u8],
+    inp: &mut [u8],
+    cell: Option<SocketAddr>,
+    world: Option<&SharedWorld>,
+    timed: bool,
+    times: &mut Vec<u32>,
+    z_mm: &mut f64,
+) -> Result<bool> {
+    let Some(addr) = cell else { return Ok(false) };
+    let t0 = Instant::now();
+    s.sock.send_to(datagram, addr)?;
+    let (m, _) = s.sock.recv_from(inp).context("no answer from the cell")?;
+    let dt = t0.elapsed();
+    if timed {
+        times.push(u32::try_from(dt.as_nanos()).unwrap_or(u32::MAX));
+    }
+    let (z, stop) = s.answer(&inp[..m])?;
+    *z_mm = z;
+    if let Some(w) = world {
+        sim::world::lock(w).advance(Some(&Correction::along_z(z * 1e-3)));
+    }
+    Ok(stop)
+}
+
+fn echo_server(sock: UdpSocket, done: Arc<AtomicBool>) {
+    let mut buf = vec![0u8; 65536];
+    sock.set_read_timeout(Some(Duration::from_millis(200))).ok();
+    while !done.load(Ordering::Relaxed) {
+        if let Ok((n, from)) = sock.recv_from(&mut buf) {
+            let _ = sock.send_to(&buf[..n], from);
+        }
+    }
+}
+
+/// Give this process's threads named `recorder` the scheduling `how` asks for, through `chrt` or
+/// `renice` (util-linux).
+fn resched_recorder(how: &str) -> Result<()> {
+    let mut found = 0;
+    for task in std::fs::read_dir("/proc/self/task")? {
+        let task = task?.path();
+        if std::fs::read_to_string(task.join("comm"))?.trim() != "recorder" {
+            continue;
+        }
+        let tid = task
+            .file_name()
+            .context("tid")?
+            .to_string_lossy()
+            .into_owned();
+        let status = match how {
+            "idle" => std::process::Command::new("chrt")
+                .args(["--idle", "-p", "0", &tid])
+                .status()?,
+            "nice" => std::process::Command::new("renice")
+                .args(["-n", "19", "-p", &tid])
+                .stdout(std::process::Stdio::null())
+                .status()?,
+            _ => bail!("--recorder-sched {how}: idle or nice"),
+        };
+        if !status.success() {
+            bail!("could not reschedule the recorder thread {tid}");
+        }
+        found += 1;
+    }
+    if found == 0 {
+        bail!("--recorder-sched: no recorder thread");
+    }
+    Ok(())
+}
+
+fn free_port() -> Result<SocketAddr> {
+    Ok(UdpSocket::bind("127.0.0.1:0")?.local_addr()?)
+}
+
+const CELL: &str = r#"
+tuning = "robust-100hz"
+record = "unused"
+
+[robot]
+listen = "127.0.0.1:0"
+robot_ip = "127.0.0.1"
+
+[sensor]
+kind = "robotiq"
+port = "unused"
+"#;
+
+/// The sensor of `--cell run`, measuring `world`.
+enum RunSensor {
+    Inproc(InProcSensor),
+    // The simulated device lives as long as the driver reads it.
+    Robotiq(
+        Box<robotiq::Ft300>,
+        #[allow(dead_code)] sim::ft300::SimFt300,
+    ),
+}
+
+impl hal::ForceSensor for RunSensor {
+    type Error = hal::ErrorKind;
+    fn read(&mut self) -> Result<hal::Sample, Self::Error> {
+        match self {
+            Self::Inproc(s) => s.read(),
+            Self::Robotiq(s, _) => s.read().map_err(|e| hal::Error::kind(&e)),
+        }
+    }
+}
+
+impl RunSensor {
+    fn open(kind: &str, world: &SharedWorld) -> Result<Self> {
+        Ok(match kind {
+            "inproc" => Self::Inproc(InProcSensor::new(world.clone())),
+            "robotiq" => {
+                let device = sim::ft300::SimFt300::spawn(
+                    sim::ft300::Ft300Config {
+                        noise_force: 0.0,
+                        noise_torque: 0.0,
+                        streaming_at_start: true,
+                        ..sim::ft300::Ft300Config::default()
+                    },
+                    sim::ati_node::WorldSource::measured(world.clone()),
+                )?;
+                let ft = robotiq::Ft300::open(robotiq::Config::new(device.path()))?;
+                Self::Robotiq(Box::new(ft), device)
+            }
+            k => bail!("--sensor {k}: inproc or robotiq with --cell run"),
+        })
+    }
+}
+
+/// The cell's own receive→send distribution, µs.
+fn driver_line(l: &Latency) -> String {
+    let us = |d: Duration| d.as_secs_f64() * 1e6;
+    format!(
+        "p50 {:.0}, p99 {:.0}, p99.9 {:.0}, max {:.1} (1 µs buckets, upper edges; {} replies)",
+        us(l.quantile(0.5)),
+        us(l.quantile(0.99)),
+        us(l.quantile(0.999)),
+        us(l.max()),
+        l.count()
+    )
+}
+
+fn main() -> Result<()> {
+    let o = parse_opts()?;
+    // Everything but the loop and the echo is spawned from here on the other CPU.
+    pin(o.other_cpu)?;
+    let dir = std::env::temp_dir().join(format!("cell_latency-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let done = Arc::new(AtomicBool::new(false));
+    let echo = if o.echo {
+        let sock = UdpSocket::bind("127.0.0.1:0")?;
+        let addr = sock.local_addr()?;
+        let (d, cpu) = (done.clone(), o.loop_cpu);
+        thread::Builder::new().name("echo".into()).spawn(move || {
+            pin(cpu).expect("pin the echo");
+            echo_server(sock, d);
+        })?;
+        Some(addr)
+    } else {
+        None
+    };
+    let driver: Arc<Mutex<Option<(Latency, Latency)>>> = Arc::default();
+    let (cell_addr, world, looping) =
+        match o.cell.as_str() {
+            "none" => (None, None, None),
+            "run" => {
+                let cfg = forcecell::cell::CellConfig::from_toml(CELL, "cell.toml")?;
+                let tuning = cfg.tuning()?;
+                let mut lc = cfg.link_config(&tuning)?;
+                // The stand-in may pause between warm-up and timing (a slow machine): 1 s watchdog.
+                lc.watchdog_cycles = 250;
+                let mut link = RsiLink::bind(lc)?;
+                let addr = link.local_addr()?;
+                let world = spring_world();
+                let sensor = RunSensor::open(&o.sensor, &world)?;
+                let recorder = if o.record {
+                    let (tx, rec) = forcecell::recorder::start(
+                        &dir.join("run.mcap"),
+                        forcecell::recorder::RecorderOptions::default(),
+                        None,
+                    )?;
+                    Some((tx, rec))
+                } else {
+                    None
+                };
+                let (cpu, driver) = (o.loop_cpu, driver.clone());
+                let h = thread::Builder::new().name("loop".into()).spawn(
+                    move || -> Result<String> {
+                        pin(cpu)?;
+                        let stop = AtomicBool::new(false);
+                        let (tx, rec) = recorder.map_or((None, None), |(t, r)| (Some(t), Some(r)));
+                        let out = forcecell::cell::run_cell_recorded(
+                            &cfg, &tuning, &mut link, sensor, &stop, tx,
+                        )?;
+                        let d = link.diagnostics();
+                        *driver.lock().unwrap() = Some((d.latency.clone(), d.before_send.clone()));
+                        let recorded = rec.map(|r| r.finish(Vec::new())).transpose()?;
+                        Ok(format!(
+                            "{}; {} cycles, {} sensor faults, {} limited; recorded {}",
+                            out.ended,
+                            out.stats.cycles,
+                            out.stats.sensor_faults,
+                            out.stats.limited,
+                            recorded.map_or("nothing".into(), |r| r.to_string())
+                        ))
+                    },
+                )?;
+                (Some(addr), Some(world), Some(h))
+            }
+            "external" => {
+                let addr = free_port()?;
+                let mut spec = forcecell::runner::RunSpec::new(
+                    forcecell::scenario::Scenario::load("paper-fig9")?,
+                    None,
+                    Some("robust"),
+                )?;
+                // Long enough for every cycle the stand-in sends; it ends the run.
+                spec.scenario.duration = (o.warmup + o.cycles + 10) as f64 * 0.004;
+                let args = forcecell::rsi::RsiArgs {
+                    external_robot: Some(addr),
+                    ..forcecell::rsi::RsiArgs::default()
+                };
+                let (o2, driver) = (o.clone(), driver.clone());
+                let mcap = dir.join("external.mcap");
+                let h = thread::Builder::new().name("loop".into()).spawn(
+                    move || -> Result<String> {
+                        let mut robot = forcecell::rsi::RobotSide::start(&spec, &args)?;
+                        let recording = if o2.record {
+                            let (tx, rec) = forcecell::runner::start_recording(
+                                robot.spec(),
+                                &mcap,
+                                true,
+                                None,
+                            )?;
+                            robot.record_to(tx);
+                            Some(rec)
+                        } else {
+                            None
+                        };
+                        // The simulated sensor's threads (if any) are spawned by the run: pin only now.
+                        pin(o2.loop_cpu)?;
+                        let (run, wire) = match o2.sensor.as_str() {
+                            "inproc" => robot.run_inproc_sensor(&mut |_| {})?,
+                            "robotiq" => forcecell::robotiq::run_sim_with(robot, &mut |_| {})?,
+                            "ati" => forcecell::ati::run_sim_with(robot, None, &mut |_| {})?,
+                            k => bail!("--sensor {k}: inproc, robotiq or ati with --cell external"),
+                        };
+                        if let Some(w) = &wire {
+                            let d = &w.diagnostics;
+                            *driver.lock().unwrap() =
+                                Some((d.latency.clone(), d.before_send.clone()));
+                        }
+                        let recorded = recording.map(|r| r.finish(run.rows.clone())).transpose()?;
+                        Ok(format!(
+                            "{} rows, ended early: {:?}; recorded {}",
+                            run.rows.len(),
+                            run.ended_early,
+                            recorded.map_or("nothing".into(), |r| r.to_string())
+                        ))
+                    },
+                )?;
+                // The link binds in the thread: let it.
+                thread::sleep(Duration::from_millis(300));
+                (Some(addr), None, Some(h))
+            }
+            c => bail!("--cell {c}: run, external or none"),
+        };
+    if let Some(how) = &o.recorder_sched {
+        // The writer thread exists once the cell started.
+        thread::sleep(Duration::from_millis(200));
+        resched_recorder(how)?;
+    }
+    pin(o.standin_cpu)?;
+    let mut times = stand_in(&o, echo, cell_addr, world)?;
+    done.store(true, Ordering::Relaxed);
+    if let Some(h) = looping {
+        let ended = h.join().map_err(|_| anyhow!("the loop panicked"))??;
+        println!("cell: {ended}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    println!(
+        "{} cell, {} sensor, {} cycles timed after {} warm-up, {}; loop CPU {:?}, stand-in {:?}, others {:?}",
+        o.cell,
+        o.sensor,
+        o.cycles,
+        o.warmup,
+        if o.period.is_zero() {
+            "lockstep".to_string()
+        } else {
+            format!("every {:?}", o.period)
+        },
+        o.loop_cpu,
+        o.standin_cpu.or(o.other_cpu),
+        o.other_cpu
+    );
+    println!(
+        "{:<34} {:>8} {:>8} {:>8} {:>8}",
+        "round trip (µs)", "p50", "p99", "p99.9", "max"
+    );
+    let mut rows = Vec::new();
+    for (name, t) in [
+        ("bare UDP echo", &mut times.echo),
+        ("forcecell", &mut times.cell),
+    ] {
+        if t.is_empty() {
+            continue;
+        }
+        let r = percentiles(t);
+        println!(
+            "{name:<34} {:>8.1} {:>8.1} {:>8.1} {:>8.1}",
+            r[0], r[1], r[2], r[3]
+        );
+        rows.push(r);
+    }
+    if let [e, f] = rows[..] {
+        println!(
+            "{:<34} {:>8.2} {:>8.2} {:>8.2} {:>8.2}",
+            "ratio forcecell/echo",
+            f[0] / e[0],
+            f[1] / e[1],
+            f[2] / e[2],
+            f[3] / e[3]
+        );
+    }
+    if let Some((l, b)) = driver.lock().unwrap().as_ref() {
+        println!("forcecell's own receive→send, µs: {}", driver_line(l));
+        println!("  of which before the send call, µs: {}", driver_line(b));
+    }
+    Ok(())
+}
