@@ -506,9 +506,9 @@ fn main() -> Result<()> {
                 )?;
                 // Long enough for every cycle the stand-in sends; it ends the run.
                 spec.scenario.duration = (o.warmup + o.cycles + 10) as f64 * 0.004;
-                let args = forcecell::rsi::RsiArgs {
+                let args = forcecell::args::RsiArgs {
                     external_robot: Some(addr),
-                    ..forcecell::rsi::RsiArgs::default()
+                    ..forcecell::args::RsiArgs::default()
                 };
                 let (o2, driver) = (o.clone(), driver.clone());
                 let mcap = dir.join("external.mcap");
