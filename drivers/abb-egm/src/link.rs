@@ -67,13 +67,16 @@ pub struct LinkConfig {
     /// Age of the force measurement when its cycle arrives (the sensor chain's delay), added to the
     /// turnaround in `EgmPathCorr.age`.
     pub sensor_age: Duration,
+    /// The state channel is called when the phase or fault changes, or the force moved by more than
+    /// this, N (a slow transport is not called every cycle for the force's noise).
+    pub state_force_deadband: f64,
 }
 
 impl LinkConfig {
     /// Defaults: listen on `bind`, 4 ms, watchdog 25 cycles (100 ms), 4 KiB datagrams,
     /// [`Limits::default`] inside a 5 mm range, all three axes, the tool as the sensor frame, no process
     /// channels, new session on a jump of more than 250 sequence numbers, late above 2 ms, 3 m/s, sensor
-    /// age 0.
+    /// age 0, state force deadband 1 N.
     pub fn new(bind: SocketAddr, robot: RobotFilter) -> Self {
         Self {
             bind,
@@ -91,6 +94,7 @@ impl LinkConfig {
             late_after: Duration::from_millis(2),
             max_speed: 3.0,
             sensor_age: Duration::ZERO,
+            state_force_deadband: 1.0,
         }
     }
 
@@ -118,6 +122,12 @@ impl LinkConfig {
             return Err(format!(
                 "max_speed must be in (0, 100] m/s, got {}",
                 self.max_speed
+            ));
+        }
+        if !(self.state_force_deadband.is_finite() && self.state_force_deadband >= 0.0) {
+            return Err(format!(
+                "state_force_deadband must be ≥ 0 N, got {}",
+                self.state_force_deadband
             ));
         }
         if !self.axes.iter().any(|a| *a) {
@@ -390,7 +400,12 @@ impl EgmLink {
         let Some(ch) = self.state.as_mut() else {
             return;
         };
-        if self.published.as_ref() == Some(state) {
+        let band = self.session.config().state_force_deadband;
+        if let Some(p) = &self.published
+            && p.phase == state.phase
+            && p.fault == state.fault
+            && ((p.force - state.force).abs() <= band || (p.force.is_nan() && state.force.is_nan()))
+        {
             return;
         }
         let c = &mut self.session.diagnostics_mut().counters;
