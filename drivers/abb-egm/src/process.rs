@@ -25,17 +25,11 @@ use core::fmt;
 
 use hal::{ProcessCommand, ProcessFault, ProcessMode, ProcessPhase, ProcessState};
 
-/// Where the command lies in `RAPIDfromRobot.dnum`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Where the command lies in `RAPIDfromRobot.dnum` (default: from index 0).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub struct CommandSlots {
     /// Index of the mode; force, ramp and segment follow.
     pub first: usize,
-}
-
-impl Default for CommandSlots {
-    fn default() -> Self {
-        Self { first: 0 }
-    }
 }
 
 /// Numbers of the command.

@@ -352,7 +352,7 @@ impl EgmSession {
         let fb = m.feed_back.as_ref();
         let clock_us = fb
             .and_then(|f| f.time)
-            .and_then(|c| Some(c.sec?.checked_mul(1_000_000)?.checked_add(c.usec?)?));
+            .and_then(|c| c.sec?.checked_mul(1_000_000)?.checked_add(c.usec?));
         if header.tm.is_none() && clock_us.is_none() {
             return Err(self.malformed(Malformed::NoTime));
         }
@@ -701,7 +701,8 @@ mod tests {
             Err(Rejected::Malformed(Malformed::Protobuf))
         );
         let mut m = EgmRobot::decode(&good[..]).unwrap();
-        let variants: Vec<(Box<dyn Fn(&mut EgmRobot)>, Malformed)> = vec![
+        type Spoil = Box<dyn Fn(&mut EgmRobot)>;
+        let variants: Vec<(Spoil, Malformed)> = vec![
             (
                 Box::new(|m| m.header.as_mut().unwrap().seqno = None),
                 Malformed::NoSequence,
