@@ -2,8 +2,10 @@
 //!
 //! Every cycle it sends an `EgmRobot` (header with its sequence number and time, the feedback and planned
 //! tool poses, motors on, RAPID running and, when configured, the RAPID program's process command in
-//! `RAPIDfromRobot.dnum`) to the external device, takes the newest good `EgmSensorPathCorr` that arrived
-//! for it, clamps it per axis to the configured path-correction range, filters it (an optional
+//! `RAPIDfromRobot.dnum`) to the external device, takes the first good `EgmSensorPathCorr` that arrives
+//! within the cycle's window (the period in real time; a reply that comes later is read in the next
+//! window, as a controller reading its queue would: EGM echoes no sequence number to match replies to
+//! cycles), clamps it per axis to the configured path-correction range, filters it (an optional
 //! first-order low-pass, the MotionProcess's filter) and moves a [`Mechanism`] with it. Without a good
 //! correction it holds the last one; after `comm_timeout` such cycles in a row it ends the session, as
 //! EGM does on its communication timeout. It uses the driver's codec for the opposite direction.
@@ -607,10 +609,9 @@ impl Irc5 {
                 return Irc5End::Io(e.to_string());
             }
             let deadline = core.reply_deadline(cycle_start, Instant::now());
-            // Lockstep: until the cycle's good correction (or the deadline); real time: the whole
-            // period, the newest good correction wins.
+            // Until the cycle's good correction or the deadline (the end of the period in real time).
             loop {
-                if cfg.timing != Timing::Realtime && core.answered() {
+                if core.answered() {
                     break;
                 }
                 let now = Instant::now();
