@@ -12,6 +12,8 @@ use clap::{Args, ValueEnum};
 pub enum RobotBackend {
     /// The KUKA RSI driver over loopback UDP against the simulated KUKA controller.
     Rsi,
+    /// The ABB EGM driver (path correction) over loopback UDP against the simulated IRC5.
+    Egm,
     /// The in-process robot (no wire).
     Inproc,
 }

@@ -7,6 +7,7 @@ pub mod ati;
 pub mod bench;
 pub mod candump;
 pub mod cell;
+pub mod egm;
 pub mod live;
 pub mod plot;
 pub mod readout;

@@ -437,7 +437,7 @@ fn sim(mut a: SimArgs) -> Result<ExitCode> {
     println!("robot: {}", a.robot.describe());
     let live = match a.live {
         Some(addr) => {
-            if a.robot.robot == forcecell::args::RobotBackend::Rsi {
+            if a.robot.robot != forcecell::args::RobotBackend::Inproc {
                 a.robot.realtime = true;
             }
             let server = forcecell::live::LiveServer::bind(addr)?;

@@ -15,6 +15,7 @@ use kuka_rsi::{
     CorrectionMode, Diagnostics, EthernetConfig, Limits, LinkConfig, LinkError, PoscorrLimits,
     ProcessChannels, ProcessIo, ProcessSetup, RobotFilter, RobotSetup, RsiLink, Segment,
 };
+use sim::irc5::Irc5Report;
 use sim::krc::{Krc, KrcConfig, KrcEnd, KrcReport, Timing};
 use sim::{InProcRobot, InProcSensor, InnerLoopModel, SharedWorld};
 
@@ -29,6 +30,14 @@ impl RsiArgs {
         match (self.external_robot, self.robot) {
             (Some(addr), _) => format!("KUKA RSI driver listening on {addr} for an external robot"),
             (None, RobotBackend::Inproc) => "in-process robot".to_string(),
+            (None, RobotBackend::Egm) => format!(
+                "ABB EGM driver (path correction) ↔ simulated IRC5 over loopback UDP ({})",
+                if self.realtime {
+                    "real time"
+                } else {
+                    "lockstep"
+                }
+            ),
             (None, RobotBackend::Rsi) => format!(
                 "KUKA RSI driver ↔ simulated KRC over loopback UDP ({})",
                 if self.realtime {
@@ -41,24 +50,44 @@ impl RsiArgs {
     }
 }
 
-/// What the wire did during a run.
+/// What the wire did during a run, by robot family.
 #[derive(Clone, Debug)]
-pub struct WireSummary {
-    /// The driver's counters and latency distribution.
-    pub diagnostics: Diagnostics,
-    /// The simulated controller's report (none with an external robot).
-    pub krc: Option<KrcReport>,
+pub enum WireSummary {
+    /// KUKA RSI.
+    Rsi {
+        /// The driver's counters and latency distribution.
+        diagnostics: Diagnostics,
+        /// The simulated controller's report (none with an external robot).
+        krc: Option<KrcReport>,
+    },
+    /// ABB EGM.
+    Egm {
+        /// The driver's counters, the robot's status and the latency distribution.
+        diagnostics: abb_egm::Diagnostics,
+        /// The simulated controller's report.
+        irc5: Option<Irc5Report>,
+    },
 }
 
 impl WireSummary {
     /// Print a short table.
     pub fn print(&self) {
-        print_link(&self.diagnostics);
-        if let Some(k) = &self.krc {
-            println!(
-                "  simulated KRC: {} cycles, {} good, {} late, max Delay {}, ended {:?}",
-                k.cycles, k.good, k.late, k.max_delay, k.end
-            );
+        match self {
+            Self::Rsi { diagnostics, krc } => {
+                print_link(diagnostics);
+                if let Some(k) = krc {
+                    println!(
+                        "  simulated KRC: {} cycles, {} good, {} late, max Delay {}, ended {:?}",
+                        k.cycles, k.good, k.late, k.max_delay, k.end
+                    );
+                }
+            }
+            Self::Egm { diagnostics, irc5 } => {
+                crate::egm::print_link(diagnostics);
+                if let Some(r) = irc5 {
+                    crate::egm::print_irc5(r);
+                }
+            }
         }
     }
 }
@@ -125,7 +154,7 @@ pub fn cell_limits(loop_cfg: &LoopConfig) -> (Limits, PoscorrLimits, PoscorrLimi
 const FIRST_CONTACT_POLL: Duration = Duration::from_millis(100);
 
 /// Clears a flag when dropped.
-struct ClearOnDrop(Arc<AtomicBool>);
+pub(crate) struct ClearOnDrop(pub(crate) Arc<AtomicBool>);
 
 impl Drop for ClearOnDrop {
     fn drop(&mut self) {
@@ -155,6 +184,10 @@ enum Kind {
         abort: Arc<AtomicBool>,
         running: Arc<AtomicBool>,
     },
+    SimulatedEgm {
+        sim: Box<crate::egm::SimulatedEgm>,
+        running: Arc<AtomicBool>,
+    },
     External {
         link: Box<RsiLink>,
     },
@@ -174,14 +207,39 @@ impl RobotSide {
     /// The robot the options ask for.
     pub fn start(spec: &RunSpec, args: &RsiArgs) -> Result<Self> {
         if let Some(addr) = args.external_robot {
+            if args.robot == RobotBackend::Egm {
+                bail!(
+                    "--external-robot speaks RSI only so far; an external EGM client is not supported yet"
+                );
+            }
             return Self::external(spec, addr, args.process_channels);
         }
         match args.robot {
             RobotBackend::Inproc if args.realtime => {
-                bail!("--realtime needs the RSI robot backend (--robot rsi)")
+                bail!("--realtime needs a robot on a wire (--robot rsi or egm)")
             }
             RobotBackend::Inproc => Ok(Self::inproc(spec)),
             RobotBackend::Rsi => Self::simulated(spec, args.realtime),
+            RobotBackend::Egm => {
+                let world = spec.world();
+                let running = Arc::new(AtomicBool::new(true));
+                let sim = crate::egm::start_simulated(
+                    spec,
+                    &world,
+                    args.realtime,
+                    FIRST_CONTACT_POLL,
+                    running.clone(),
+                )?;
+                Ok(Self {
+                    spec: spec.clone(),
+                    world,
+                    kind: Kind::SimulatedEgm {
+                        sim: Box::new(sim),
+                        running,
+                    },
+                    recorder: None,
+                })
+            }
         }
     }
 
@@ -198,7 +256,7 @@ impl RobotSide {
     /// Whether this robot keeps the wall clock (the simulated controller in real time, an external
     /// robot) rather than stepping in lockstep with the loop.
     pub fn is_realtime(&self, args: &RsiArgs) -> bool {
-        args.external_robot.is_some() || (args.robot == RobotBackend::Rsi && args.realtime)
+        args.external_robot.is_some() || (args.robot != RobotBackend::Inproc && args.realtime)
     }
 
     /// The world the robot moves; a sensor backend measures it.
@@ -363,9 +421,33 @@ impl RobotSide {
                 }
                 Ok((
                     run,
-                    Some(WireSummary {
+                    Some(WireSummary::Rsi {
                         diagnostics: link.diagnostics().clone(),
                         krc: Some(report),
+                    }),
+                ))
+            }
+            Kind::SimulatedEgm { mut sim, running } => {
+                let robot = Interruptible::new(&mut sim.link, crate::stop::flag())
+                    .with_peer(|| running.load(Ordering::Relaxed));
+                let result = run_recorded(&spec, &world, robot, sensor, recorder, progress);
+                sim.abort.store(true, Ordering::Relaxed);
+                let report = sim
+                    .irc5
+                    .join()
+                    .map_err(|_| anyhow!("the simulated IRC5 panicked"))?;
+                let run = result?;
+                if !matches!(
+                    report.end,
+                    sim::irc5::Irc5End::Completed | sim::irc5::Irc5End::Aborted
+                ) {
+                    eprintln!("note: the simulated IRC5 ended with {:?}", report.end);
+                }
+                Ok((
+                    run,
+                    Some(WireSummary::Egm {
+                        diagnostics: sim.link.diagnostics().clone(),
+                        irc5: Some(report),
                     }),
                 ))
             }
@@ -382,7 +464,7 @@ impl RobotSide {
                 let run = run_recorded(&spec, &world, robot, sensor, recorder, progress)?;
                 Ok((
                     run,
-                    Some(WireSummary {
+                    Some(WireSummary::Rsi {
                         diagnostics: link.diagnostics().clone(),
                         krc: None,
                     }),

@@ -23,7 +23,9 @@ use core::time::Duration;
 
 pub use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
+mod latency;
 pub mod process;
+pub use latency::Latency;
 pub use process::{ProcessCommand, ProcessFault, ProcessMode, ProcessPhase, ProcessState};
 
 /// What kind of failure a driver error is. Non-exhaustive: match with a wildcard arm.

@@ -5,6 +5,7 @@
 pub mod ati_node;
 pub mod ft300;
 pub mod inner;
+pub mod irc5;
 pub mod krc;
 pub mod plant;
 pub mod program;
@@ -13,6 +14,7 @@ pub mod vcan_env;
 pub mod world;
 
 pub use inner::{InnerLoop, InnerLoopModel};
+pub use irc5::{Irc5, Irc5Config, Irc5End, Irc5Report, RapidVariables};
 pub use krc::{Krc, KrcConfig, KrcEnd, KrcReport, Mechanism, RigidArm, Timing};
 pub use plant::{ContactPlant, Event, Schedule};
 pub use program::{Program, ProgramRunner, Segment, SegmentMode, SurfaceForm};

@@ -1,0 +1,139 @@
+//! The ABB EGM wiring of the application: `forcecell sim --robot egm` runs the EGM driver against the
+//! simulated IRC5 over real loopback UDP. [`crate::rsi::RobotSide`] starts it and runs the scenario
+//! through the one run loop; everything EGM-specific is here.
+
+use std::net::{Ipv4Addr, SocketAddr};
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::thread;
+use std::time::Duration;
+
+use abb_egm::{
+    CommandSlots, CorrectionRange, Diagnostics, EgmLink, Limits, LinkConfig, RobotFilter,
+};
+use anyhow::{Context, Result};
+use controller::LoopConfig;
+use sim::SharedWorld;
+use sim::irc5::{Irc5, Irc5Config, Irc5Report};
+use sim::krc::Timing;
+
+use crate::runner::RunSpec;
+
+/// The driver's envelope and rate limit from a tuning's own loop limits (so the driver never acts
+/// before the loop does), and the robot's path-correction range 10 % beyond the envelope.
+pub fn cell_limits(loop_cfg: &LoopConfig) -> (Limits, CorrectionRange) {
+    (
+        Limits {
+            max_translation: loop_cfg.max_offset,
+            max_translation_step: loop_cfg.max_step,
+        },
+        CorrectionRange {
+            translation: loop_cfg.max_offset * 1.1,
+        },
+    )
+}
+
+/// The EGM driver bound on loopback and the simulated IRC5 already running in its thread.
+pub struct SimulatedEgm {
+    /// The driver.
+    pub link: EgmLink,
+    /// The controller's thread.
+    pub irc5: thread::JoinHandle<Irc5Report>,
+    /// Set to end the controller.
+    pub abort: Arc<AtomicBool>,
+}
+
+/// Start the driver and the simulated IRC5 on `world` for `spec`. A scenario with a robot program
+/// runs it on the controller: its command goes out in `RAPIDfromRobot`, the state comes back through
+/// the controller's RAPID variables (the driver's state channel). `clear_on_exit` is cleared however
+/// the controller's thread ends.
+pub fn start_simulated(
+    spec: &RunSpec,
+    world: &SharedWorld,
+    realtime: bool,
+    first_contact: Duration,
+    clear_on_exit: Arc<AtomicBool>,
+) -> Result<SimulatedEgm> {
+    let period = Duration::from_secs_f64(spec.plant.period);
+    let process = spec.scenario.program.is_some().then(CommandSlots::default);
+    let (limits, range) = cell_limits(&spec.tuning.loop_cfg);
+    let mut lc = LinkConfig::new(SocketAddr::from((Ipv4Addr::LOCALHOST, 0)), RobotFilter::Any);
+    lc.period = period;
+    lc.limits = limits;
+    lc.range = range;
+    lc.process = process;
+    lc.first_contact_timeout = Some(first_contact);
+    // 1 s: lockstep pauses whenever the loop does.
+    lc.watchdog_cycles = ((1.0 / spec.plant.period).ceil() as u32).max(25);
+    // A sequence-number jump of up to 1 s is still the same session.
+    lc.session_jump = lc.watchdog_cycles;
+    let mut link = EgmLink::bind(lc).context("EGM driver")?;
+    let mut kc = Irc5Config::new(link.local_addr()?);
+    kc.period = period;
+    kc.range = range;
+    kc.process = process;
+    kc.timing = if realtime {
+        Timing::Realtime
+    } else {
+        // As for the simulated KRC: lockstep has no real-time meaning, a long wait keeps one datagram
+        // per step on a loaded host.
+        Timing::Lockstep {
+            deadline: Duration::from_secs(5),
+        }
+    };
+    // One more than the run's steps: the last cycle is answered with `stop`.
+    kc.cycles = (!realtime).then(|| spec.steps() + 1);
+    let mut irc5 = Irc5::new(kc).context("simulated IRC5")?;
+    link.set_robot_filter(RobotFilter::Exact(irc5.local_addr()?));
+    if process.is_some() {
+        link.set_state_channel(Box::new(irc5.rapid_variables()));
+    }
+    let abort = irc5.abort_handle();
+    let mut mech = world.clone();
+    let handle = thread::Builder::new()
+        .name("sim-irc5".into())
+        .spawn(move || {
+            let _alive = crate::rsi::ClearOnDrop(clear_on_exit);
+            irc5.run(&mut mech)
+        })?;
+    Ok(SimulatedEgm {
+        link,
+        irc5: handle,
+        abort,
+    })
+}
+
+/// Print the EGM link's counters and its receive→send latency.
+pub fn print_link(d: &Diagnostics) {
+    let c = d.counters;
+    let l = &d.latency;
+    println!(
+        "EGM link: {} received, {} answered, {} late, {} skipped, {} stale, {} foreign, {} malformed, {} oversized, {} implausible, {} rotations dropped, {} states published",
+        c.received,
+        c.answered,
+        c.late,
+        c.skipped,
+        c.stale,
+        c.foreign,
+        c.malformed,
+        c.oversized,
+        c.implausible,
+        c.rotation_dropped,
+        c.states_published
+    );
+    println!(
+        "  receive→send: p50 {:?}, p99 {:?}, p99.9 {:?}, max {:?}",
+        l.quantile(0.5),
+        l.quantile(0.99),
+        l.quantile(0.999),
+        l.max()
+    );
+}
+
+/// Print the simulated IRC5's report in one line.
+pub fn print_irc5(r: &Irc5Report) {
+    println!(
+        "  simulated IRC5: {} cycles, {} good, {} late, {} bad, {} clamped, max age {} ms, ended {:?}",
+        r.cycles, r.good, r.late, r.bad, r.clamped, r.max_age, r.end
+    );
+}
