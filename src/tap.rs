@@ -74,7 +74,7 @@ impl<S: ForceSensor> ForceSensor for TapSensor<S> {
                     xc_hat: f64::NAN,
                     k_c: f64::NAN,
                     x_c: f64::NAN,
-                    fault: 0,
+                    condition: 0,
                     ..Row::default()
                 }
                 .no_process(),

@@ -120,9 +120,9 @@ fn a_sensor_silent_in_contact_ends_the_run_backed_off_with_stop() {
     assert!(out.ended.contains("held the last command"), "{}", out.ended);
     assert!(out.stopped, "{}", out.ended);
     assert_eq!(report.end, KrcEnd::Stopped, "{report:?}");
-    let held = out.rows.iter().filter(|r| r.fault == 1).count();
+    let held = out.rows.iter().filter(|r| r.condition == 1).count();
     assert!(held > 0 && held <= 26, "held {held} cycles of 4 ms");
-    let pressing = out.rows.iter().rev().find(|r| r.fault != 7).unwrap();
+    let pressing = out.rows.iter().rev().find(|r| r.condition != 7).unwrap();
     let last = out.rows.last().unwrap();
     assert!(
         pressing.x_cmd - last.x_cmd >= 0.002 - 1e-9,
