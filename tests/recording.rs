@@ -581,7 +581,7 @@ try:
             counts[topics[rec.channel_id]] += 1
 except Exception as e:
     end = type(e).__name__
-print(counts["/force"], counts["/process"], end)
+print(counts["/cycle"], counts["/truth"], end)
 "#;
     let out = Command::new(&python)
         .args(["-c", script])
@@ -597,8 +597,121 @@ print(counts["/force"], counts["/process"], end)
     let f: Vec<&str> = text.split_whitespace().collect();
     let back = recorder::read_mcap(&std::fs::read(&path).unwrap()).unwrap();
     assert_eq!(f[0].parse::<usize>().unwrap(), back.rows.len(), "{text}");
-    assert_eq!(f[1].parse::<usize>().unwrap(), back.rows.len(), "{text}");
+    assert_eq!(f[1], "0", "a killed simulation wrote no truth: {text}");
     assert!(back.rows.len() > 100, "{text}");
+}
+
+/// Google's protobuf runtime (through the `mcap` and `mcap-protobuf-support` Python packages, with
+/// nothing of ours but the file) decodes every message of every channel of a `sim` recording with
+/// the schema the file carries, finds the codes' names there, and reads the values `export --csv`
+/// writes: every cycle, every column, bit for bit. Needs `pip install mcap mcap-protobuf-support
+/// protobuf`; `FORCECELL_MCAP_PYTHON` names the interpreter (default `python3`).
+#[test]
+#[ignore = "needs Python packages: pip install mcap mcap-protobuf-support protobuf; FORCECELL_MCAP_PYTHON=path/to/python"]
+fn the_protobuf_runtime_decodes_every_channel_as_the_export_reads_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let exe = env!("CARGO_BIN_EXE_forcecell");
+    // A programmed pass at 250 Hz: process command, phases and segments, contact and truth.
+    let o = Command::new(exe)
+        .args([
+            "sim",
+            "--scenario",
+            "pass-flat-20n",
+            "--plant",
+            "p2",
+            "--out",
+            "res",
+        ])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let mcap = dir.path().join("res/pass-flat-20n-p2-robust.mcap");
+    let csv = dir.path().join("res/exported.csv");
+    let o = Command::new(exe)
+        .arg("export")
+        .arg(&mcap)
+        .args(["--csv", "--out"])
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let python = std::env::var("FORCECELL_MCAP_PYTHON").unwrap_or_else(|_| "python3".into());
+    let script = r#"
+import csv, math, sys
+from collections import Counter
+from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
+
+rows, counts, schemas = {}, Counter(), {}
+with open(sys.argv[1], "rb") as f:
+    reader = make_reader(f, decoder_factories=[DecoderFactory()])
+    for schema, channel, message, m in reader.iter_decoded_messages():
+        assert schema.encoding == "protobuf" and channel.message_encoding == "protobuf", channel.topic
+        counts[channel.topic] += 1
+        schemas[channel.topic] = type(m).DESCRIPTOR
+        row = rows.setdefault(message.log_time, {})
+        if channel.topic == "/cycle":
+            p = m.process
+            mode = p.mode_code if p.HasField("mode_code") else (p.mode if p.HasField("mode") else None)
+            row.update(t=m.t, f=m.force.f, f_r=m.force.f_r, x=m.position.x, x_cmd=m.position.x_cmd,
+                       x_r=m.position.x_r, kc_hat=m.estimates.kc_hat, xc_hat=m.estimates.xc_hat,
+                       condition=m.state.condition,
+                       segment=p.segment if p.HasField("segment") else None, mode=mode,
+                       f_cmd=p.f_cmd, phase=p.phase if p.HasField("phase") else None,
+                       fault=p.fault if p.HasField("fault") else None)
+            assert m.HasField("wrench") and m.HasField("sensor") and m.HasField("robot")
+            assert m.force.error == m.force.error or math.isnan(m.force.f)
+        elif channel.topic == "/truth":
+            row.update(f_true=m.f_true, k_c=m.k_c, x_c=m.x_c)
+        else:
+            raise SystemExit("unexpected channel " + channel.topic)
+
+# The codes' names travel in the schema.
+state = schemas["/cycle"].fields_by_name["state"].message_type
+print("names", state.fields_by_name["condition"].enum_type.values_by_number[2].name,
+      state.fields_by_name["state"].enum_type.values_by_number[1].name,
+      schemas["/cycle"].fields_by_name["process"].message_type.fields_by_name["fault"].enum_type.values_by_number[2].name)
+
+def same(text, value):
+    if value is None:
+        return text == ""
+    if isinstance(value, float):
+        return text == "" if math.isnan(value) else float(text) == value
+    return text != "" and int(text) == value
+
+cycles = [rows[k] for k in sorted(rows) if "t" in rows[k]]
+with open(sys.argv[2]) as f:
+    table = list(csv.DictReader(f))
+assert len(table) == len(cycles), (len(table), len(cycles))
+for line, (want, got) in enumerate(zip(table, cycles), 2):
+    for col, text in want.items():
+        assert same(text, got.get(col)), (line, col, text, got.get(col))
+print("rows", len(cycles), counts["/cycle"], counts["/truth"], len(table[0]))
+"#;
+    let out = Command::new(&python)
+        .args(["-c", script])
+        .arg(&mcap)
+        .arg(&csv)
+        .output()
+        .expect("run python");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(
+        lines[0], "names NON_FINITE_SAMPLE CONTACT FORCE_LIMIT",
+        "{text}"
+    );
+    let f: Vec<&str> = lines[1].split_whitespace().collect();
+    let back = recorder::read_mcap(&std::fs::read(&mcap).unwrap()).unwrap();
+    let n = back.rows.len().to_string();
+    assert_eq!(f[1..4], [n.as_str(), n.as_str(), n.as_str()], "{text}");
+    assert_eq!(f[4], "17", "every column compared: {text}");
+    assert!(back.rows.len() > 500, "{text}");
 }
 
 /// Needs root: mounts a 256 KiB tmpfs (the CI and the dev machines run as root).
