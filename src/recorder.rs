@@ -177,10 +177,15 @@ impl std::fmt::Display for RecordingSummary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "{}: {} cycles recorded ({:.1} MB{})",
+            "{}: {} cycles recorded ({:.1} MB{}{})",
             self.path.display(),
             self.written,
             self.bytes as f64 / 1e6,
+            if self.written > 0 {
+                format!(", {:.0} B a cycle", self.bytes as f64 / self.written as f64)
+            } else {
+                String::new()
+            },
             if self.finished {
                 ", finished with summary and index"
             } else {

@@ -812,3 +812,37 @@ fn a_recording_with_no_cycle_has_no_chunk_without_messages() {
     );
     assert_eq!(recorder::read_mcap(&bytes).unwrap().rows.len(), 0);
 }
+
+/// Every message path of the Foxglove layout shipped in `docs/` names a field of the schema.
+#[test]
+fn the_foxglove_layout_plots_fields_of_the_schema() {
+    let layout: serde_json::Value =
+        serde_json::from_str(include_str!("../docs/foxglove-layout.json")).unwrap();
+    let mut paths = Vec::new();
+    for panel in layout["configById"].as_object().unwrap().values() {
+        for p in panel["paths"].as_array().unwrap() {
+            paths.push(p["value"].as_str().unwrap().to_string());
+        }
+    }
+    assert!(paths.len() > 10, "{paths:?}");
+    for path in &paths {
+        let (topic, fields) = path[1..].split_once('.').unwrap();
+        let channel = CHANNELS
+            .iter()
+            .find(|c| c.topic[1..] == *topic)
+            .unwrap_or_else(|| panic!("{path}: no channel {topic}"));
+        let mut msg = channel.message;
+        let mut names = fields.split('.').peekable();
+        while let Some(name) = names.next() {
+            let field = msg
+                .fields
+                .iter()
+                .find(|f| f.name == name)
+                .unwrap_or_else(|| panic!("{path}: no field {name} in {}", msg.name));
+            match field.ty {
+                telemetry::Type::Message(m) => msg = m,
+                _ => assert!(names.peek().is_none(), "{path}: {name} is no message"),
+            }
+        }
+    }
+}

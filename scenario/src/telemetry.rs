@@ -1482,6 +1482,33 @@ pub fn code_table() -> String {
     out
 }
 
+/// How many cycles of `rows` met each condition, by name (`none` when every cycle was clean): the
+/// line a run's summary prints, e.g. `12 sensor error, 3 step limited`.
+pub fn condition_counts(rows: &[Row]) -> String {
+    let mut counts = [0usize; Condition::ALL.len()];
+    let mut unknown = 0;
+    for r in rows {
+        match counts.get_mut(usize::from(r.condition)) {
+            Some(n) => *n += 1,
+            None => unknown += 1,
+        }
+    }
+    let mut parts: Vec<String> = Condition::ALL
+        .iter()
+        .zip(counts)
+        .filter(|(c, n)| **c != Condition::None && *n > 0)
+        .map(|(c, n)| format!("{n} {}", c.name()))
+        .collect();
+    if unknown > 0 {
+        parts.push(format!("{unknown} unknown"));
+    }
+    if parts.is_empty() {
+        "none".into()
+    } else {
+        parts.join(", ")
+    }
+}
+
 /// Every channel's fields as a Markdown table: path, protobuf type, unit, description.
 pub fn describe() -> String {
     fn walk(prefix: &str, m: &MessageType, out: &mut String) {
@@ -1666,6 +1693,19 @@ mod tests {
         assert_eq!(
             event_names(0b1000_0001).collect::<Vec<_>>(),
             ["contact", "bad_input"]
+        );
+    }
+
+    #[test]
+    fn a_summary_counts_conditions_by_name() {
+        let row = |condition| Row {
+            condition,
+            ..Row::default()
+        };
+        assert_eq!(condition_counts(&[row(0), row(0)]), "none");
+        assert_eq!(
+            condition_counts(&[row(1), row(5), row(1), row(0), row(9)]),
+            "2 sensor error, 1 step limited, 1 unknown"
         );
     }
 
