@@ -274,10 +274,16 @@ fn a_recorded_cell_run_streams_every_cycle_to_mcap() {
     assert_eq!(back.rows.len() as u64, summary.written);
     let last = back.rows.last().unwrap();
     assert!(last.t >= 1.5 && (last.f - 5.0).abs() < 0.1, "{last:?}");
-    // The raw (uncompensated) wrench is recorded beside the compensated one.
+    // The raw (uncompensated) wrench is recorded beside the compensated one, in every cycle.
     let raw = mcap::MessageStream::new(&bytes)
         .unwrap()
-        .filter(|m| m.as_ref().unwrap().channel.topic == "/wrench_raw")
+        .map(Result::unwrap)
+        .filter(|m| m.channel.topic == scenario::telemetry::CYCLE_TOPIC)
+        .filter(|m| {
+            let mut rec = forcecell::recorder::Record::unknown();
+            scenario::telemetry::decode(&scenario::telemetry::CYCLE, &m.data, &mut rec).unwrap();
+            rec.wrench_raw.iter().all(|v| v.is_finite())
+        })
         .count() as u64;
     assert_eq!(raw, summary.written);
 }
