@@ -64,3 +64,63 @@ fn cycle_recorded(b: Bencher) {
     drain.join().unwrap();
     eprintln!("recorder: {} records dropped (queue full)", tx.dropped());
 }
+
+/// The records of a simulated run at 250 Hz (plant P2, robust tuning, in-process robot and sensor)
+/// over `seconds`, and its rows with the world's truth filled in (what `sim` writes on `/truth`).
+fn simulated(scenario: &str, seconds: f64) -> (Vec<Record>, Vec<forcecell::record::Row>) {
+    use forcecell::runner::{RunSpec, run_recorded};
+    use forcecell::scenario::Scenario;
+    let mut s = Scenario::load(scenario).unwrap();
+    s.duration = seconds;
+    let spec = RunSpec::new(s, Some("p2"), Some("robust")).unwrap();
+    let world = spec.world();
+    let (tx, mut rx) = recorder::queue(spec.steps() as usize + 16, Full::Drop);
+    let run = run_recorded(
+        &spec,
+        &world,
+        sim::InProcRobot::new(world.clone()),
+        sim::InProcSensor::new(world.clone()),
+        Some(tx),
+        &mut |_| {},
+    )
+    .unwrap();
+    let mut recs = Vec::new();
+    while let Ok(r) = rx.pop() {
+        recs.push(r);
+    }
+    (recs, run.rows)
+}
+
+/// The writer's cost per cycle: a simulated run's records (a clean surface step, b03a; sensor noise,
+/// b06) pushed into a recording on a file (`/dev/shm` where there is one: the disk's speed is not what
+/// is measured) and finished with the truth, as `sim` does. Prints the file's bytes per cycle.
+#[divan::bench(args = ["b03a-surface-retreat", "b06-noise-drift"], sample_count = 20, sample_size = 1)]
+fn writer(b: Bencher, scenario: &str) {
+    let (recs, truth) = simulated(scenario, 10.0);
+    let n = recs.len();
+    let shm = std::path::Path::new("/dev/shm");
+    let dir = if shm.is_dir() {
+        tempfile::tempdir_in(shm).unwrap()
+    } else {
+        tempfile::tempdir().unwrap()
+    };
+    let path = dir.path().join("bench.mcap");
+    let mut bytes = 0;
+    b.counter(divan::counter::ItemsCount::new(n))
+        .bench_local(|| {
+            let opts = recorder::RecorderOptions {
+                full: Full::Wait,
+                ..recorder::RecorderOptions::default()
+            };
+            let (mut tx, recording) = recorder::start(&path, opts, None).unwrap();
+            for r in &recs {
+                tx.push(*r);
+            }
+            drop(tx);
+            bytes = recording.finish(truth.clone()).unwrap().bytes;
+        });
+    eprintln!(
+        "writer {scenario}: {n} cycles, {bytes} B in the file, {:.1} B a cycle",
+        bytes as f64 / n as f64
+    );
+}

@@ -535,8 +535,8 @@ fn main() -> Result<()> {
                             "ati" => forcecell::ati::run_sim_with(robot, None, &mut |_| {})?,
                             k => bail!("--sensor {k}: inproc, robotiq or ati with --cell external"),
                         };
-                        if let Some(w) = &wire {
-                            let d = &w.diagnostics;
+                        if let Some(forcecell::rsi::WireSummary::Rsi { diagnostics: d, .. }) = &wire
+                        {
                             *driver.lock().unwrap() =
                                 Some((d.latency.clone(), d.before_send.clone()));
                         }

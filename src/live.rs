@@ -2,9 +2,9 @@
 //! (`foxglove.websocket.v1`), so Foxglove (or any client of that protocol) can watch a run.
 //!
 //! A small server of its own on `tungstenite`: on connect it sends `serverInfo` and `advertise` (every
-//! channel of [`CHANNELS`] with its JSON schema); a client's `subscribe`/`unsubscribe` choose what it
-//! gets; each message goes out as a binary `messageData` frame (opcode 1, subscription id, timestamp
-//! in ns, JSON payload). The recorder's writer thread feeds it ([`LiveServer::sink`]), never the
+//! channel of [`CHANNELS`], `protobuf`-encoded, with its schema: the `FileDescriptorSet` in base64);
+//! a client's `subscribe`/`unsubscribe` choose what it gets; each message goes out as a binary
+//! `messageData` frame (opcode 1, subscription id, timestamp in ns, the protobuf message). The recorder's writer thread feeds it ([`LiveServer::sink`]), never the
 //! control loop; a client that cannot keep up loses messages (its queue is bounded), it never slows
 //! the writer.
 
@@ -22,7 +22,7 @@ use serde_json::{Value, json};
 use tungstenite::handshake::server::{ErrorResponse, Request, Response};
 use tungstenite::{Message, WebSocket};
 
-use crate::recorder::{CHANNELS, LiveSink};
+use crate::recorder::{CHANNELS, ENCODING, LiveSink};
 
 /// The subprotocol Foxglove speaks.
 pub const SUBPROTOCOL: &str = "foxglove.websocket.v1";
@@ -134,14 +134,36 @@ pub fn advertise() -> Value {
             json!({
                 "id": i + 1,
                 "topic": c.topic,
-                "encoding": "json",
-                "schemaName": c.schema,
-                "schema": c.json_schema,
-                "schemaEncoding": "jsonschema",
+                "encoding": ENCODING,
+                "schemaName": c.schema_name(),
+                "schema": base64(&::scenario::telemetry::file_descriptor_set(c)),
+                "schemaEncoding": ENCODING,
             })
         })
         .collect();
     json!({"op": "advertise", "channels": channels})
+}
+
+/// Standard base64 with padding (RFC 4648), as the protocol carries a binary schema.
+pub fn base64(data: &[u8]) -> String {
+    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = String::with_capacity(data.len().div_ceil(3) * 4);
+    for chunk in data.chunks(3) {
+        let b = [
+            chunk[0],
+            chunk.get(1).copied().unwrap_or(0),
+            chunk.get(2).copied().unwrap_or(0),
+        ];
+        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+        for k in 0..4 {
+            if k <= chunk.len() {
+                out.push(char::from(ALPHABET[(n >> (18 - 6 * k)) as usize & 63]));
+            } else {
+                out.push('=');
+            }
+        }
+    }
+    out
 }
 
 fn server_info() -> Value {
@@ -256,5 +278,27 @@ fn handle(me: &Arc<Mutex<Client>>, text: &str) {
             c.subs.retain(|_, sub| !ids.contains(&u64::from(*sub)));
         }
         _ => {}
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn base64_is_rfc_4648() {
+        // RFC 4648's own test vectors.
+        for (raw, enc) in [
+            ("", ""),
+            ("f", "Zg=="),
+            ("fo", "Zm8="),
+            ("foo", "Zm9v"),
+            ("foob", "Zm9vYg=="),
+            ("fooba", "Zm9vYmE="),
+            ("foobar", "Zm9vYmFy"),
+        ] {
+            assert_eq!(base64(raw.as_bytes()), enc);
+        }
+        assert_eq!(base64(&[0xfb, 0xff]), "+/8=");
     }
 }

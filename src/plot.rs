@@ -8,6 +8,8 @@ use anyhow::{Result, anyhow};
 use plotters::prelude::*;
 use plotters::style::{FontStyle, register_font};
 
+use ::scenario::telemetry as tm;
+
 use crate::record::Row;
 
 /// The backend reports an unwritable path as a nested Debug dump, only after drawing: find it first.
@@ -158,19 +160,19 @@ pub fn write_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
         "force [N]",
         &[
             Line {
-                label: "f measured",
+                label: tm::F.label,
                 color: GREY_,
                 width: 1,
                 value: |r| r.f,
             },
             Line {
-                label: "f true",
+                label: tm::F_TRUE.label,
                 color: BLUE_,
                 width: 2,
                 value: |r| r.f_true,
             },
             Line {
-                label: "f_r set-point",
+                label: tm::F_R.label,
                 color: RED_,
                 width: 2,
                 value: |r| r.f_r,
@@ -184,31 +186,31 @@ pub fn write_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
         "x [mm]",
         &[
             Line {
-                label: "x measured",
+                label: tm::X.label,
                 color: BLUE_,
                 width: 2,
                 value: |r| r.x * 1e3,
             },
             Line {
-                label: "x_cmd",
+                label: tm::X_CMD.label,
                 color: ORANGE_,
                 width: 1,
                 value: |r| r.x_cmd * 1e3,
             },
             Line {
-                label: "x_r reference",
+                label: tm::X_R.label,
                 color: GREEN_,
                 width: 1,
                 value: |r| r.x_r * 1e3,
             },
             Line {
-                label: "x_c surface (true)",
+                label: tm::X_C.label,
                 color: BLACK,
                 width: 1,
                 value: |r| r.x_c * 1e3,
             },
             Line {
-                label: "x̂_c estimate",
+                label: tm::XC_HAT.label,
                 color: PURPLE_,
                 width: 2,
                 value: |r| r.xc_hat * 1e3,
@@ -222,13 +224,13 @@ pub fn write_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
         "k [kN/m]",
         &[
             Line {
-                label: "k_c true",
+                label: tm::K_C.label,
                 color: BLACK,
                 width: 1,
                 value: |r| r.k_c * 1e-3,
             },
             Line {
-                label: "k̂_c estimate",
+                label: tm::KC_HAT.label,
                 color: PURPLE_,
                 width: 2,
                 value: |r| r.kc_hat * 1e-3,
@@ -264,13 +266,13 @@ pub fn write_pass_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
         "force [N]",
         &[
             Line {
-                label: "f true",
+                label: tm::F_TRUE.label,
                 color: BLUE_,
                 width: 2,
                 value: |r| r.f_true,
             },
             Line {
-                label: "F commanded (FcCmd.F)",
+                label: tm::F_CMD.label,
                 color: BLACK,
                 width: 1,
                 value: |r| r.f_cmd,
@@ -286,10 +288,13 @@ pub fn write_pass_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
     panel(
         &lower[0],
         &rows,
-        "process state (FcState: 0 OFF, 1 APPROACH, 2 RAMP, 3 PRESSING, 4 RELEASE, 9 FAULT)",
-        "state",
+        &format!(
+            "process phase (FcState.State: {})",
+            hal::ProcessPhase::legend().to_uppercase()
+        ),
+        "phase",
         &[Line {
-            label: "state",
+            label: tm::PHASE.label,
             color: ORANGE_,
             width: 2,
             value: |r| r.phase.map_or(f64::NAN, f64::from),
@@ -301,7 +306,7 @@ pub fn write_pass_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
         "program segment (FcCmd.Seg)",
         "segment",
         &[Line {
-            label: "segment",
+            label: tm::SEGMENT.label,
             color: GREEN_,
             width: 2,
             value: |r| r.segment.map_or(f64::NAN, |s| s as f64),

@@ -5,12 +5,16 @@
 //! * The loop side is [`Recorder::push`]: one copy into a fixed-capacity single-producer ring
 //!   ([`rtrb`]). When the ring is full the record is dropped and counted ([`Full::Drop`], the real-time
 //!   setting). A lockstep simulation, which has no deadline, may instead wait for room ([`Full::Wait`]).
-//! * The writer thread ([`Recording`]) turns each record into one JSON message per channel
-//!   ([`CHANNELS`], each with a JSON schema Foxglove can plot) and finishes an MCAP chunk and flushes the
-//!   file at least every [`RecorderOptions::flush_every`] (1 s): a killed process leaves a file readable
-//!   up to the last flush. [`Recording::finish`] writes the summary and index.
+//! * The writer thread ([`Recording`]) turns each record into one protobuf message on `/cycle` (the
+//!   schema is [`scenario::telemetry`]'s table, embedded in the file as a `FileDescriptorSet`: Foxglove
+//!   and any protobuf reader decode it without a copy of ours), compresses chunks with zstd, and
+//!   finishes a chunk and flushes the file at least every [`RecorderOptions::flush_every`] (1 s): a
+//!   killed process leaves a file readable up to the last flush. A simulation's truth goes on `/truth`
+//!   at the end. [`Recording::finish`] writes the summary and index.
 //! * A write error (a full disk, a vanished directory) is reported once on stderr; the writer then
 //!   discards and counts, the loop is never held up, and [`RecordingSummary`] says what was lost.
+//! * [`read_mcap`] reads these recordings back, and every JSON recording written before them (one
+//!   channel per group of fields: `/force`, `/position`, `/state`, `/process`, …).
 //!
 //! Time: each message's `log_time` and `publish_time` is the cycle time `t` in ns (robot time on a
 //! cell, simulated time in `sim`).
@@ -26,126 +30,22 @@ use std::sync::mpsc;
 use std::thread;
 use std::time::{Duration, Instant};
 
+use ::scenario::telemetry;
 use anyhow::{Context, Result, anyhow};
-use controller::{ContactState, CycleReport, Events};
-use serde::Serialize;
+
+pub use ::scenario::telemetry::{CHANNELS, Channel, NO_STATE, Record};
 
 use crate::record::Row;
 
-/// One control cycle as recorded. SI units (s, N, N·m, m, N/m); NaN where a value is unknown.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Record {
-    /// The trace row (force, positions, estimates, fault; truth columns NaN).
-    pub row: Row,
-    /// The wrench the loop read (gravity-compensated on a cell that compensates), sensor frame:
-    /// `[Fx, Fy, Fz, Tx, Ty, Tz]`.
-    pub wrench: [f64; 6],
-    /// The sensor's wrench before compensation (NaN where no compensation runs).
-    pub wrench_raw: [f64; 6],
-    /// The sensor driver's measurement counter (0 when no sample).
-    pub sensor_seq: u64,
-    /// Age of the sample when read, s (NaN when no sample).
-    pub sensor_age: f64,
-    /// The robot cycle's sequence number (RSI IPOC on a KUKA).
-    pub robot_seq: u64,
-    /// The robot cycle's period, s.
-    pub period: f64,
-    /// Replies the robot reported late so far.
-    pub late_replies: u64,
-    /// Contact state code ([`ContactState::code`]), or [`NO_STATE`] for laws without a state machine.
-    pub state: u8,
-    /// The law's events of this step, one bit each in [`EVENT_NAMES`] order.
-    pub events: u16,
-}
+/// The uncompressed size at which a chunk is finished (it is finished at each flush too).
+const CHUNK_SIZE: u64 = 1024 * 1024;
 
-/// The state code of a law without a contact state machine.
-pub const NO_STATE: u8 = 255;
+/// Index of the `/truth` channel in [`CHANNELS`] (written at the end of a simulation).
+pub const TRUTH: usize = 1;
 
-/// Names of the [`Record::events`] bits, lowest bit first.
-pub const EVENT_NAMES: [&str; 8] = [
-    "contact",
-    "lift_off",
-    "force_limit",
-    "velocity_limit",
-    "acceleration_limit",
-    "deviation_limit",
-    "estimator_bound",
-    "bad_input",
-];
-
-/// The events of one step as bits in [`EVENT_NAMES`] order.
-pub fn event_bits(e: &Events) -> u16 {
-    [
-        e.contact,
-        e.lift_off,
-        e.force_limit,
-        e.velocity_limit,
-        e.acceleration_limit,
-        e.deviation_limit,
-        e.estimator_bound,
-        e.bad_input,
-    ]
-    .iter()
-    .enumerate()
-    .fold(0, |acc, (i, &b)| acc | (u16::from(b) << i))
-}
-
-/// A state code's name.
-pub fn state_name(code: u8) -> &'static str {
-    match code {
-        0 => "approach",
-        1 => "contact",
-        2 => "reacquire",
-        3 => "retract",
-        _ => "none",
-    }
-}
-
-/// A fault code's name (codes of [`crate::record::fault_code`]).
-pub fn fault_name(code: u8) -> &'static str {
-    match code {
-        0 => "none",
-        1 => "sensor error",
-        2 => "non-finite sample",
-        3 => "non-finite pose",
-        4 => "non-finite command",
-        5 => "step limited",
-        6 => "envelope limited",
-        7 => "backing off after a fault",
-        _ => "unknown",
-    }
-}
-
-const NAN6: [f64; 6] = [f64::NAN; 6];
-
-impl Record {
-    /// The record of an answered cycle with set-point `f_r`; the process segment, command and state
-    /// come from the cycle and the correction sent ([`Row::from_report`]).
-    pub fn from_report(r: &CycleReport, f_r: f64) -> Self {
-        let (raw, sensor_seq, sensor_age) = match r.sample {
-            Some(s) => (s.wrench.to_array(), s.seq, s.age.as_secs_f64()),
-            None => (NAN6, 0, f64::NAN),
-        };
-        // Where the loop compensates gravity, the wrench it used and the raw one beside it.
-        let (wrench, wrench_raw) = if r.compensated {
-            (r.wrench.map_or(NAN6, |w| w.to_array()), raw)
-        } else {
-            (raw, NAN6)
-        };
-        Self {
-            row: Row::from_report(r, f_r),
-            wrench,
-            wrench_raw,
-            sensor_seq,
-            sensor_age,
-            robot_seq: r.cycle.seq,
-            period: r.cycle.period,
-            late_replies: u64::from(r.cycle.late_replies),
-            state: r.out.state.map_or(NO_STATE, ContactState::code),
-            events: event_bits(&r.out.events),
-        }
-    }
-}
+/// The encoding of every message, and of every schema, as MCAP and the Foxglove WebSocket protocol
+/// name it.
+pub const ENCODING: &str = "protobuf";
 
 /// What the loop side does when the queue is full.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -231,192 +131,16 @@ pub fn queue(capacity: usize, full: Full) -> (Recorder, rtrb::Consumer<Record>) 
 }
 
 /// Where the writer thread also sends every message (the live view): the channel's index in
-/// [`CHANNELS`], the log time in ns and the JSON payload. Called on the writer thread, never the loop's.
+/// [`CHANNELS`], the log time in ns and the protobuf payload. Called on the writer thread, never the
+/// loop's.
 pub type LiveSink = Box<dyn FnMut(usize, u64, &[u8]) + Send>;
 
-/// A channel of the recording.
-#[derive(Clone, Copy, Debug)]
-pub struct ChannelDef {
-    /// Topic, e.g. `/force`.
-    pub topic: &'static str,
-    /// Schema name.
-    pub schema: &'static str,
-    /// The JSON schema.
-    pub json_schema: &'static str,
-}
-
-// Plain `"type":"number"` fields (a value that is not known is written as `null`): Foxglove Studio's
-// JSON-schema reader refuses type unions such as `["number","null"]` and leaves the channel unplottable.
-macro_rules! num_schema {
-    ($title:literal, $field0:literal: $desc0:literal $(, $field:literal: $desc:literal)* $(,)?) => {
-        concat!(
-            r#"{"title":""#, $title, r#"","type":"object","properties":{"#,
-            r#"""#, $field0, r#"":{"type":"number","description":""#, $desc0, r#" (null: unknown)"}"#,
-            $( r#",""#, $field, r#"":{"type":"number","description":""#, $desc, r#" (null: unknown)"}"#, )*
-            r#"}}"#
-        )
-    };
-}
-
-const WRENCH_SCHEMA: &str = r#"{"title":"forcecell.Wrench","type":"object","properties":{"force":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}},"description":"N, sensor frame"},"torque":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}},"description":"N·m, sensor frame"}}}"#;
-
-/// Every channel a recording (and the live view) carries, in a fixed order.
-pub const CHANNELS: [ChannelDef; 10] = [
-    ChannelDef {
-        topic: "/force",
-        schema: "forcecell.Force",
-        json_schema: num_schema!("forcecell.Force", "t": "cycle time, s", "f": "measured normal force, N", "f_r": "set-point, N", "error": "f - f_r, N"),
-    },
-    ChannelDef {
-        topic: "/wrench",
-        schema: "forcecell.Wrench",
-        json_schema: WRENCH_SCHEMA,
-    },
-    ChannelDef {
-        topic: "/wrench_raw",
-        schema: "forcecell.Wrench",
-        json_schema: WRENCH_SCHEMA,
-    },
-    ChannelDef {
-        topic: "/position",
-        schema: "forcecell.Position",
-        json_schema: num_schema!("forcecell.Position", "x": "measured position along the normal, m", "x_cmd": "commanded position, m", "x_r": "impedance reference, m"),
-    },
-    ChannelDef {
-        topic: "/estimates",
-        schema: "forcecell.Estimates",
-        json_schema: num_schema!("forcecell.Estimates", "kc_hat": "stiffness estimate, N/m", "xc_hat": "surface estimate, m"),
-    },
-    ChannelDef {
-        topic: "/state",
-        schema: "forcecell.State",
-        json_schema: r#"{"title":"forcecell.State","type":"object","properties":{"state":{"type":"integer","description":"0 approach, 1 contact, 2 reacquire, 3 retract, 255 none"},"state_name":{"type":"string"},"segment":{"type":"integer","description":"the robot program's path segment (null: no process command)"},"fault":{"type":"integer","description":"0 none, 1 sensor error, 2 non-finite sample, 3 non-finite pose, 4 non-finite command, 5 step limited, 6 envelope limited, 7 backing off after a fault"},"fault_name":{"type":"string"},"events":{"type":"integer","description":"bits: contact, lift_off, force_limit, velocity_limit, acceleration_limit, deviation_limit, estimator_bound, bad_input"},"event_names":{"type":"array","items":{"type":"string"}}}}"#,
-    },
-    ChannelDef {
-        topic: "/rsi",
-        schema: "forcecell.Robot",
-        json_schema: r#"{"title":"forcecell.Robot","type":"object","properties":{"seq":{"type":"integer","description":"cycle sequence (RSI IPOC)"},"period":{"type":"number","description":"s"},"late_replies":{"type":"integer"}}}"#,
-    },
-    ChannelDef {
-        topic: "/sensor",
-        schema: "forcecell.Sensor",
-        json_schema: r#"{"title":"forcecell.Sensor","type":"object","properties":{"ok":{"type":"boolean"},"seq":{"type":"integer"},"age":{"type":"number","description":"s (null: no sample)"}}}"#,
-    },
-    ChannelDef {
-        topic: "/truth",
-        schema: "forcecell.Truth",
-        json_schema: num_schema!("forcecell.Truth", "f_true": "true contact force, N", "k_c": "true stiffness, N/m", "x_c": "true surface position, m"),
-    },
-    ChannelDef {
-        topic: "/process",
-        schema: "forcecell.Process",
-        json_schema: r#"{"title":"forcecell.Process","type":"object","properties":{"segment":{"type":"integer","description":"the robot program's path segment (RSI FcCmd); null: the link carries no process command"},"mode":{"type":"integer","description":"commanded mode: 0 off, 1 press, 2 release, other numbers as sent (a bad command)"},"mode_name":{"type":"string"},"f_cmd":{"type":"number","description":"commanded force, N"},"phase":{"type":"integer","description":"reported phase (RSI FcState): 0 off, 1 approach, 2 ramp, 3 pressing, 4 release, 9 fault"},"phase_name":{"type":"string"},"fault":{"type":"integer","description":"latched process fault: 0 none, 1 sensor lost, 2 force limit, 3 correction limit, 4 bad command, 5 contact lost, 6 hold timeout"},"fault_name":{"type":"string"}}}"#,
-    },
-];
-
-/// Index of the `/process` channel.
-pub const PROCESS: usize = 9;
-
-/// A process mode number's name ([`hal::ProcessMode::code`]).
-pub fn mode_name(code: Option<i64>) -> &'static str {
-    match code {
-        None => "none",
-        Some(0) => "off",
-        Some(1) => "press",
-        Some(2) => "release",
-        Some(_) => "unknown",
-    }
-}
-
-/// A process phase number's name ([`hal::ProcessPhase::code`]).
-pub fn phase_name(code: Option<u8>) -> &'static str {
-    match code.and_then(|c| hal::ProcessPhase::from_code(i64::from(c))) {
-        None => "unknown",
-        Some(hal::ProcessPhase::Off) => "off",
-        Some(hal::ProcessPhase::Approach) => "approach",
-        Some(hal::ProcessPhase::Ramp) => "ramp",
-        Some(hal::ProcessPhase::Pressing) => "pressing",
-        Some(hal::ProcessPhase::Release) => "release",
-        Some(hal::ProcessPhase::Fault) => "fault",
-    }
-}
-
-/// A process fault number's name ([`hal::ProcessFault::code`]).
-pub fn process_fault_name(code: Option<u8>) -> &'static str {
-    code.and_then(|c| hal::ProcessFault::from_code(i64::from(c)))
-        .map_or("unknown", hal::ProcessFault::name)
-}
-
-/// Index of the `/truth` channel (written at the end of a simulation).
-pub const TRUTH: usize = 8;
-
-#[derive(Serialize)]
-struct Xyz {
-    x: f64,
-    y: f64,
-    z: f64,
-}
-
-#[derive(Serialize)]
-struct WrenchMsg {
-    force: Xyz,
-    torque: Xyz,
-}
-
-fn wrench_msg(w: &[f64; 6]) -> WrenchMsg {
-    WrenchMsg {
-        force: Xyz {
-            x: w[0],
-            y: w[1],
-            z: w[2],
-        },
-        torque: Xyz {
-            x: w[3],
-            y: w[4],
-            z: w[5],
-        },
-    }
-}
-
-/// The JSON message of channel `i` for `rec`, or `None` when the channel has nothing this cycle.
+/// The message of channel `i` for `rec` (cleared first), or `None` when the channel has nothing this
+/// cycle (the truth where the world knows none).
 pub fn encode(i: usize, rec: &Record, buf: &mut Vec<u8>) -> Option<()> {
-    use serde_json::json;
     buf.clear();
-    let r = &rec.row;
-    let v = match i {
-        0 => json!({"t": r.t, "f": r.f, "f_r": r.f_r, "error": r.f - r.f_r}),
-        1 => serde_json::to_value(wrench_msg(&rec.wrench)).ok()?,
-        2 if rec.wrench_raw.iter().any(|v| v.is_finite()) => {
-            serde_json::to_value(wrench_msg(&rec.wrench_raw)).ok()?
-        }
-        3 => json!({"x": r.x, "x_cmd": r.x_cmd, "x_r": r.x_r}),
-        4 => json!({"kc_hat": r.kc_hat, "xc_hat": r.xc_hat}),
-        5 => {
-            let names: Vec<&str> = EVENT_NAMES
-                .iter()
-                .enumerate()
-                .filter(|(b, _)| rec.events & (1 << b) != 0)
-                .map(|(_, n)| *n)
-                .collect();
-            json!({"state": rec.state, "state_name": state_name(rec.state), "segment": r.segment,
-                   "fault": r.fault, "fault_name": fault_name(r.fault), "events": rec.events, "event_names": names})
-        }
-        6 => json!({"seq": rec.robot_seq, "period": rec.period, "late_replies": rec.late_replies}),
-        7 => {
-            json!({"ok": rec.wrench.iter().all(|v| v.is_finite()), "seq": rec.sensor_seq, "age": rec.sensor_age})
-        }
-        TRUTH if r.f_true.is_finite() || r.k_c.is_finite() || r.x_c.is_finite() => {
-            json!({"f_true": r.f_true, "k_c": r.k_c, "x_c": r.x_c})
-        }
-        PROCESS => json!({
-            "segment": r.segment, "mode": r.mode, "mode_name": mode_name(r.mode), "f_cmd": r.f_cmd,
-            "phase": r.phase, "phase_name": phase_name(r.phase),
-            "fault": r.process_fault, "fault_name": process_fault_name(r.process_fault),
-        }),
-        _ => return None,
-    };
-    serde_json::to_writer(&mut *buf, &v).ok()?;
-    Some(())
+    let c = CHANNELS.get(i)?;
+    c.has(rec).then(|| telemetry::encode(c.message, rec, buf))
 }
 
 /// A time in s as MCAP nanoseconds (negative and non-finite times become 0).
@@ -453,10 +177,15 @@ impl std::fmt::Display for RecordingSummary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "{}: {} cycles recorded ({:.1} MB{})",
+            "{}: {} cycles recorded ({:.1} MB{}{})",
             self.path.display(),
             self.written,
             self.bytes as f64 / 1e6,
+            if self.written > 0 {
+                format!(", {:.0} B a cycle", self.bytes as f64 / self.written as f64)
+            } else {
+                String::new()
+            },
             if self.finished {
                 ", finished with summary and index"
             } else {
@@ -501,10 +230,13 @@ pub fn start(
 ) -> Result<(Recorder, Recording)> {
     let file = File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
     let mut w = mcap::WriteOptions::new()
-        .compression(Some(mcap::Compression::Lz4))
+        // zstd on this thread (no compression threads of its own beside the control loop): the cycles
+        // of a chunk differ little from one to the next.
+        .compression(Some(mcap::Compression::Zstd))
+        .compression_threads(0)
         .profile("")
         .library(concat!("forcecell ", env!("CARGO_PKG_VERSION")))
-        .chunk_size(Some(512 * 1024))
+        .chunk_size(Some(CHUNK_SIZE))
         // Each chunk is built in memory and written whole when it is finished (at most a second
         // later): a killed run leaves complete chunks only, never one with an unpatched length.
         .disable_seeking(true)
@@ -547,7 +279,10 @@ pub fn start(
         },
         live,
         buf: Vec::with_capacity(512),
-        seq: 0,
+        schemas: CHANNELS
+            .iter()
+            .map(telemetry::file_descriptor_set)
+            .collect(),
         last_t: None,
         unflushed: 0,
     };
@@ -615,7 +350,8 @@ struct Writer {
     summary: RecordingSummary,
     live: Option<LiveSink>,
     buf: Vec<u8>,
-    seq: u32,
+    /// Each channel's schema (a `FileDescriptorSet`).
+    schemas: Vec<Vec<u8>>,
     last_t: Option<f64>,
     /// Messages written since the last flush.
     unflushed: u64,
@@ -690,8 +426,8 @@ impl Writer {
             None => {
                 let c = &CHANNELS[i];
                 let added = w
-                    .add_schema(c.schema, "jsonschema", c.json_schema.as_bytes())
-                    .and_then(|schema| w.add_channel(schema, c.topic, "json", &BTreeMap::new()));
+                    .add_schema(&c.schema_name(), ENCODING, &self.schemas[i])
+                    .and_then(|schema| w.add_channel(schema, c.topic, ENCODING, &BTreeMap::new()));
                 match added {
                     Ok(id) => {
                         self.ids[i] = Some(id);
@@ -707,10 +443,11 @@ impl Writer {
                 }
             }
         };
-        self.seq = self.seq.wrapping_add(1);
         let header = mcap::records::MessageHeader {
             channel_id,
-            sequence: self.seq,
+            // No counter of the writer's own (MCAP: 0, "not assigned"): the cycle's own sequence
+            // numbers are in the message, and a counter would cost 3–4 compressed bytes a cycle.
+            sequence: 0,
             log_time: t,
             publish_time: t,
         };
@@ -782,24 +519,6 @@ impl Writer {
     }
 }
 
-impl Record {
-    /// A record holding only a trace row (the other fields unknown).
-    pub fn from_row(row: Row) -> Self {
-        Self {
-            row,
-            wrench: NAN6,
-            wrench_raw: NAN6,
-            sensor_seq: 0,
-            sensor_age: f64::NAN,
-            robot_seq: 0,
-            period: f64::NAN,
-            late_replies: 0,
-            state: NO_STATE,
-            events: 0,
-        }
-    }
-}
-
 /// What [`read_mcap`] found.
 #[derive(Debug)]
 pub struct ReadBack {
@@ -815,8 +534,50 @@ fn num(v: &serde_json::Value, k: &str) -> f64 {
         .unwrap_or(f64::NAN)
 }
 
-/// Read a forcecell MCAP recording back into trace rows (for `export` and `plot`). A file that ends
-/// early (a killed run) is read up to its last complete record and marked [`ReadBack::truncated`].
+/// One message of a JSON recording (written before the protobuf schema: a channel per group of
+/// fields) into its row.
+fn read_json_message(topic: &str, v: &serde_json::Value, row: &mut Row) {
+    match topic {
+        "/force" => {
+            row.t = v.get("t").and_then(|t| t.as_f64()).unwrap_or(row.t);
+            row.f = num(v, "f");
+            row.f_r = num(v, "f_r");
+        }
+        "/position" => {
+            row.x = num(v, "x");
+            row.x_cmd = num(v, "x_cmd");
+            row.x_r = num(v, "x_r");
+        }
+        "/estimates" => {
+            row.kc_hat = num(v, "kc_hat");
+            row.xc_hat = num(v, "xc_hat");
+        }
+        // `/state`'s `fault` was the cycle's condition.
+        "/state" => {
+            row.condition = v.get("fault").and_then(|f| f.as_u64()).unwrap_or(0) as u8;
+        }
+        "/truth" => {
+            row.f_true = num(v, "f_true");
+            row.k_c = num(v, "k_c");
+            row.x_c = num(v, "x_c");
+        }
+        // Recordings before the process channel leave these unknown (`/state`'s `segment` was
+        // always 0 then).
+        "/process" => {
+            let int = |k| v.get(k).and_then(serde_json::Value::as_i64);
+            row.segment = int("segment");
+            row.mode = int("mode");
+            row.f_cmd = num(v, "f_cmd");
+            row.phase = int("phase").and_then(|c| u8::try_from(c).ok());
+            row.fault = int("fault").and_then(|c| u8::try_from(c).ok());
+        }
+        _ => {}
+    }
+}
+
+/// Read a forcecell MCAP recording back into trace rows (for `export` and `plot`): a protobuf one
+/// (`/cycle`, `/truth`) or a JSON one written before. A file that ends early (a killed run) is read up
+/// to its last complete record and marked [`ReadBack::truncated`].
 pub fn read_mcap(bytes: &[u8]) -> Result<ReadBack> {
     let mut rows: BTreeMap<u64, Row> = BTreeMap::new();
     let mut truncated = None;
@@ -831,52 +592,35 @@ pub fn read_mcap(bytes: &[u8]) -> Result<ReadBack> {
             }
         };
         any = true;
-        let v: serde_json::Value = match serde_json::from_slice(&m.data) {
-            Ok(v) => v,
-            Err(e) => anyhow::bail!(
-                "{} message at {} ns is not JSON: {e}",
-                m.channel.topic,
-                m.log_time
-            ),
-        };
+        let topic = m.channel.topic.as_str();
         let row = rows.entry(m.log_time).or_insert_with(|| Row {
             t: m.log_time as f64 * 1e-9,
-            ..nan_row()
+            ..Row::unknown()
         });
-        match m.channel.topic.as_str() {
-            "/force" => {
-                row.t = v.get("t").and_then(|t| t.as_f64()).unwrap_or(row.t);
-                row.f = num(&v, "f");
-                row.f_r = num(&v, "f_r");
+        match m.channel.message_encoding.as_str() {
+            ENCODING => {
+                let Some(c) = CHANNELS.iter().find(|c| c.topic == topic) else {
+                    continue;
+                };
+                let mut rec = Record::from_row(*row);
+                telemetry::decode(c.message, &m.data, &mut rec).with_context(|| {
+                    format!(
+                        "{topic} message at {} ns is not a {}",
+                        m.log_time,
+                        c.schema_name()
+                    )
+                })?;
+                *row = rec.row;
             }
-            "/position" => {
-                row.x = num(&v, "x");
-                row.x_cmd = num(&v, "x_cmd");
-                row.x_r = num(&v, "x_r");
+            _ => {
+                let v: serde_json::Value = match serde_json::from_slice(&m.data) {
+                    Ok(v) => v,
+                    Err(e) => {
+                        anyhow::bail!("{topic} message at {} ns is not JSON: {e}", m.log_time)
+                    }
+                };
+                read_json_message(topic, &v, row);
             }
-            "/estimates" => {
-                row.kc_hat = num(&v, "kc_hat");
-                row.xc_hat = num(&v, "xc_hat");
-            }
-            "/state" => {
-                row.fault = v.get("fault").and_then(|f| f.as_u64()).unwrap_or(0) as u8;
-            }
-            "/truth" => {
-                row.f_true = num(&v, "f_true");
-                row.k_c = num(&v, "k_c");
-                row.x_c = num(&v, "x_c");
-            }
-            // Recordings before the process channel leave these unknown (`/state`'s `segment` was
-            // always 0 then).
-            "/process" => {
-                let int = |k| v.get(k).and_then(serde_json::Value::as_i64);
-                row.segment = int("segment");
-                row.mode = int("mode");
-                row.f_cmd = num(&v, "f_cmd");
-                row.phase = int("phase").and_then(|c| u8::try_from(c).ok());
-                row.process_fault = int("fault").and_then(|c| u8::try_from(c).ok());
-            }
-            _ => {}
         }
     }
     if !any && truncated.is_some() {
@@ -888,30 +632,6 @@ pub fn read_mcap(bytes: &[u8]) -> Result<ReadBack> {
     // A row that only `/truth` touched (its cycle's messages were lost) is not a recorded cycle.
     let rows = rows.into_values().filter(|r| !r.f_r.is_nan()).collect();
     Ok(ReadBack { rows, truncated })
-}
-
-/// A row with every value unknown.
-fn nan_row() -> Row {
-    Row {
-        t: f64::NAN,
-        f: f64::NAN,
-        f_true: f64::NAN,
-        f_r: f64::NAN,
-        x: f64::NAN,
-        x_cmd: f64::NAN,
-        x_r: f64::NAN,
-        kc_hat: f64::NAN,
-        xc_hat: f64::NAN,
-        k_c: f64::NAN,
-        x_c: f64::NAN,
-        fault: 0,
-        segment: None,
-        mode: None,
-        f_cmd: f64::NAN,
-        phase: None,
-        process_fault: None,
-        s: f64::NAN,
-    }
 }
 
 /// Read a trace from a file: an MCAP recording (by its magic) or a CSV. Returns the rows and, for an
@@ -926,63 +646,5 @@ pub fn load_trace(path: &Path) -> Result<(Vec<Row>, Option<String>)> {
             .map_err(|_| anyhow!("{}: neither an MCAP file nor a CSV trace", path.display()))?;
         let rows = crate::record::read_csv(&text).with_context(|| format!("{}", path.display()))?;
         Ok((rows, None))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A channel field's description, from its JSON schema.
-    fn description(topic: &str, field: &str) -> String {
-        let def = CHANNELS.iter().find(|c| c.topic == topic).unwrap();
-        let schema: serde_json::Value = serde_json::from_str(def.json_schema).unwrap();
-        schema["properties"][field]["description"]
-            .as_str()
-            .unwrap_or_else(|| panic!("{topic} {field}: no description"))
-            .to_owned()
-    }
-
-    /// `c name` for each code, joined as a schema lists them.
-    fn legend(codes: impl IntoIterator<Item = u8>, name: impl Fn(u8) -> &'static str) -> String {
-        codes
-            .into_iter()
-            .map(|c| format!("{c} {}", name(c)))
-            .collect::<Vec<_>>()
-            .join(", ")
-    }
-
-    #[test]
-    fn every_schema_legend_names_the_codes_as_the_recording_does() {
-        let cases = [
-            ("/state", "state", legend([0, 1, 2, 3, 255], state_name)),
-            ("/state", "fault", legend(0..=7, fault_name)),
-            (
-                "/process",
-                "mode",
-                legend(0..=2, |c| mode_name(Some(i64::from(c)))),
-            ),
-            (
-                "/process",
-                "phase",
-                legend([0, 1, 2, 3, 4, 9], |c| phase_name(Some(c))),
-            ),
-            ("/process", "fault", hal::ProcessFault::legend()),
-        ];
-        for (topic, field, want) in cases {
-            let d = description(topic, field);
-            // The list after any "…: " lead, item by item (a longer name is no match).
-            let listed: Vec<&str> = d.rsplit(": ").next().unwrap().split(", ").collect();
-            for item in want.split(", ") {
-                assert!(
-                    listed.contains(&item),
-                    "{topic} {field}: {d:?} does not list {item:?}"
-                );
-            }
-        }
-        // Past the listed codes the names say so (a new code must be listed above).
-        assert_eq!(fault_name(8), "unknown");
-        assert_eq!(process_fault_name(Some(7)), "unknown");
-        assert_eq!(phase_name(Some(5)), "unknown");
     }
 }

@@ -1,12 +1,14 @@
 //! The live view: `forcecell sim --live` serves the recording's channels over the Foxglove WebSocket
-//! protocol; a client on the loopback port gets `serverInfo`, every channel advertised with its schema,
-//! and, once subscribed, `messageData` frames with the run's values.
+//! protocol; a client on the loopback port gets `serverInfo`, every channel advertised with its
+//! protobuf schema, and, once subscribed, `messageData` frames with the run's values.
 
 use std::io::{BufRead, BufReader};
 use std::net::TcpStream;
 use std::path::Path;
 use std::process::{Command, Stdio};
 
+use forcecell::recorder::Record;
+use scenario::telemetry;
 use tungstenite::Message;
 use tungstenite::client::IntoClientRequest;
 
@@ -80,52 +82,79 @@ fn a_client_on_the_live_port_gets_the_channels_and_messages() {
     let adv = text(ws.read().unwrap());
     assert_eq!(adv["op"], "advertise");
     let channels = adv["channels"].as_array().unwrap();
-    for c in forcecell::recorder::CHANNELS {
+    for c in &forcecell::recorder::CHANNELS {
         let ch = channels
             .iter()
             .find(|ch| ch["topic"] == c.topic)
             .unwrap_or_else(|| panic!("{} not advertised", c.topic));
-        assert_eq!(ch["encoding"], "json");
-        assert_eq!(ch["schemaEncoding"], "jsonschema");
-        let schema: serde_json::Value =
-            serde_json::from_str(ch["schema"].as_str().unwrap()).unwrap();
-        assert!(schema["properties"].is_object());
+        assert_eq!(ch["encoding"], "protobuf");
+        assert_eq!(ch["schemaEncoding"], "protobuf");
+        assert_eq!(ch["schemaName"], c.schema_name());
+        // The schema is the FileDescriptorSet in base64, naming the channel's message.
+        let schema = unbase64(ch["schema"].as_str().unwrap());
+        let set = <prost_types::FileDescriptorSet as prost::Message>::decode(&schema[..]).unwrap();
+        assert!(
+            set.file[0]
+                .message_type
+                .iter()
+                .any(|m| format!("forcecell.{}", m.name()) == c.schema_name()),
+            "{}",
+            c.topic
+        );
     }
-    let force = channels.iter().find(|c| c["topic"] == "/force").unwrap()["id"].clone();
-    let position = channels.iter().find(|c| c["topic"] == "/position").unwrap()["id"].clone();
+    let cycle = channels.iter().find(|c| c["topic"] == "/cycle").unwrap()["id"].clone();
+    let truth = channels.iter().find(|c| c["topic"] == "/truth").unwrap()["id"].clone();
     ws.send(Message::text(
         serde_json::json!({"op": "subscribe", "subscriptions": [
-            {"id": 7, "channelId": force}, {"id": 9, "channelId": position}]})
+            {"id": 7, "channelId": cycle}, {"id": 9, "channelId": truth}]})
         .to_string(),
     ))
     .unwrap();
-    let (mut forces, mut positions, mut last_t) = (0, 0, 0u64);
-    while forces < 20 || positions < 20 {
+    let (mut cycles, mut last_t) = (0, 0u64);
+    while cycles < 40 {
         let Message::Binary(b) = ws.read().unwrap() else {
             continue;
         };
         assert_eq!(b[0], 0x01, "messageData opcode");
         let sub = u32::from_le_bytes(b[1..5].try_into().unwrap());
         let t = u64::from_le_bytes(b[5..13].try_into().unwrap());
-        let v: serde_json::Value = serde_json::from_slice(&b[13..]).unwrap();
-        match sub {
-            7 => {
-                forces += 1;
-                assert_eq!(v["f_r"], 5.0);
-                assert!(t >= last_t, "timestamps in order");
-                last_t = t;
-                let secs = v["t"].as_f64().unwrap();
-                assert_eq!(
-                    t,
-                    (secs * 1e9).round() as u64,
-                    "timestamp is the cycle time"
-                );
-            }
-            9 => {
-                positions += 1;
-                assert!(v["x_cmd"].as_f64().unwrap().is_finite());
-            }
-            other => panic!("a message for subscription {other}, which was never made"),
+        // The truth comes only when a simulation ends.
+        assert_eq!(sub, 7, "a message for subscription {sub}");
+        let mut rec = Record::unknown();
+        telemetry::decode(&telemetry::CYCLE, &b[13..], &mut rec).unwrap();
+        cycles += 1;
+        assert_eq!(rec.row.f_r, 5.0);
+        assert!(rec.row.x_cmd.is_finite());
+        assert!(t >= last_t, "timestamps in order");
+        last_t = t;
+        assert_eq!(
+            t,
+            (rec.row.t * 1e9).round() as u64,
+            "timestamp is the cycle time"
+        );
+    }
+}
+
+/// Standard base64 back to bytes.
+fn unbase64(s: &str) -> Vec<u8> {
+    let value = |c: u8| match c {
+        b'A'..=b'Z' => c - b'A',
+        b'a'..=b'z' => c - b'a' + 26,
+        b'0'..=b'9' => c - b'0' + 52,
+        b'+' => 62,
+        b'/' => 63,
+        _ => panic!("not base64: {c}"),
+    };
+    let mut out = Vec::new();
+    for quad in s.as_bytes().chunks(4) {
+        let data: Vec<u8> = quad.iter().copied().filter(|&c| c != b'=').collect();
+        let n = data
+            .iter()
+            .enumerate()
+            .fold(0u32, |n, (i, &c)| n | (u32::from(value(c)) << (18 - 6 * i)));
+        for k in 0..data.len().saturating_sub(1) {
+            out.push((n >> (16 - 8 * k)) as u8);
         }
     }
+    out
 }

@@ -1,6 +1,6 @@
 //! MCAP recordings on real files: written → read back → the same values; a `sim` killed with SIGKILL
 //! leaves a file readable up to its last flush; a full disk is reported once and counted while the loop
-//! side never blocks.
+//! side never blocks; the JSON recordings written before the protobuf schema still read.
 
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -8,6 +8,7 @@ use std::time::{Duration, Instant};
 
 use forcecell::record::Row;
 use forcecell::recorder::{self, CHANNELS, Full, NO_STATE, Record, RecorderOptions};
+use scenario::telemetry;
 
 fn record(k: u64) -> Record {
     let t = k as f64 * 0.004;
@@ -27,7 +28,7 @@ fn record(k: u64) -> Record {
         xc_hat: 0.009 + 1e-9 * k as f64,
         k_c: f64::NAN,
         x_c: f64::NAN,
-        fault: (k % 3) as u8,
+        condition: (k % 3) as u8,
         // The process: no command for the first cycles, then pressing segment by segment, a bad
         // command (mode 7) that latches a fault, and a release.
         segment: (k >= 50).then_some((k / 500) as i64),
@@ -50,7 +51,7 @@ fn record(k: u64) -> Record {
             2500.. => 4,
             _ => 3,
         }),
-        process_fault: Some(if (1000..1500).contains(&k) { 4 } else { 0 }),
+        fault: Some(if (1000..1500).contains(&k) { 4 } else { 0 }),
         s: f64::NAN,
     });
     rec.wrench = [0.1, -0.2, 5.0 + k as f64, 0.01, 0.02, -0.03];
@@ -90,31 +91,36 @@ fn assert_same_row(got: &Row, want: &Row) {
             "column {i}: read {a}, wrote {b} ({got:?} vs {want:?})"
         );
     }
-    assert_eq!(got.fault, want.fault);
+    assert_eq!(got.condition, want.condition);
     assert_eq!(
-        (got.segment, got.mode, got.phase, got.process_fault),
-        (want.segment, want.mode, want.phase, want.process_fault),
+        (got.segment, got.mode, got.phase, got.fault),
+        (want.segment, want.mode, want.phase, want.fault),
         "process columns at t = {}",
         want.t
     );
     assert!(same(got.f_cmd, want.f_cmd), "f_cmd at t = {}", want.t);
 }
 
-/// Every field's `type` is one plain JSON type (Foxglove Studio refuses unions like
-/// `["number","null"]`: "Unsupported type"), and every type is one Foxglove knows.
-fn assert_foxglove_types(topic: &str, schema: &serde_json::Value) {
-    for (name, field) in schema["properties"].as_object().unwrap() {
-        let ty = field["type"]
-            .as_str()
-            .unwrap_or_else(|| panic!("{topic}.{name}: type {:?}", field["type"]));
-        assert!(
-            ["number", "integer", "string", "boolean", "object", "array"].contains(&ty),
-            "{topic}.{name}: type {ty}"
-        );
-        if ty == "object" {
-            assert_foxglove_types(&format!("{topic}.{name}"), field);
-        }
-    }
+/// A channel's schema: a protobuf `FileDescriptorSet` holding its message, every field of the
+/// telemetry table with its number, and each enum's codes.
+fn assert_protobuf_schema(c: &telemetry::Channel, data: &[u8]) {
+    use prost::Message as _;
+    let set = prost_types::FileDescriptorSet::decode(data).expect("a FileDescriptorSet");
+    let file = &set.file[0];
+    assert_eq!(file.package(), "forcecell");
+    let msg = file
+        .message_type
+        .iter()
+        .find(|m| format!("forcecell.{}", m.name()) == c.schema_name())
+        .unwrap_or_else(|| panic!("{}: no {}", c.topic, c.schema_name()));
+    let fields: Vec<(&str, i32)> = msg.field.iter().map(|f| (f.name(), f.number())).collect();
+    let want: Vec<(&str, i32)> = c
+        .message
+        .fields
+        .iter()
+        .map(|f| (f.name, f.number as i32))
+        .collect();
+    assert_eq!(fields, want, "{}", c.topic);
 }
 
 #[test]
@@ -166,18 +172,18 @@ fn records_round_trip_through_an_mcap_file() {
         .values()
         .map(|c| c.topic.as_str())
         .collect();
-    for c in CHANNELS {
+    for c in &CHANNELS {
         assert!(topics.contains(&c.topic), "{} missing: {topics:?}", c.topic);
         let ch = summary
             .channels
             .values()
             .find(|ch| ch.topic == c.topic)
             .unwrap();
+        assert_eq!(ch.message_encoding, "protobuf");
         let schema = ch.schema.as_ref().expect("a schema");
-        assert_eq!(schema.encoding, "jsonschema");
-        let parsed: serde_json::Value = serde_json::from_slice(&schema.data).unwrap();
-        assert!(parsed["properties"].is_object(), "{}", c.topic);
-        assert_foxglove_types(c.topic, &parsed);
+        assert_eq!(schema.encoding, "protobuf");
+        assert_eq!(schema.name, c.schema_name());
+        assert_protobuf_schema(c, &schema.data);
     }
     // Foxglove Studio reads a chunk only through its message index: a chunk without messages (the
     // schemas alone, an idle second) has none and makes it refuse the whole file.
@@ -189,58 +195,47 @@ fn records_round_trip_through_an_mcap_file() {
         );
     }
     let stats = summary.stats.unwrap();
-    assert_eq!(stats.message_count, n * CHANNELS.len() as u64);
+    // One message a cycle on `/cycle`, and the truth of each on `/truth`.
+    assert_eq!(stats.message_count, 2 * n);
     assert_eq!(stats.attachment_count, 1);
     let att = &summary.attachment_indexes[0];
     let a = mcap::read::attachment(&bytes, att).unwrap();
     assert_eq!(&a.data[..], b"tuning = \"robust\"\n");
 
-    // The wrench channels carry what was pushed, and the state its name.
+    // Each cycle's message carries what was pushed: the wrench, the raw one, the state and its
+    // events, the process command and state.
     let mut seen_raw = 0;
     let mut seen_contact_event = false;
     let mut seen_process_fault = false;
     for m in mcap::MessageStream::new(&bytes).unwrap() {
         let m = m.unwrap();
-        let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        if m.channel.topic != "/cycle" {
+            continue;
+        }
+        let mut rec = Record::unknown();
+        telemetry::decode(&telemetry::CYCLE, &m.data, &mut rec).unwrap();
         let k = (m.log_time as f64 / 4e6).round() as u64;
-        match m.channel.topic.as_str() {
-            "/wrench" => assert_eq!(v["force"]["z"].as_f64(), Some(5.0 + k as f64)),
-            "/wrench_raw" => {
-                seen_raw += 1;
-                assert_eq!(v["force"]["z"].as_f64(), Some(25.0));
-            }
-            "/state" if k == 10 => {
-                assert_eq!(v["state_name"], "contact");
-                assert_eq!(v["event_names"][0], "contact");
+        let want = record(k);
+        assert_eq!(rec.wrench[2], 5.0 + k as f64);
+        assert_eq!(rec.robot_seq, k);
+        if rec.wrench_raw[2] == 25.0 {
+            seen_raw += 1;
+        }
+        assert_eq!((rec.state, rec.events), (want.state, want.events));
+        let r = rec.row;
+        match k {
+            10 => {
+                assert_eq!(telemetry::event_names(rec.events).next(), Some("contact"));
+                assert_eq!(rec.state, 1, "contact");
                 seen_contact_event = true;
+                assert_eq!((r.segment, r.mode, r.phase), (None, None, Some(0)));
             }
-            "/state" if k == 10 => assert!(v["segment"].is_null(), "{v}"),
-            "/process" if k == 10 => {
-                assert!(v["segment"].is_null() && v["mode"].is_null(), "{v}");
-                assert_eq!(
-                    (v["mode_name"].as_str(), v["phase_name"].as_str()),
-                    (Some("none"), Some("off"))
-                );
-            }
-            "/process" if k == 1005 => {
-                assert_eq!(v["segment"], 2);
-                assert_eq!(v["mode"], 7);
-                assert_eq!(v["mode_name"], "unknown");
-                assert_eq!(v["f_cmd"], 7.0);
-                assert_eq!(
-                    (v["phase"].as_u64(), v["phase_name"].as_str()),
-                    (Some(9), Some("fault"))
-                );
-                assert_eq!(v["fault_name"], "bad command");
+            1005 => {
+                assert_eq!((r.segment, r.mode, r.f_cmd), (Some(2), Some(7), 7.0));
+                assert_eq!((r.phase, r.fault), (Some(9), Some(4)));
                 seen_process_fault = true;
             }
-            "/process" if k == 2600 => {
-                assert_eq!(
-                    (v["segment"].as_i64(), v["mode_name"].as_str()),
-                    (Some(5), Some("release"))
-                );
-                assert_eq!(v["phase_name"], "release");
-            }
+            2600 => assert_eq!((r.segment, r.mode, r.phase), (Some(5), Some(2), Some(4))),
             _ => {}
         }
     }
@@ -248,6 +243,117 @@ fn records_round_trip_through_an_mcap_file() {
     assert!(seen_contact_event);
     assert!(seen_process_fault);
     assert_ne!(record(0).state, NO_STATE);
+}
+
+/// A JSON recording as forcecell wrote them before the protobuf schema: one channel per group of
+/// fields, each message exactly as the JSON writer shaped it (`/state`'s `fault` was the cycle's
+/// condition, `/process`'s the process fault). Returns the file's bytes.
+fn json_recording(cycles: u32) -> Vec<u8> {
+    use std::collections::BTreeMap;
+    let mut buf = std::io::Cursor::new(Vec::new());
+    let mut w = mcap::Writer::new(&mut buf).unwrap();
+    let mut ids = BTreeMap::new();
+    for (topic, schema) in [
+        ("/force", "forcecell.Force"),
+        ("/wrench", "forcecell.Wrench"),
+        ("/position", "forcecell.Position"),
+        ("/estimates", "forcecell.Estimates"),
+        ("/state", "forcecell.State"),
+        ("/rsi", "forcecell.Robot"),
+        ("/sensor", "forcecell.Sensor"),
+        ("/truth", "forcecell.Truth"),
+        ("/process", "forcecell.Process"),
+    ] {
+        let id = w
+            .add_schema(schema, "jsonschema", br#"{"type":"object"}"#)
+            .unwrap();
+        ids.insert(
+            topic,
+            w.add_channel(id, topic, "json", &BTreeMap::new()).unwrap(),
+        );
+    }
+    for k in 0..cycles {
+        let t = u64::from(k + 1) * 4_000_000;
+        let secs = t as f64 * 1e-9;
+        // Cycle 1 held on a non-finite sample (condition 2) while the process had latched a force
+        // limit (fault 2): the same number, two meanings, as the JSON channels had it.
+        let (cond, cond_name) = if k == 1 {
+            (2, "non-finite sample")
+        } else {
+            (0, "none")
+        };
+        let f = if k == 1 {
+            "null".to_string()
+        } else {
+            format!("{}", 5.0 + f64::from(k))
+        };
+        for (topic, msg) in [
+            ("/force", format!(r#"{{"t":{secs},"f":{f},"f_r":5.0,"error":0.0}}"#)),
+            ("/wrench", r#"{"force":{"x":0.1,"y":-0.2,"z":5.0},"torque":{"x":0.01,"y":0.02,"z":-0.03}}"#.to_string()),
+            ("/position", r#"{"x":0.01,"x_cmd":0.011,"x_r":0.012}"#.to_string()),
+            ("/estimates", r#"{"kc_hat":50000.0,"xc_hat":0.009}"#.to_string()),
+            ("/state", format!(r#"{{"state":1,"state_name":"contact","segment":3,"fault":{cond},"fault_name":"{cond_name}","events":0,"event_names":[]}}"#)),
+            ("/rsi", format!(r#"{{"seq":{k},"period":0.004,"late_replies":0}}"#)),
+            ("/sensor", r#"{"ok":true,"seq":7,"age":0.0}"#.to_string()),
+            ("/process", r#"{"segment":3,"mode":1,"mode_name":"press","f_cmd":12.5,"phase":9,"phase_name":"fault","fault":2,"fault_name":"force limit"}"#.to_string()),
+            ("/truth", r#"{"f_true":5.5,"k_c":70000.0,"x_c":0.01}"#.to_string()),
+        ] {
+            let header = mcap::records::MessageHeader { channel_id: ids[topic], sequence: k, log_time: t, publish_time: t };
+            w.write_to_known_channel(&header, msg.as_bytes()).unwrap();
+        }
+    }
+    w.finish().unwrap();
+    drop(w);
+    buf.into_inner()
+}
+
+/// Every JSON recording written so far still reads, with the names of today: `export --csv` gives
+/// the cycle's condition and the process fault in their own columns, and `plot` draws it.
+#[test]
+fn a_json_recording_from_before_the_protobuf_schema_still_reads() {
+    let dir = tempfile::tempdir().unwrap();
+    let old = dir.path().join("json.mcap");
+    std::fs::write(&old, json_recording(3)).unwrap();
+    let (rows, truncated) = recorder::load_trace(&old).unwrap();
+    assert!(truncated.is_none());
+    assert_eq!(rows.len(), 3);
+    assert!(rows[1].f.is_nan());
+    assert_eq!(
+        (rows[2].f, rows[2].x_cmd, rows[2].kc_hat),
+        (7.0, 0.011, 50_000.0)
+    );
+    assert_eq!((rows[1].condition, rows[1].fault), (2, Some(2)));
+    assert_eq!((rows[0].condition, rows[0].fault), (0, Some(2)));
+    assert_eq!(
+        (rows[2].segment, rows[2].mode, rows[2].f_cmd, rows[2].phase),
+        (Some(3), Some(1), 12.5, Some(9))
+    );
+    assert_eq!(
+        (rows[2].f_true, rows[2].k_c, rows[2].x_c),
+        (5.5, 70_000.0, 0.01)
+    );
+    let exe = env!("CARGO_BIN_EXE_forcecell");
+    let o = Command::new(exe)
+        .args(["export", "json.mcap", "--csv", "--out", "json.csv"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = std::fs::read_to_string(dir.path().join("json.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(lines.next(), Some(forcecell::record::HEADER));
+    assert_eq!(
+        lines.nth(1),
+        Some("0.008,,5.5,5,0.01,0.011,0.012,50000,0.009,70000,0.01,2,3,1,12.5,9,2"),
+        "{csv}"
+    );
+    let o = Command::new(exe)
+        .args(["plot", "json.mcap", "--out", "json.png"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(dir.path().join("json.png").metadata().unwrap().len() > 1000);
 }
 
 /// A recording made before the `/process` channel (its `/state` carried `segment: 0`) still reads:
@@ -294,12 +400,7 @@ fn a_recording_without_the_process_channel_still_reads() {
         (5.0, 0.011, 50_000.0)
     );
     assert_eq!(
-        (
-            rows[2].segment,
-            rows[2].mode,
-            rows[2].phase,
-            rows[2].process_fault
-        ),
+        (rows[2].segment, rows[2].mode, rows[2].phase, rows[2].fault),
         (None, None, None, None)
     );
     // `export` writes the process columns empty; `plot` draws it.
@@ -480,7 +581,7 @@ try:
             counts[topics[rec.channel_id]] += 1
 except Exception as e:
     end = type(e).__name__
-print(counts["/force"], counts["/process"], end)
+print(counts["/cycle"], counts["/truth"], end)
 "#;
     let out = Command::new(&python)
         .args(["-c", script])
@@ -496,8 +597,121 @@ print(counts["/force"], counts["/process"], end)
     let f: Vec<&str> = text.split_whitespace().collect();
     let back = recorder::read_mcap(&std::fs::read(&path).unwrap()).unwrap();
     assert_eq!(f[0].parse::<usize>().unwrap(), back.rows.len(), "{text}");
-    assert_eq!(f[1].parse::<usize>().unwrap(), back.rows.len(), "{text}");
+    assert_eq!(f[1], "0", "a killed simulation wrote no truth: {text}");
     assert!(back.rows.len() > 100, "{text}");
+}
+
+/// Google's protobuf runtime (through the `mcap` and `mcap-protobuf-support` Python packages, with
+/// nothing of ours but the file) decodes every message of every channel of a `sim` recording with
+/// the schema the file carries, finds the codes' names there, and reads the values `export --csv`
+/// writes: every cycle, every column, bit for bit. Needs `pip install mcap mcap-protobuf-support
+/// protobuf`; `FORCECELL_MCAP_PYTHON` names the interpreter (default `python3`).
+#[test]
+#[ignore = "needs Python packages: pip install mcap mcap-protobuf-support protobuf; FORCECELL_MCAP_PYTHON=path/to/python"]
+fn the_protobuf_runtime_decodes_every_channel_as_the_export_reads_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let exe = env!("CARGO_BIN_EXE_forcecell");
+    // A programmed pass at 250 Hz: process command, phases and segments, contact and truth.
+    let o = Command::new(exe)
+        .args([
+            "sim",
+            "--scenario",
+            "pass-flat-20n",
+            "--plant",
+            "p2",
+            "--out",
+            "res",
+        ])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let mcap = dir.path().join("res/pass-flat-20n-p2-robust.mcap");
+    let csv = dir.path().join("res/exported.csv");
+    let o = Command::new(exe)
+        .arg("export")
+        .arg(&mcap)
+        .args(["--csv", "--out"])
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let python = std::env::var("FORCECELL_MCAP_PYTHON").unwrap_or_else(|_| "python3".into());
+    let script = r#"
+import csv, math, sys
+from collections import Counter
+from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
+
+rows, counts, schemas = {}, Counter(), {}
+with open(sys.argv[1], "rb") as f:
+    reader = make_reader(f, decoder_factories=[DecoderFactory()])
+    for schema, channel, message, m in reader.iter_decoded_messages():
+        assert schema.encoding == "protobuf" and channel.message_encoding == "protobuf", channel.topic
+        counts[channel.topic] += 1
+        schemas[channel.topic] = type(m).DESCRIPTOR
+        row = rows.setdefault(message.log_time, {})
+        if channel.topic == "/cycle":
+            p = m.process
+            mode = p.mode_code if p.HasField("mode_code") else (p.mode if p.HasField("mode") else None)
+            row.update(t=m.t, f=m.force.f, f_r=m.force.f_r, x=m.position.x, x_cmd=m.position.x_cmd,
+                       x_r=m.position.x_r, kc_hat=m.estimates.kc_hat, xc_hat=m.estimates.xc_hat,
+                       condition=m.state.condition,
+                       segment=p.segment if p.HasField("segment") else None, mode=mode,
+                       f_cmd=p.f_cmd, phase=p.phase if p.HasField("phase") else None,
+                       fault=p.fault if p.HasField("fault") else None)
+            assert m.HasField("wrench") and m.HasField("sensor") and m.HasField("robot")
+            assert m.force.error == m.force.error or math.isnan(m.force.f)
+        elif channel.topic == "/truth":
+            row.update(f_true=m.f_true, k_c=m.k_c, x_c=m.x_c)
+        else:
+            raise SystemExit("unexpected channel " + channel.topic)
+
+# The codes' names travel in the schema.
+state = schemas["/cycle"].fields_by_name["state"].message_type
+print("names", state.fields_by_name["condition"].enum_type.values_by_number[2].name,
+      state.fields_by_name["state"].enum_type.values_by_number[1].name,
+      schemas["/cycle"].fields_by_name["process"].message_type.fields_by_name["fault"].enum_type.values_by_number[2].name)
+
+def same(text, value):
+    if value is None:
+        return text == ""
+    if isinstance(value, float):
+        return text == "" if math.isnan(value) else float(text) == value
+    return text != "" and int(text) == value
+
+cycles = [rows[k] for k in sorted(rows) if "t" in rows[k]]
+with open(sys.argv[2]) as f:
+    table = list(csv.DictReader(f))
+assert len(table) == len(cycles), (len(table), len(cycles))
+for line, (want, got) in enumerate(zip(table, cycles), 2):
+    for col, text in want.items():
+        assert same(text, got.get(col)), (line, col, text, got.get(col))
+print("rows", len(cycles), counts["/cycle"], counts["/truth"], len(table[0]))
+"#;
+    let out = Command::new(&python)
+        .args(["-c", script])
+        .arg(&mcap)
+        .arg(&csv)
+        .output()
+        .expect("run python");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(
+        lines[0], "names NON_FINITE_SAMPLE CONTACT FORCE_LIMIT",
+        "{text}"
+    );
+    let f: Vec<&str> = lines[1].split_whitespace().collect();
+    let back = recorder::read_mcap(&std::fs::read(&mcap).unwrap()).unwrap();
+    let n = back.rows.len().to_string();
+    assert_eq!(f[1..4], [n.as_str(), n.as_str(), n.as_str()], "{text}");
+    assert_eq!(f[4], "17", "every column compared: {text}");
+    assert!(back.rows.len() > 500, "{text}");
 }
 
 /// Needs root: mounts a 256 KiB tmpfs (the CI and the dev machines run as root).
@@ -531,13 +745,13 @@ fn a_full_disk_is_reported_once_counted_and_never_blocks_the_loop() {
         ..RecorderOptions::default()
     };
     let (mut tx, recording) = recorder::start(&path, opts, None).unwrap();
-    // ~1.3 kB a cycle: 256 KiB holds about 200 cycles; push 2 000, 20 at a time, so that some
-    // flushes land before the disk is full.
-    let n = 2_000u64;
+    // Some tens of bytes a cycle (compressed chunks of ~200 cycles): 256 KiB holds some thousands;
+    // push 40 000, 200 at a time, so that some flushes land before the disk is full.
+    let n = 40_000u64;
     let mut accepted = 0;
     for k in 0..n {
         accepted += u64::from(tx.push(record(k)));
-        if k % 20 == 19 {
+        if k % 200 == 199 {
             std::thread::sleep(Duration::from_millis(15));
         }
     }
@@ -597,4 +811,38 @@ fn a_recording_with_no_cycle_has_no_chunk_without_messages() {
         s.chunk_indexes
     );
     assert_eq!(recorder::read_mcap(&bytes).unwrap().rows.len(), 0);
+}
+
+/// Every message path of the Foxglove layout shipped in `docs/` names a field of the schema.
+#[test]
+fn the_foxglove_layout_plots_fields_of_the_schema() {
+    let layout: serde_json::Value =
+        serde_json::from_str(include_str!("../docs/foxglove-layout.json")).unwrap();
+    let mut paths = Vec::new();
+    for panel in layout["configById"].as_object().unwrap().values() {
+        for p in panel["paths"].as_array().unwrap() {
+            paths.push(p["value"].as_str().unwrap().to_string());
+        }
+    }
+    assert!(paths.len() > 10, "{paths:?}");
+    for path in &paths {
+        let (topic, fields) = path[1..].split_once('.').unwrap();
+        let channel = CHANNELS
+            .iter()
+            .find(|c| c.topic[1..] == *topic)
+            .unwrap_or_else(|| panic!("{path}: no channel {topic}"));
+        let mut msg = channel.message;
+        let mut names = fields.split('.').peekable();
+        while let Some(name) = names.next() {
+            let field = msg
+                .fields
+                .iter()
+                .find(|f| f.name == name)
+                .unwrap_or_else(|| panic!("{path}: no field {name} in {}", msg.name));
+            match field.ty {
+                telemetry::Type::Message(m) => msg = m,
+                _ => assert!(names.peek().is_none(), "{path}: {name} is no message"),
+            }
+        }
+    }
 }

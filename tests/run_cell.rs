@@ -120,9 +120,9 @@ fn a_sensor_silent_in_contact_ends_the_run_backed_off_with_stop() {
     assert!(out.ended.contains("held the last command"), "{}", out.ended);
     assert!(out.stopped, "{}", out.ended);
     assert_eq!(report.end, KrcEnd::Stopped, "{report:?}");
-    let held = out.rows.iter().filter(|r| r.fault == 1).count();
+    let held = out.rows.iter().filter(|r| r.condition == 1).count();
     assert!(held > 0 && held <= 26, "held {held} cycles of 4 ms");
-    let pressing = out.rows.iter().rev().find(|r| r.fault != 7).unwrap();
+    let pressing = out.rows.iter().rev().find(|r| r.condition != 7).unwrap();
     let last = out.rows.last().unwrap();
     assert!(
         pressing.x_cmd - last.x_cmd >= 0.002 - 1e-9,
@@ -274,10 +274,16 @@ fn a_recorded_cell_run_streams_every_cycle_to_mcap() {
     assert_eq!(back.rows.len() as u64, summary.written);
     let last = back.rows.last().unwrap();
     assert!(last.t >= 1.5 && (last.f - 5.0).abs() < 0.1, "{last:?}");
-    // The raw (uncompensated) wrench is recorded beside the compensated one.
+    // The raw (uncompensated) wrench is recorded beside the compensated one, in every cycle.
     let raw = mcap::MessageStream::new(&bytes)
         .unwrap()
-        .filter(|m| m.as_ref().unwrap().channel.topic == "/wrench_raw")
+        .map(Result::unwrap)
+        .filter(|m| m.channel.topic == scenario::telemetry::CYCLE_TOPIC)
+        .filter(|m| {
+            let mut rec = forcecell::recorder::Record::unknown();
+            scenario::telemetry::decode(&scenario::telemetry::CYCLE, &m.data, &mut rec).unwrap();
+            rec.wrench_raw.iter().all(|v| v.is_finite())
+        })
         .count() as u64;
     assert_eq!(raw, summary.written);
 }

@@ -38,6 +38,27 @@ impl ProcessMode {
             Self::Unknown(c) => c,
         }
     }
+
+    /// A short name, for the operator and recordings (`unknown` for a number the contract does not
+    /// define).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Off => "off",
+            Self::Press => "press",
+            Self::Release => "release",
+            Self::Unknown(_) => "unknown",
+        }
+    }
+
+    /// Every defined wire number with its name, for a legend: `0 off, 1 press, 2 release`.
+    pub fn legend() -> String {
+        (0..)
+            .map(Self::from_code)
+            .take_while(|m| !matches!(m, Self::Unknown(_)))
+            .map(|m| format!("{} {}", m.code(), m.name()))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
 }
 
 /// The robot program's process command, carried by one cycle. SI units: the driver converts at the wire.
@@ -95,6 +116,27 @@ impl ProcessPhase {
             9 => Self::Fault,
             _ => return None,
         })
+    }
+
+    /// A short name, for the operator and recordings.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Off => "off",
+            Self::Approach => "approach",
+            Self::Ramp => "ramp",
+            Self::Pressing => "pressing",
+            Self::Release => "release",
+            Self::Fault => "fault",
+        }
+    }
+
+    /// Every wire number with its name, for a legend: `0 off, 1 approach, …, 9 fault`.
+    pub fn legend() -> String {
+        (0..=u8::MAX)
+            .filter_map(|c| Self::from_code(i64::from(c)))
+            .map(|p| format!("{} {}", p.code(), p.name()))
+            .collect::<Vec<_>>()
+            .join(", ")
     }
 }
 

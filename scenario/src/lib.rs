@@ -7,4 +7,5 @@ pub mod metrics;
 pub mod record;
 pub mod run;
 pub mod scenario;
+pub mod telemetry;
 pub mod tuning;

@@ -96,7 +96,8 @@ pub struct Metrics {
     pub xc_hat: f64,
     /// Relative.
     pub kc_rel_error: f64,
-    /// Steps with a fault.
+    /// Steps with a condition (`Row::condition` not 0: a sensor error, a non-finite input, a limited
+    /// command); the metric keeps its name, scenario targets use it.
     pub faults: f64,
     /// s.
     pub pressing_time: f64,
@@ -138,7 +139,7 @@ impl Metrics {
             kc_hat: f64::NAN,
             xc_hat: f64::NAN,
             kc_rel_error: f64::NAN,
-            faults: win.iter().filter(|r| r.fault != 0).count() as f64,
+            faults: win.iter().filter(|r| r.condition != 0).count() as f64,
             pressing_time: 0.0,
             pressing_in_band_pct: f64::NAN,
             press_overshoot_pct: f64::NAN,

@@ -5,6 +5,8 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 
+use crate::telemetry::{self, Coded, Condition, Value};
+
 /// One control step. SI units: s, N, m, N/m.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub struct Row {
@@ -30,8 +32,9 @@ pub struct Row {
     pub k_c: f64,
     /// True surface position, m (NaN on a real cell).
     pub x_c: f64,
-    /// Fault code of the step (0: none; see [`fault_code`]).
-    pub fault: u8,
+    /// The step's condition code ([`Condition`]: 0 none, a sensor error, a non-finite input, a
+    /// limited command).
+    pub condition: u8,
     /// The robot program's path segment (RSI `FcCmd`), `None` when the link carries no process
     /// command (or the trace predates process columns).
     pub segment: Option<i64>,
@@ -45,7 +48,7 @@ pub struct Row {
     pub phase: Option<u8>,
     /// The force process's latched fault (`hal::ProcessFault::code`), `None` in a trace that
     /// predates process columns.
-    pub process_fault: Option<u8>,
+    pub fault: Option<u8>,
     /// Path position along the workpiece, m (simulation only: NaN on a real cell and in files).
     pub s: f64,
 }
@@ -66,12 +69,12 @@ impl Row {
             xc_hat: r.out.xc_hat,
             k_c: f64::NAN,
             x_c: f64::NAN,
-            fault: fault_code(r.fault),
+            condition: Condition::of(r.fault).code() as u8,
             segment: r.cycle.process.map(|p| p.segment),
             mode: r.cycle.process.map(|p| p.mode.code()),
             f_cmd: r.cycle.process.map_or(f64::NAN, |p| p.force),
             phase: Some(r.command.process.phase.code() as u8),
-            process_fault: Some(r.command.process.fault.code() as u8),
+            fault: Some(r.command.process.fault.code() as u8),
             s: f64::NAN,
         }
     }
@@ -84,76 +87,69 @@ impl Row {
             mode: None,
             f_cmd: f64::NAN,
             phase: None,
-            process_fault: None,
+            fault: None,
             ..self
+        }
+    }
+
+    /// A row with every value unknown (NaN, `None`; condition 0).
+    pub fn unknown() -> Self {
+        Self {
+            t: f64::NAN,
+            f: f64::NAN,
+            f_true: f64::NAN,
+            f_r: f64::NAN,
+            x: f64::NAN,
+            x_cmd: f64::NAN,
+            x_r: f64::NAN,
+            kc_hat: f64::NAN,
+            xc_hat: f64::NAN,
+            k_c: f64::NAN,
+            x_c: f64::NAN,
+            condition: 0,
+            segment: None,
+            mode: None,
+            f_cmd: f64::NAN,
+            phase: None,
+            fault: None,
+            s: f64::NAN,
         }
     }
 }
 
-/// The CSV header, in column order. The last five columns are the process command and state
-/// (`segment`, commanded `mode` and force `f_cmd`, reported `phase` and `process_fault`, as their wire
-/// numbers; empty where unknown).
-pub const HEADER: &str =
+/// The CSV header, in column order: the names of the schema's trace fields
+/// ([`telemetry::CSV_COLUMNS`]). The last five columns are the process command and state (`segment`,
+/// commanded `mode` and force `f_cmd`, reported `phase` and `fault`, as their wire numbers; empty where
+/// unknown).
+pub const HEADER: &str = telemetry::CSV_HEADER;
+
+/// The header of traces written before `fault` was renamed `condition` and `process_fault` `fault`
+/// (still read: the same columns in the same order).
+pub const HEADER_V2: &str =
     "t,f,f_true,f_r,x,x_cmd,x_r,kc_hat,xc_hat,k_c,x_c,fault,segment,mode,f_cmd,phase,process_fault";
 
 /// The header of traces written before the process columns (still read).
 pub const HEADER_V1: &str = "t,f,f_true,f_r,x,x_cmd,x_r,kc_hat,xc_hat,k_c,x_c,fault";
 
-/// A compact code for a cycle's fault, as written in the CSV `fault` column:
-/// 0 none, 1 sensor error, 2 non-finite sample, 3 non-finite pose, 4 non-finite command,
-/// 5 step limited, 6 envelope limited, 7 backing off after a fault that ends the run.
-pub fn fault_code(f: Option<controller::Fault>) -> u8 {
-    use controller::Fault::*;
-    match f {
-        None => 0,
-        Some(Sensor(_)) => 1,
-        Some(NonFiniteSample) => 2,
-        Some(NonFinitePose) => 3,
-        Some(NonFiniteCommand) => 4,
-        Some(StepLimited) => 5,
-        Some(EnvelopeLimited) => 6,
-        Some(Retracting) => 7,
-    }
-}
-
-fn field(w: &mut impl Write, v: f64) -> io::Result<()> {
-    if v.is_finite() {
-        write!(w, "{v}")
-    } else {
-        Ok(())
-    }
-}
-
-fn opt(w: &mut impl Write, v: Option<impl std::fmt::Display>) -> io::Result<()> {
-    match v {
-        Some(v) => write!(w, ",{v}"),
-        None => w.write_all(b","),
-    }
-}
-
-/// Write rows as CSV. Non-finite values are written as empty fields.
+/// Write rows as CSV, one column per field of [`telemetry::CSV_COLUMNS`]. Non-finite values and
+/// absent ones are written as empty fields.
 pub fn write_csv(w: impl Write, rows: &[Row]) -> io::Result<()> {
     let mut w = BufWriter::new(w);
     writeln!(w, "{HEADER}")?;
     for r in rows {
-        for (i, v) in [
-            r.t, r.f, r.f_true, r.f_r, r.x, r.x_cmd, r.x_r, r.kc_hat, r.xc_hat, r.k_c, r.x_c,
-        ]
-        .into_iter()
-        .enumerate()
-        {
+        let rec = telemetry::Record::from_row(*r);
+        for (i, col) in telemetry::CSV_COLUMNS.iter().enumerate() {
             if i > 0 {
                 w.write_all(b",")?;
             }
-            field(&mut w, v)?;
+            match (col.get)(&rec) {
+                Value::F64(v) if v.is_finite() => write!(w, "{v}")?,
+                Value::I64(v) => write!(w, "{v}")?,
+                Value::U64(v) => write!(w, "{v}")?,
+                Value::Bool(b) => write!(w, "{}", u8::from(b))?,
+                Value::F64(_) | Value::Absent => {}
+            }
         }
-        write!(w, ",{}", r.fault)?;
-        opt(&mut w, r.segment)?;
-        opt(&mut w, r.mode)?;
-        w.write_all(b",")?;
-        field(&mut w, r.f_cmd)?;
-        opt(&mut w, r.phase)?;
-        opt(&mut w, r.process_fault)?;
         writeln!(w)?;
     }
     w.flush()
@@ -175,13 +171,13 @@ pub const MAX_TIME: f64 = 1e7;
 pub fn read_csv(text: &str) -> Result<Vec<Row>> {
     let mut lines = text.lines();
     let head = lines.next().unwrap_or_default().trim();
-    let ncols = if head == HEADER {
+    let ncols = if head == HEADER || head == HEADER_V2 {
         17
     } else if head == HEADER_V1 {
         12
     } else {
         anyhow::bail!(
-            "not a forcecell trace: the header must be {HEADER:?} (or, before process columns, {HEADER_V1:?})"
+            "not a forcecell trace: the header must be {HEADER:?} (or, as written before, {HEADER_V2:?} or {HEADER_V1:?})"
         );
     };
     let mut rows = Vec::new();
@@ -219,9 +215,9 @@ pub fn read_csv(text: &str) -> Result<Vec<Row>> {
                 v[0]
             );
         }
-        let fault = cols[11]
+        let condition = cols[11]
             .parse()
-            .with_context(|| format!("line {}: bad fault code", n + 2))?;
+            .with_context(|| format!("line {}: bad condition code", n + 2))?;
         let int = |i: usize, what: &str| -> Result<Option<i64>> {
             match cols.get(i) {
                 None | Some(&"") => Ok(None),
@@ -256,7 +252,7 @@ pub fn read_csv(text: &str) -> Result<Vec<Row>> {
             mode: int(13, "process mode")?,
             f_cmd,
             phase: code(15, "process phase")?,
-            process_fault: code(16, "process fault")?,
+            fault: code(16, "process fault")?,
             t: v[0],
             f: v[1],
             f_true: v[2],
@@ -268,7 +264,7 @@ pub fn read_csv(text: &str) -> Result<Vec<Row>> {
             xc_hat: v[8],
             k_c: v[9],
             x_c: v[10],
-            fault,
+            condition,
             s: f64::NAN,
         });
     }
@@ -294,12 +290,12 @@ mod tests {
                 xc_hat: 0.009,
                 k_c: 70_000.0,
                 x_c: 0.01,
-                fault: 1,
+                condition: 1,
                 segment: Some(4),
                 mode: Some(1),
                 f_cmd: 12.5,
                 phase: Some(3),
-                process_fault: Some(0),
+                fault: Some(0),
                 s: f64::NAN,
             };
             2
@@ -312,7 +308,7 @@ mod tests {
         assert_eq!(back.len(), 2);
         assert!(back[0].f.is_nan());
         assert_eq!(back[0].x_cmd, 0.0102);
-        assert_eq!(back[1].fault, 1);
+        assert_eq!(back[1].condition, 1);
         // NaN is not equal to itself: the missing `f` and the simulation-only `s` compared as 0.
         let without_f = |r: &Row| Row {
             f: 0.0,
@@ -327,7 +323,7 @@ mod tests {
             (back[0].segment, back[0].mode, back[0].f_cmd),
             (Some(4), Some(1), 12.5)
         );
-        assert_eq!((back[0].phase, back[0].process_fault), (Some(3), Some(0)));
+        assert_eq!((back[0].phase, back[0].fault), (Some(3), Some(0)));
         assert!(read_csv("a,b\n").is_err());
         let broken = text.replace("0.0102", "zz");
         assert!(
@@ -345,7 +341,7 @@ mod tests {
             f: 1.0,
             f_r: 5.0,
             phase: Some(0),
-            process_fault: Some(0),
+            fault: Some(0),
             ..Row::default()
         }
         .no_process();
@@ -355,12 +351,7 @@ mod tests {
         assert!(text.lines().nth(1).unwrap().ends_with(",0,,,,,"), "{text}");
         let back = read_csv(&text).unwrap();
         assert_eq!(
-            (
-                back[0].segment,
-                back[0].mode,
-                back[0].phase,
-                back[0].process_fault
-            ),
+            (back[0].segment, back[0].mode, back[0].phase, back[0].fault),
             (None, None, None, None)
         );
         assert!(back[0].f_cmd.is_nan());
@@ -372,6 +363,19 @@ mod tests {
         assert_eq!(
             (back[0].f, back[0].f_r, back[0].segment, back[0].phase),
             (1.0, 5.0, None, None)
+        );
+        // A trace written before the renames (`fault` → `condition`, `process_fault` → `fault`): the
+        // same columns.
+        let v2 = format!("{HEADER_V2}\n0.004,1,,5,0,0,0,0,0,,,2,3,1,5,3,4\n");
+        let back = read_csv(&v2).unwrap();
+        assert_eq!(
+            (
+                back[0].condition,
+                back[0].segment,
+                back[0].phase,
+                back[0].fault
+            ),
+            (2, Some(3), Some(3), Some(4))
         );
         // …but a row must have its header's column count.
         assert!(read_csv(&format!("{HEADER}\n0.004,1,,5,0,0,0,0,0,,,0\n")).is_err());

@@ -230,6 +230,8 @@ impl ProcessSetup {
                 )
         };
         let io = &self.io;
+        // The legends are hal's code tables (KRL's own spelling: upper case for modes and states).
+        let mode_legend = hal::ProcessMode::legend().to_uppercase();
         let mut out = vec![
             "KRL -> RSI (ETHERNET inputs, read through SEN_PINT / SEN_PREA objects):".to_owned(),
         ];
@@ -237,7 +239,7 @@ impl ProcessSetup {
             (
                 format!("$SEN_PINT[{}]", io.mode_pint),
                 format!("{FC_CMD}.Mode"),
-                "0 OFF, 1 PRESS, 2 RELEASE",
+                mode_legend.as_str(),
             ),
             (
                 format!("$SEN_PREA[{}]", io.force_prea),
@@ -262,11 +264,12 @@ impl ProcessSetup {
                 .to_owned(),
         );
         let fault_legend = hal::ProcessFault::legend();
+        let phase_legend = hal::ProcessPhase::legend().to_uppercase();
         for (var, tag, what) in [
             (
                 format!("$SEN_PINT[{}]", io.state_pint),
                 format!("{FC_STATE}.State"),
-                "0 OFF, 1 APPROACH, 2 RAMP, 3 PRESSING, 4 RELEASE, 9 FAULT",
+                phase_legend.as_str(),
             ),
             (
                 format!("$SEN_PREA[{}]", io.measured_prea),
@@ -650,5 +653,33 @@ impl RobotSetup {
         let _ = writeln!(k, "  RESUME");
         let _ = writeln!(k, "END");
         k
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ProcessChannels;
+
+    #[test]
+    fn the_mapping_legends_are_hals_code_tables() {
+        let ethernet = EthernetConfig::forcecell(core::net::Ipv4Addr::LOCALHOST, 49152, false)
+            .with_process(ProcessChannels::default());
+        let lines = ProcessSetup::default_polish().mapping(&ethernet);
+        let line = |tag: &str| {
+            lines
+                .iter()
+                .find(|l| l.contains(tag))
+                .unwrap_or_else(|| panic!("no {tag} in {lines:#?}"))
+                .clone()
+        };
+        assert!(line(".Mode").ends_with(") 0 OFF, 1 PRESS, 2 RELEASE"));
+        assert!(
+            line(".State").ends_with(") 0 OFF, 1 APPROACH, 2 RAMP, 3 PRESSING, 4 RELEASE, 9 FAULT")
+        );
+        assert!(line(".Fault").ends_with(
+            ") 0 none, 1 sensor lost, 2 force limit, 3 correction limit, 4 bad command, \
+             5 contact lost, 6 hold timeout"
+        ));
     }
 }
