@@ -14,7 +14,13 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 /// The directories and files (relative to the controller crate) whose logic is scanned.
-const SCANNED: &[&str] = &["src/robust", "src/onset", "src/conditioning.rs"];
+const SCANNED: &[&str] = &[
+    "src/robust",
+    "src/estimator",
+    "src/predictor",
+    "src/onset",
+    "src/conditioning.rs",
+];
 
 /// A bare literal found: file, line, the literal's text and the line's text.
 #[derive(Debug, Clone, PartialEq)]
