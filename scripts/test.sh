@@ -26,5 +26,8 @@ RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --release
 step "cargo test (unit, integration, loopback UDP, in-memory CAN; release build: closed-loop simulations are long)"
 cargo test --workspace --release
 
+step "robust-law censuses (the #[ignore]d counts of known failures: each asserts no more than measured; ~15 s)"
+cargo test --release -p forcecell-controller --test ranges --test gentle_search --test sensor_filter -- --ignored
+
 step "real-vcan tests (ATI CAN driver; native vcan0, else User-Mode Linux, else QEMU)"
 bash scripts/vcan-tests.sh

@@ -8,6 +8,13 @@ use core::f64::consts::PI;
 
 use serde::{Deserialize, Serialize};
 
+/// The highest frequency a filter is designed for, as a fraction of the sampling rate `1/dt`: a
+/// cut-off above `CUTOFF_CAP/dt` is lowered to it. The bilinear transform's pre-warp `tan(π·f·dt)`
+/// diverges at Nyquist (`f = 1/(2·dt)`); at 0.45 it is `tan(0.45·π) ≈ 6.3`, a finite, well-conditioned
+/// biquad, and the low-pass still passes everything the loop can act on. The same cap gives the
+/// conditioning's delay, noise bandwidth and step time ([`crate::robust::Conditioner`]).
+pub const CUTOFF_CAP: f64 = 0.45;
+
 /// A notch (band-stop) section, e.g. against a spindle or tool resonance.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -23,7 +30,7 @@ pub struct NotchParams {
 #[serde(deny_unknown_fields)]
 pub struct ConditioningParams {
     /// Cut-off of the second-order Butterworth low-pass, Hz. Above the Nyquist frequency of the loop it
-    /// is limited to 0.45 of the sampling rate.
+    /// is limited to [`CUTOFF_CAP`] of the sampling rate.
     pub cutoff: f64,
     /// Optional notch.
     #[serde(default)]
@@ -65,6 +72,7 @@ struct Coeffs {
 }
 
 impl Coeffs {
+    /// The section that passes its input unchanged.
     const IDENTITY: Self = Self {
         b0: 1.0,
         b1: 0.0,
@@ -75,7 +83,7 @@ impl Coeffs {
 
     /// Pre-warped analogue frequency `tan(π·f·dt)`, with `f` limited below Nyquist.
     fn warp(f: f64, dt: f64) -> f64 {
-        let f = f.min(0.45 / dt);
+        let f = f.min(CUTOFF_CAP / dt);
         (PI * f * dt).tan()
     }
 
@@ -94,7 +102,7 @@ impl Coeffs {
     }
 
     fn notch(f0: f64, q: f64, dt: f64) -> Self {
-        if f0 >= 0.5 / dt {
+        if f0 >= 1.0 / (2.0 * dt) {
             // Above Nyquist the loop cannot see it; nothing to remove.
             return Self::IDENTITY;
         }

@@ -24,12 +24,18 @@
 //! output noise of a force sensor does not bias least squares, a filter's lag would.
 
 mod params;
+pub mod rls;
 mod steady;
 #[cfg(test)]
 mod tests;
 mod update;
 
 pub use params::EstimatorParams;
+pub use rls::{Rls, RlsStep};
+
+use nalgebra::{Matrix3, Vector3};
+
+use crate::robust::guards::VARIANCE_GUARD;
 pub use steady::SteadyEstimator;
 
 /// What one estimator update did.
@@ -51,9 +57,19 @@ pub struct Update {
 /// robot's (same filtering), m/s.
 pub fn surface_moving(v_c: f64, v_x: f64, max_surface_speed: f64) -> bool {
     v_c.abs() > max_surface_speed
-        && (v_c * v_x >= 0.0 || v_x.abs() < 0.1 * v_c.abs())
-        && v_c.abs() >= 0.85 * v_x.abs()
+        && (v_c * v_x >= 0.0 || v_x.abs() < STILL_ROBOT * v_c.abs())
+        && v_c.abs() >= LEADING_SPEED * v_x.abs()
 }
+
+/// The robot counts as still beside an observed surface motion when it moves at less than a tenth of
+/// it: a too-low `k̂_c` shows the robot's own motion opposed, as `(1 − k_c/k̂_c)·ẋ`, which is ten times
+/// the robot's speed only when `k̂_c < k_c/11`.
+const STILL_ROBOT: f64 = 0.1;
+
+/// The least observed surface speed, as a share of the robot's, that is real motion: a too-high `k̂_c`
+/// shows the robot's own motion as `(1 − k_c/k̂_c)·ẋ`, which reaches 0.85 of it only when `k̂_c` is
+/// more than `1/0.15 ≈ 6.7` times the true stiffness.
+const LEADING_SPEED: f64 = 0.85;
 
 /// Recursive least squares on `f = k_c·(x − x_c(t))`, with the surface locally linear in time.
 #[derive(Clone, Debug, PartialEq)]
@@ -61,10 +77,9 @@ pub struct StiffnessEstimator {
     p: EstimatorParams,
     /// Position scale `s`, m.
     scale: f64,
-    /// `[k_c·s, k_c·(x₀ − x_c(t₀)), −k_c·ẋ_c·memory]`, N.
-    theta: [f64; 3],
-    /// Covariance, symmetric.
-    cov: [[f64; 3]; 3],
+    /// The recursion on `θ = [k_c·s, k_c·(x₀ − x_c(t₀)), −k_c·ẋ_c·memory]` (N) and its covariance
+    /// (unit measurement variance).
+    rls: Rls<PARAMS>,
     /// Reference position `x₀`, m.
     x0: f64,
     /// Time since the reference `t₀`, s.
@@ -81,18 +96,33 @@ pub struct StiffnessEstimator {
     seed_var: f64,
 }
 
+/// The recursion's parameters: the scaled stiffness, the intercept and the surface's drift.
+const PARAMS: usize = 3;
+
 /// Covariance given to the intercept and the surface-velocity term at each contact onset.
 const INTERCEPT_UNCERTAINTY: f64 = 100.0;
-/// Ceiling of any diagonal covariance entry of the recursion (its square: the steady estimator's).
+/// Ceiling of any diagonal covariance entry of the recursion, N² (its square: the steady estimator's,
+/// [`STEADY_COV_MAX`]). The recursion forgets over adapting time only, but a regressor that excites
+/// one direction lets forgetting wind the others up; the ceiling bounds that (`θ₀`'s deviation at
+/// 100 N, i.e. `k̂_c` unsure by 100 N over the scale `s`).
 const COV_MAX: f64 = 1.0e4;
+
+/// Ceiling of the steady estimator's diagonal covariance entries, N²: [`COV_MAX`] squared. Its
+/// measurement variance is the measured noise (not 1), so its covariance is in N² of the parameters
+/// themselves and starts at the onset fit's variance, which the recursion's ceiling would clip. Kept
+/// as it was measured with; no sweep has chosen either value.
+const STEADY_COV_MAX: f64 = COV_MAX * COV_MAX;
 
 impl StiffnessEstimator {
     /// An estimator at `k̂_c(0)` with position scale `scale` (m, typically `f_r/k̂_c(0)`).
     pub fn new(p: EstimatorParams, scale: f64) -> Self {
         Self {
             scale,
-            theta: [p.kc0 * scale, 0.0, 0.0],
-            cov: [[0.0; 3]; 3],
+            rls: Rls::new(
+                Vector3::new(p.kc0 * scale, 0.0, 0.0),
+                Matrix3::zeros(),
+                COV_MAX,
+            ),
             x0: 0.0,
             t: 0.0,
             x_slow: 0.0,
@@ -113,7 +143,7 @@ impl StiffnessEstimator {
     pub fn set_params(&mut self, p: EstimatorParams) {
         self.p = p;
         let k = self.kc().clamp(p.kc_min, p.kc_max);
-        self.theta[0] = k * self.scale;
+        self.rls.theta[0] = k * self.scale;
     }
 
     /// Start over at `k̂_c(0)`, as [`new`](Self::new) left it: no fit's variance survives (it would
@@ -130,22 +160,17 @@ impl StiffnessEstimator {
         self.x_slow = x;
         self.f_slow = f;
         self.last = (x, f);
-        self.theta[1] = f;
-        self.theta[2] = 0.0;
-        self.prior = self.theta[0];
-        let u = self.p.initial_uncertainty * self.theta[0];
-        self.cov = [
-            [u * u, 0.0, 0.0],
-            [0.0, INTERCEPT_UNCERTAINTY, 0.0],
-            [0.0, 0.0, INTERCEPT_UNCERTAINTY],
-        ];
+        self.rls.theta[1] = f;
+        self.rls.theta[2] = 0.0;
+        self.prior = self.rls.theta[0];
+        self.rls.p = self.onset_covariance();
     }
 
     /// Keep the stiffness's uncertainty within `rel_sd` of `k̂_c` (relative standard deviation).
     pub fn limit_uncertainty(&mut self, rel_sd: f64) {
-        let u = rel_sd * self.theta[0];
-        if u * u < self.cov[0][0] {
-            self.cov[0][0] = u * u;
+        let u = rel_sd * self.rls.theta[0];
+        if u * u < self.rls.p[(0, 0)] {
+            self.rls.p[(0, 0)] = u * u;
         }
     }
 
@@ -156,29 +181,24 @@ impl StiffnessEstimator {
     pub fn seed(&mut self, fit: &crate::onset::LineFit, x: f64, f_gate: f64) -> bool {
         let prior = self.prior;
         let u = self.p.initial_uncertainty * prior;
-        let var_prior = (u * u).max(1e-30);
+        let var_prior = (u * u).max(VARIANCE_GUARD);
         let w = var_prior / (var_prior + fit.var_b);
         let b = prior + w * (fit.b - prior);
         let var_b = w * fit.var_b;
         // The intercept moves with the slope along the fit's own correlation.
-        let a = fit.a + fit.cov_ab / fit.var_b.max(1e-30) * (b - fit.b);
+        let a = fit.a + fit.cov_ab / fit.var_b.max(VARIANCE_GUARD) * (b - fit.b);
         let k = (b / self.scale).clamp(self.p.kc_min, self.p.kc_max);
         let projected = k * self.scale != b;
         if !(b.is_finite() && a.is_finite() && var_b.is_finite()) {
             return false;
         }
-        self.theta = [k * self.scale, a, 0.0];
+        self.rls.theta = Vector3::new(k * self.scale, a, 0.0);
         self.t = 0.0;
         // The covariance stays the one of a contact onset: the fit sets the estimate, the recursion
         // keeps its agility for what changes later (a stiffness step must not meet a confident
         // estimator).
         self.seed_var = var_b;
-        let u = self.p.initial_uncertainty * self.theta[0];
-        self.cov = [
-            [u * u, 0.0, 0.0],
-            [0.0, INTERCEPT_UNCERTAINTY, 0.0],
-            [0.0, 0.0, INTERCEPT_UNCERTAINTY],
-        ];
+        self.rls.p = self.onset_covariance();
         self.x_slow = x;
         self.f_slow = f_gate;
         projected
@@ -202,27 +222,38 @@ impl StiffnessEstimator {
         let k = k.clamp(self.p.kc_min, self.p.kc_max);
         let phi = self.regressor(x);
         let f_here = self.predict(x);
-        self.theta[0] = k * self.scale;
-        self.theta[1] = f_here - self.theta[0] * phi[0] - self.theta[2] * phi[2];
+        let theta = &mut self.rls.theta;
+        theta[0] = k * self.scale;
+        theta[1] = f_here - theta[0] * phi[0] - theta[2] * phi[2];
+    }
+
+    /// The covariance of a contact onset: the stiffness at its initial uncertainty, the intercept and
+    /// the surface-velocity term at [`INTERCEPT_UNCERTAINTY`], uncorrelated.
+    fn onset_covariance(&self) -> Matrix3<f64> {
+        let u = self.p.initial_uncertainty * self.rls.theta[0];
+        Matrix3::from_diagonal(&Vector3::new(
+            u * u,
+            INTERCEPT_UNCERTAINTY,
+            INTERCEPT_UNCERTAINTY,
+        ))
     }
 
     /// Stiffness estimate, N/m.
     pub fn kc(&self) -> f64 {
-        self.theta[0] / self.scale
+        self.rls.theta[0] / self.scale
     }
 
     /// Surface position estimate now, m.
     pub fn xc(&self) -> f64 {
-        self.x0 - (self.theta[1] + self.theta[2] * self.t / self.p.memory) / self.kc()
+        self.x0 - (self.rls.theta[1] + self.rls.theta[2] * self.t / self.p.memory) / self.kc()
     }
 
-    fn regressor(&self, x: f64) -> [f64; 3] {
-        [(x - self.x0) / self.scale, 1.0, self.t / self.p.memory]
+    fn regressor(&self, x: f64) -> Vector3<f64> {
+        Vector3::new((x - self.x0) / self.scale, 1.0, self.t / self.p.memory)
     }
 
     /// Predicted force at `x` now, N.
     pub fn predict(&self, x: f64) -> f64 {
-        let phi = self.regressor(x);
-        (0..3).map(|i| self.theta[i] * phi[i]).sum()
+        self.rls.predict(&self.regressor(x))
     }
 }

@@ -1,6 +1,8 @@
 //! The steady contact's least squares under sensor noise.
 
-use super::COV_MAX;
+use nalgebra::{Matrix3, Vector3};
+
+use super::{PARAMS, Rls, STEADY_COV_MAX};
 
 /// Least squares of a steady contact under sensor noise: `f = θ₀·(x − x₀)/s + θ₁ + θ₂·t/T`, with
 /// forgetting over `T` (s) and the measured noise as the measurement variance.
@@ -13,8 +15,8 @@ use super::COV_MAX;
 /// learns nothing where there is no noise to learn from (its uncertainty then stays where it started).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SteadyEstimator {
-    theta: [f64; 3],
-    cov: [[f64; 3]; 3],
+    /// The least squares on `θ = [k_c·s, intercept, drift]`, N, with the measured noise's variance.
+    rls: Rls<PARAMS>,
     x0: f64,
     scale: f64,
     /// Time since the start, s.
@@ -31,8 +33,7 @@ impl SteadyEstimator {
     /// An inactive estimator with forgetting time `memory` (s).
     pub fn new(memory: f64) -> Self {
         Self {
-            theta: [0.0; 3],
-            cov: [[0.0; 3]; 3],
+            rls: Rls::new(Vector3::zeros(), Matrix3::zeros(), STEADY_COV_MAX),
             x0: 0.0,
             scale: 1.0,
             t: 0.0,
@@ -48,17 +49,17 @@ impl SteadyEstimator {
             self.active = false;
             return;
         }
-        self.theta = [theta0, f0, 0.0];
+        self.rls.theta = Vector3::new(theta0, f0, 0.0);
         let v0 = if var0.is_finite() {
             var0.max(0.0)
         } else {
             theta0 * theta0
         };
-        self.cov = [
-            [v0, 0.0, 0.0],
-            [0.0, STEADY_INTERCEPT_VAR, 0.0],
-            [0.0, 0.0, STEADY_INTERCEPT_VAR],
-        ];
+        self.rls.p = Matrix3::from_diagonal(&Vector3::new(
+            v0,
+            STEADY_INTERCEPT_VAR,
+            STEADY_INTERCEPT_VAR,
+        ));
         self.x0 = x0;
         self.scale = scale;
         self.t = 0.0;
@@ -86,43 +87,12 @@ impl SteadyEstimator {
             return;
         }
         self.t += dt;
-        let phi = [(x - self.x0) / self.scale, 1.0, self.t / self.memory];
+        let phi = Vector3::new((x - self.x0) / self.scale, 1.0, self.t / self.memory);
         let lambda = (-dt / self.memory).exp();
-        let mut c = self.cov;
-        for row in c.iter_mut() {
-            for v in row.iter_mut() {
-                *v /= lambda;
-            }
-        }
-        let mut pphi = [0.0; 3];
-        for (i, v) in pphi.iter_mut().enumerate() {
-            *v = (0..3).map(|j| c[i][j] * phi[j]).sum();
-        }
-        let sv = r + (0..3).map(|i| phi[i] * pphi[i]).sum::<f64>();
-        let err = f - (0..3).map(|i| self.theta[i] * phi[i]).sum::<f64>();
-        let mut theta = self.theta;
-        for i in 0..3 {
-            theta[i] += pphi[i] / sv * err;
-            for j in 0..3 {
-                c[i][j] -= pphi[i] * pphi[j] / sv;
-            }
-        }
-        for i in 0..3 {
-            c[i][i] = c[i][i].clamp(0.0, COV_MAX * COV_MAX);
-            for j in 0..i {
-                let v = 0.5 * (c[i][j] + c[j][i]);
-                let lim = (c[i][i] * c[j][j]).sqrt();
-                c[i][j] = v.clamp(-lim, lim);
-                c[j][i] = c[i][j];
-            }
-        }
-        if theta
-            .iter()
-            .chain(c.iter().flatten())
-            .all(|v| v.is_finite())
-        {
-            self.theta = theta;
-            self.cov = c;
+        let mut next = self.rls;
+        next.update(&phi, f, r, lambda);
+        if next.is_finite() {
+            self.rls = next;
         } else {
             self.active = false;
         }
@@ -130,12 +100,13 @@ impl SteadyEstimator {
 
     /// Stiffness estimate (N/m) and its relative standard deviation.
     pub fn estimate(&self) -> Option<(f64, f64)> {
-        if !self.active || self.theta[0] <= 0.0 {
+        let theta0 = self.rls.theta[0];
+        if !self.active || theta0 <= 0.0 {
             return None;
         }
         Some((
-            self.theta[0] / self.scale,
-            self.cov[0][0].max(0.0).sqrt() / self.theta[0],
+            theta0 / self.scale,
+            self.rls.p[(0, 0)].max(0.0).sqrt() / theta0,
         ))
     }
 }

@@ -1,7 +1,7 @@
 //! The recursion's step: the excitation gate, the forgetting least-squares update, the rate limit and
 //! the projection.
 
-use super::{COV_MAX, StiffnessEstimator, Update};
+use super::{StiffnessEstimator, Update};
 
 /// Multiple of `excitation` above which a force transient is informative on a moving surface too.
 const STRONG_EXCITATION: f64 = 10.0;
@@ -38,7 +38,7 @@ impl StiffnessEstimator {
         self.t += dt;
         if self.t > self.p.memory {
             // Re-anchor the time origin so the regressor stays of order one.
-            self.theta[1] += self.theta[2] * self.t / self.p.memory;
+            self.rls.theta[1] += self.rls.theta[2] * self.t / self.p.memory;
             self.t = 0.0;
         }
         let a = (dt / self.p.excitation_window).min(1.0);
@@ -79,45 +79,24 @@ impl StiffnessEstimator {
             return up;
         }
         let lambda = (-dt / self.p.memory).exp();
-        let c = self.cov;
-        let mut pphi = [0.0; 3];
-        for (i, v) in pphi.iter_mut().enumerate() {
-            *v = (0..3).map(|j| c[i][j] * phi[j]).sum();
-        }
-        let denom = lambda + (0..3).map(|i| phi[i] * pphi[i]).sum::<f64>();
-        let mut n = [[0.0; 3]; 3];
-        for i in 0..3 {
-            self.theta[i] += pphi[i] / denom * err;
-            for j in 0..3 {
-                n[i][j] = (c[i][j] - pphi[i] * pphi[j] / denom) / lambda;
-            }
-        }
-        // Symmetric, with a bounded, non-negative diagonal.
-        for i in 0..3 {
-            n[i][i] = n[i][i].clamp(0.0, COV_MAX);
-            for j in 0..i {
-                let v = 0.5 * (n[i][j] + n[j][i]);
-                let lim = (n[i][i] * n[j][j]).sqrt();
-                n[i][j] = v.clamp(-lim, lim);
-                n[j][i] = n[i][j];
-            }
-        }
-        self.cov = n;
+        // Normalised RLS (unit measurement variance): the forgetting alone scales the covariance.
+        let fit = self.rls.update(&phi, f, 1.0, lambda);
         up.adapted = true;
         // No single step moves k̂_c by more than MAX_RATE·dt relative up or MAX_FALL_RATE·dt down: a
         // burst of biased samples (a surface starting to move, an impact) cannot throw the estimate
         // across its range at once.
-        let k_before = self.theta[0] - pphi[0] / denom * err;
+        let k_before = self.rls.theta[0] - fit.gain[0] * fit.err;
         let (rise, fall) = (
             MAX_RATE * dt * k_before.abs(),
             MAX_FALL_RATE * dt * k_before.abs(),
         );
-        let step = self.theta[0] - k_before;
+        let step = self.rls.theta[0] - k_before;
         if step > rise || step < -fall {
             let k_lim = k_before + step.clamp(-fall, rise);
             let f_here = self.predict(x);
-            self.theta[0] = k_lim;
-            self.theta[1] = f_here - self.theta[0] * phi[0] - self.theta[2] * phi[2];
+            let theta = &mut self.rls.theta;
+            theta[0] = k_lim;
+            theta[1] = f_here - theta[0] * phi[0] - theta[2] * phi[2];
         }
         let k = self.kc();
         if !(k.is_finite() && (self.p.kc_min..=self.p.kc_max).contains(&k)) {
@@ -129,10 +108,11 @@ impl StiffnessEstimator {
             };
             // Keep the prediction at the current position unchanged while moving the slope.
             let f_here = if k.is_finite() { self.predict(x) } else { f };
-            self.theta[0] = kp * self.scale;
-            self.theta[1] = f_here - self.theta[0] * phi[0] - self.theta[2] * phi[2];
+            let theta = &mut self.rls.theta;
+            theta[0] = kp * self.scale;
+            theta[1] = f_here - theta[0] * phi[0] - theta[2] * phi[2];
         }
-        if !self.theta.iter().all(|v| v.is_finite()) {
+        if !self.rls.theta.iter().all(|v| v.is_finite()) {
             self.begin_contact(x, f);
         }
         up

@@ -1,14 +1,17 @@
 //! The window's fits: the free line (with damping where it is determined), the line through a
 //! known surface, and the known spring on a surface moving at a constant speed.
 
-use super::sums::{COLLINEAR, Sums};
+use super::sums::{COLLINEAR, MIN_SAMPLES, SFF, SUF, Sums};
+
+/// Degrees of freedom a plane fit `f = a + b·u + c·w` uses: three parameters.
+const PLANE_DOF: f64 = 3.0;
 use super::{LineFit, Moving, OnsetFit};
 
 impl OnsetFit {
     /// The fit so far, with residual variance at least `noise_var` (N²); `None` while undetermined.
     pub fn fit(&self, noise_var: f64) -> Option<LineFit> {
         let s = &self.sums;
-        if s.n < 4.0 || s.centred()[3] <= 0.0 {
+        if s.n < MIN_SAMPLES || s.centred()[SUF] <= 0.0 {
             return None;
         }
         let m = s.solve()?;
@@ -17,7 +20,7 @@ impl OnsetFit {
         }
         let (ub, wb) = (s.u / s.n, s.w / s.n);
         let a = s.f / s.n - m.b * ub - m.c * wb;
-        let dof = if m.c > 0.0 { 3.0 } else { 2.0 };
+        let dof = if m.c > 0.0 { PLANE_DOF } else { 2.0 };
         let residual_var = m.sse / (s.n - dof);
         let var = residual_var.max(noise_var);
         let var_b = var * m.i_uu;
@@ -34,7 +37,7 @@ impl OnsetFit {
             c_unit_var: m.i_ww,
             residual_var,
             sse: m.sse,
-            force_var: s.centred()[5] / (s.n - 1.0),
+            force_var: s.centred()[SFF] / (s.n - 1.0),
         };
         [fit.a, fit.b, fit.var_a, fit.var_b, fit.cov_ab, fit.c]
             .iter()
@@ -50,7 +53,7 @@ impl OnsetFit {
     pub fn fit_through(&self, x_c: f64, noise_var: f64) -> Option<(LineFit, f64)> {
         let s = &self.sums;
         let d = (self.x0 - x_c) / self.scale;
-        if s.n < 4.0 || !d.is_finite() {
+        if s.n < MIN_SAMPLES || !d.is_finite() {
             return None;
         }
         // Moments about the pivot, u_p = u + d, uncentred.
@@ -88,7 +91,7 @@ impl OnsetFit {
             c_unit_var: i_cc,
             residual_var,
             sse,
-            force_var: s.centred()[5] / (s.n - 1.0),
+            force_var: s.centred()[SFF] / (s.n - 1.0),
         };
         (b > 0.0
             && [fit.a, fit.b, fit.var_b, fit.c]

@@ -159,7 +159,7 @@ impl OnsetFit {
             suffix.add((x - x0) / scale, v / scale, f);
             pre_ff -= f * f;
             if suffix.n >= 2.0 {
-                let suf = suffix.centred()[3];
+                let suf = suffix.centred()[sums::SUF];
                 let cost = pre_ff.max(0.0) + suffix.sse();
                 if suf > 0.0 && cost < best.0 {
                     best = (cost, suffix);

@@ -19,6 +19,17 @@ pub(super) struct Sums {
 /// (a constant velocity, or one proportional to the position): the fit is then the line alone.
 pub(super) const COLLINEAR: f64 = 1e-6;
 
+/// The fewest samples a fit with damping is taken on, and any fit judged: one more than the plane's
+/// three parameters (`a`, `b`, `c`), so that a residual is left to judge it by.
+pub(super) const MIN_SAMPLES: f64 = 4.0;
+
+/// The number of centred second moments ([`Sums::centred`]).
+pub(super) const MOMENTS: usize = 6;
+/// Index of `Suf`, the position-force moment, in [`Sums::centred`].
+pub(super) const SUF: usize = 3;
+/// Index of `Sff`, the force's own moment, in [`Sums::centred`].
+pub(super) const SFF: usize = 5;
+
 /// The centred normal equations' solution: slope `b` on `u`, slope `c` on `w` (0: line only), the
 /// inverse's entries `(i_uu, i_uw, i_ww)`, and the residual sum of squares.
 pub(super) struct Solved {
@@ -45,7 +56,7 @@ impl Sums {
     }
 
     /// Centred second moments `[Suu, Suw, Sww, Suf, Swf, Sff]`.
-    pub(super) fn centred(&self) -> [f64; 6] {
+    pub(super) fn centred(&self) -> [f64; MOMENTS] {
         let n = self.n.max(1.0);
         [
             self.uu - self.u * self.u / n,
@@ -73,7 +84,7 @@ impl Sums {
             sse: (sff - suf * suf / suu).max(0.0),
         };
         let det = suu * sww - suw * suw;
-        if self.n < 4.0 || det <= COLLINEAR * suu * sww {
+        if self.n < MIN_SAMPLES || det <= COLLINEAR * suu * sww {
             return Some(line);
         }
         let (i_uu, i_uw, i_ww) = (sww / det, -suw / det, suu / det);

@@ -25,26 +25,73 @@
 //! [`SurfacePredictor::command`] evaluates it on the filter's local polynomial.
 
 pub use jump::JumpTest;
+pub use kalman::Kalman;
+
+use nalgebra::{Matrix3, Vector3};
 
 /// State and covariance of the surface filter.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SurfacePredictor {
-    /// `[x_c, ẋ_c, ẍ_c]`, m, m/s, m/s².
-    s: [f64; 3],
-    /// Covariance, symmetric.
-    p: [[f64; 3]; 3],
+    /// The filter on `[x_c, ẋ_c, ẍ_c]`, m, m/s, m/s².
+    kf: Kalman<STATES>,
     started: bool,
     /// The innovations of the jumps in a row just before this step, the latest first (0: none), m.
     jumps: [f64; RAMP_JUMPS - 1],
 }
 
+/// The filter's states: the surface's position, velocity and acceleration.
+const STATES: usize = 3;
+
 /// Jumps in a row that are a ramp when each is within `RAMP_TOLERANCE` of the one before.
 const RAMP_JUMPS: usize = 3;
+/// How alike jumps in a row are to be a ramp, relative: a surface moving at a steady speed moves by
+/// the same distance each cycle; a step seen through a sensor's filter shrinks by more than a tenth
+/// from one sample to the next.
 const RAMP_TOLERANCE: f64 = 0.1;
 
-/// Initial standard deviation of the velocity, m/s, and acceleration, m/s², at a (re)start.
+/// Initial standard deviation of the velocity at a (re)start, m/s: 10 mm/s, above any surface
+/// speed the law follows (B5b's sine peaks at 6.3 mm/s).
 const V0: f64 = 0.01;
+/// Initial standard deviation of the acceleration at a (re)start, m/s²: twice the largest
+/// acceleration the predictor extrapolates by default (`surface_acceleration`, 0.05 m/s²).
 const A0: f64 = 0.1;
+
+/// The constant-acceleration model of the surface at step `dt` (s): the transition `F` on
+/// `[x, ẋ, ẍ]` and the covariance of white jerk of unit spectral density over the step (multiply
+/// by the density `q`, m²/s⁵), `Q = [[dt⁵/20, dt⁴/8, dt³/6], [dt⁴/8, dt³/3, dt²/2], [dt³/6, dt²/2,
+/// dt]]` (the integral of `e^{Aτ}·b·bᵀ·e^{Aᵀτ}` over the step, `b = [0, 0, 1]ᵀ`).
+pub fn constant_acceleration(dt: f64) -> (Matrix3<f64>, Matrix3<f64>) {
+    let h2 = dt * dt / 2.0;
+    #[rustfmt::skip]
+    let f = Matrix3::new(
+        1.0, dt, h2,
+        0.0, 1.0, dt,
+        0.0, 0.0, 1.0,
+    );
+    let (d2, d3, d4, d5) = (
+        dt * dt,
+        dt * dt * dt,
+        dt * dt * dt * dt,
+        dt * dt * dt * dt * dt,
+    );
+    #[rustfmt::skip]
+    let q = Matrix3::new(
+        d5 / FACT_20, d4 / FACT_8, d3 / FACT_6,
+        d4 / FACT_8, d3 / FACT_3, d2 / 2.0,
+        d3 / FACT_6, d2 / 2.0, dt,
+    );
+    (f, q)
+}
+
+/// The denominators of the white-jerk covariance ([`constant_acceleration`]): `∫₀^dt (τ²/2)² dτ =
+/// dt⁵/20`, `∫ τ·τ²/2 = dt⁴/8`, `∫ τ²/2 = dt³/6`, `∫ τ² = dt³/3` — exact.
+const FACT_20: f64 = 20.0;
+/// See [`FACT_20`].
+const FACT_8: f64 = 8.0;
+/// See [`FACT_20`].
+const FACT_6: f64 = 6.0;
+/// See [`FACT_20`].
+const FACT_3: f64 = 3.0;
 
 impl Default for SurfacePredictor {
     fn default() -> Self {
@@ -56,8 +103,7 @@ impl SurfacePredictor {
     /// A filter that starts at its first measurement.
     pub fn new() -> Self {
         Self {
-            s: [0.0; 3],
-            p: [[0.0; 3]; 3],
+            kf: Kalman::new(Vector3::zeros(), Matrix3::zeros()),
             started: false,
             jumps: [0.0; RAMP_JUMPS - 1],
         }
@@ -76,8 +122,10 @@ impl SurfacePredictor {
     /// Start at `z` (m) moving at `v` (m/s), with variance `r` (m²) on the position.
     fn start_moving(&mut self, z: f64, v: f64, r: f64) {
         self.jumps = [0.0; RAMP_JUMPS - 1];
-        self.s = [z, v, 0.0];
-        self.p = [[r, 0.0, 0.0], [0.0, V0 * V0, 0.0], [0.0, 0.0, A0 * A0]];
+        self.kf = Kalman::new(
+            Vector3::new(z, v, 0.0),
+            Matrix3::from_diagonal(&Vector3::new(r, V0 * V0, A0 * A0)),
+        );
         self.started = true;
     }
 
@@ -85,23 +133,23 @@ impl SurfacePredictor {
     /// measurement's model moved, not the surface (a no-op before the first measurement).
     pub fn shift(&mut self, dz: f64) {
         if self.started && dz.is_finite() {
-            self.s[0] += dz;
+            self.kf.x[0] += dz;
         }
     }
 
     /// Position, velocity and acceleration estimates.
-    pub fn state(&self) -> [f64; 3] {
-        self.s
+    pub fn state(&self) -> [f64; STATES] {
+        self.kf.x.into()
     }
 
     /// Standard deviation of the velocity estimate, m/s.
     pub fn velocity_std(&self) -> f64 {
-        self.p[1][1].max(0.0).sqrt()
+        self.kf.p[(1, 1)].max(0.0).sqrt()
     }
 
     /// Standard deviation of the acceleration estimate, m/s².
     pub fn acceleration_std(&self) -> f64 {
-        self.p[2][2].max(0.0).sqrt()
+        self.kf.p[(2, 2)].max(0.0).sqrt()
     }
 
     /// One step of `dt` (s) with measurement `z` (m) of variance `r` (m²), process noise `q` (m²/s⁵).
@@ -117,37 +165,11 @@ impl SurfacePredictor {
             return None;
         }
         // Predict: s ← F s, P ← F P Fᵀ + Q.
-        let h2 = 0.5 * dt * dt;
-        let f = [[1.0, dt, h2], [0.0, 1.0, dt], [0.0, 0.0, 1.0]];
-        let s = self.s;
-        for (i, row) in f.iter().enumerate() {
-            self.s[i] = row[0] * s[0] + row[1] * s[1] + row[2] * s[2];
-        }
-        let mut fp = [[0.0; 3]; 3];
-        for (fp_row, f_row) in fp.iter_mut().zip(&f) {
-            for (j, v) in fp_row.iter_mut().enumerate() {
-                *v = (0..3).map(|k| f_row[k] * self.p[k][j]).sum();
-            }
-        }
-        let (d2, d3, d4, d5) = (
-            dt * dt,
-            dt * dt * dt,
-            dt * dt * dt * dt,
-            dt * dt * dt * dt * dt,
-        );
-        let qm = [
-            [d5 / 20.0, d4 / 8.0, d3 / 6.0],
-            [d4 / 8.0, d3 / 3.0, d2 / 2.0],
-            [d3 / 6.0, d2 / 2.0, dt],
-        ];
-        for i in 0..3 {
-            for j in 0..3 {
-                self.p[i][j] = (0..3).map(|k| fp[i][k] * f[j][k]).sum::<f64>() + q * qm[i][j];
-            }
-        }
+        let (f, qm) = constant_acceleration(dt);
+        let s = self.kf.x;
+        self.kf.predict(&f, &(qm * q));
         // Update on the position.
-        let y = z - self.s[0];
-        let sv = self.p[0][0] + r;
+        let (y, sv) = self.kf.innovation(z, r);
         let was = self.jumps;
         self.jumps = [0.0; RAMP_JUMPS - 1];
         if jump.is_jump(y, sv) {
@@ -168,44 +190,22 @@ impl SurfacePredictor {
             }
             self.jumps[0] = y;
             self.jumps[1..].copy_from_slice(&was[..RAMP_JUMPS - 2]);
-            self.s[0] = z;
+            let kf = &mut self.kf;
+            kf.x[0] = z;
             // The motion is what it was before the step: a prediction the measurement contradicts is
             // no evidence of motion, and carried on it would integrate its acceleration on every jump.
-            self.s[1] = s[1];
-            self.s[2] = s[2];
+            kf.x[1] = s[1];
+            kf.x[2] = s[2];
             // The position is now known to the measurement's accuracy; its correlations are gone.
-            self.p[0][0] = r;
-            for i in 1..3 {
-                self.p[0][i] = 0.0;
-                self.p[i][0] = 0.0;
+            kf.p[(0, 0)] = r;
+            for i in 1..STATES {
+                kf.p[(0, i)] = 0.0;
+                kf.p[(i, 0)] = 0.0;
             }
             return Some(y);
         }
-        let k = [self.p[0][0] / sv, self.p[1][0] / sv, self.p[2][0] / sv];
-        for (si, ki) in self.s.iter_mut().zip(k) {
-            *si += ki * y;
-        }
-        let p0 = self.p[0];
-        for (row, ki) in self.p.iter_mut().zip(k) {
-            for (v, p0j) in row.iter_mut().zip(p0) {
-                *v -= ki * p0j;
-            }
-        }
-        // Symmetric with a non-negative diagonal (rounding).
-        for i in 0..3 {
-            self.p[i][i] = self.p[i][i].max(0.0);
-            for j in 0..i {
-                let v = 0.5 * (self.p[i][j] + self.p[j][i]);
-                self.p[i][j] = v;
-                self.p[j][i] = v;
-            }
-        }
-        if !self
-            .s
-            .iter()
-            .chain(self.p.iter().flatten())
-            .all(|v| v.is_finite())
-        {
+        self.kf.correct(y, sv);
+        if !self.kf.is_finite() {
             self.start(z, r);
         }
         None
@@ -226,17 +226,18 @@ impl SurfacePredictor {
         dt: f64,
         max_acceleration: f64,
     ) -> f64 {
-        let [x, v, a] = self.s;
+        let [x, v, a]: [f64; STATES] = self.kf.x.into();
         // The bound is a constraint on the state: the velocity and position the filter inferred
         // together with the excess acceleration go with it, by the filter's own correlations.
         let excess = a - a.clamp(-max_acceleration, max_acceleration);
-        let (x, v, a) = if excess != 0.0 && self.p[2][2] > 0.0 {
-            let g = [self.p[0][2], self.p[1][2]].map(|c| c / self.p[2][2]);
+        let p = &self.kf.p;
+        let (x, v, a) = if excess != 0.0 && p[(2, 2)] > 0.0 {
+            let g = [p[(0, 2)], p[(1, 2)]].map(|c| c / p[(2, 2)]);
             (x - g[0] * excess, v - g[1] * excess, a - excess)
         } else {
             (x, v, a - excess)
         };
-        let at = |h: f64| x + v * h + 0.5 * a * h * h;
+        let at = |h: f64| x + v * h + a * h * h / 2.0;
         let alpha = if lag > 0.0 {
             1.0 - (-dt / lag).exp()
         } else {
@@ -248,5 +249,6 @@ impl SurfacePredictor {
 }
 
 mod jump;
+pub mod kalman;
 #[cfg(test)]
 mod tests;

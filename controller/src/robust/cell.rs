@@ -85,6 +85,11 @@ pub struct CycleMeter {
 /// Steps over which the measured cycle follows a change of the interface's cycle.
 const CYCLE_STEPS: f64 = 20.0;
 
+/// The longest step, in measured cycles, that still counts towards the cycle: halfway between one
+/// cycle and two. A longer step is a held or skipped cycle (two or more), which the interface's cycle
+/// does not become.
+const HELD_CYCLE: f64 = 1.5;
+
 impl CycleMeter {
     /// A meter for `p` (nothing measured yet).
     pub fn new(p: &CellParams) -> Self {
@@ -119,7 +124,7 @@ impl CycleMeter {
             } else {
                 self.cycle + (dt - self.cycle) / CYCLE_STEPS.sqrt()
             };
-        } else if dt <= 1.5 * self.cycle {
+        } else if dt <= HELD_CYCLE * self.cycle {
             self.cycle += (dt - self.cycle) / CYCLE_STEPS;
         }
         self.cycle

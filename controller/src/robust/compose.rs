@@ -5,6 +5,24 @@ use super::identify::StepState;
 use super::{RobustLaw, Signals, contact, observer};
 use crate::law::Events;
 
+/// The band a steady contact's force keeps about the set-point, as a share of the force scale
+/// ([`RobustLaw::force_scale`]): a fifth: a design choice, not the result of a sweep (a stiffness
+/// that changes by more than a fifth moves the force out of it under the stale gain).
+const BAND_SHARE: f64 = 0.2;
+
+/// The band's floor in noise deviations: Gaussian noise leaves a band of 5σ with a probability of
+/// 5.7·10⁻⁷ per sample (about once in 29 min at 1 kHz), where one of [`contact::SIGNIFICANCE`] (4σ,
+/// 6.3·10⁻⁵) would be left about every 16 s: a band the noise alone leaves opens re-fits on noise.
+const BAND_DEVIATIONS: f64 = 5.0;
+
+/// How far ahead of the robot the approach may command, in multiples of the loop's lead time (the
+/// lag, the delay and the conditioning's delay): the commands in flight when a contact is seen.
+const ANCHOR_LEADS: f64 = 4.0;
+
+/// The least anchor time, s: on a cell with a negligible lead the approach may still command 50 ms
+/// of travel ahead (at 10 mm/s, half a millimetre).
+const ANCHOR_MIN_TIME: f64 = 0.05;
+
 impl RobustLaw {
     /// The force a jump or a band is measured against: the set-point, at least the contact force, N.
     pub(super) fn force_scale(&self) -> f64 {
@@ -15,7 +33,7 @@ impl RobustLaw {
     /// a fifth of the set-point, at least five deviations, N. Leaving it opens a re-fit (the
     /// conditioned force) or holds the recursion for the step (the raw force).
     pub(super) fn band(&self, sigma: f64) -> f64 {
-        (0.2 * self.force_scale()).max(5.0 * sigma)
+        (BAND_SHARE * self.force_scale()).max(BAND_DEVIATIONS * sigma)
     }
 
     /// The contact detector's thresholds now: scaled to the active set-point and the measured noise
@@ -42,7 +60,7 @@ impl RobustLaw {
     /// How far ahead of the robot the approach may command, in time at approach speed, s.
     pub(super) fn anchor_time(&self, cycle: f64) -> f64 {
         let c = &self.p.cell;
-        (4.0 * (c.lag + c.loop_delay() + self.signals.delay(cycle))).max(0.05)
+        (ANCHOR_LEADS * (c.lag + c.loop_delay() + self.signals.delay(cycle))).max(ANCHOR_MIN_TIME)
     }
 
     /// The command in contact before limits.
@@ -141,7 +159,7 @@ impl RobustLaw {
         let sigma = self.noise.std();
         let off = (s.ff - self.response.set_point()).abs()
             > self.band(sigma * self.signals.noise_gain(cycle));
-        let persist = 0.5 * self.signals.step_time(cycle);
+        let persist = self.signals.step_time(cycle) / 2.0;
         let calm = self.contact.steady()
             && !moving
             && !self.identify.fitting()

@@ -6,6 +6,10 @@ use serde::{Deserialize, Serialize};
 use super::positive;
 use crate::law::Events;
 
+/// The relative excess over the acceleration limit's velocity step that counts as the limit acting:
+/// the braking's square root and the clamp round in the last digits, which is not a limit event.
+const ACCELERATION_TOLERANCE: f64 = 1e-9;
+
 /// Hard limits. Each one that acts is reported.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -84,11 +88,11 @@ impl Limiter {
         // Braking: never faster than what can still stop at the target (not a limit event: it is how
         // an acceleration-limited command reaches a target without overshoot). Discrete time: the
         // largest speed from which steps of at most `a·dt` velocity change still stop within `dist`.
-        let half = 0.5 * l.max_acceleration * dt;
+        let half = l.max_acceleration * dt / 2.0;
         let v_brake = (half * half + 2.0 * l.max_acceleration * dist.abs()).sqrt() - half;
         v = v.clamp(-v_brake, v_brake);
         let dv = l.max_acceleration * dt;
-        if (v - self.v).abs() > dv * (1.0 + 1e-9) {
+        if (v - self.v).abs() > dv * (1.0 + ACCELERATION_TOLERANCE) {
             v = v.clamp(self.v - dv, self.v + dv);
             ev.acceleration_limit = true;
         }

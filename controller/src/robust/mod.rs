@@ -60,6 +60,7 @@ use crate::law::{ContactState, EventCounts, Events, ForceLaw, Output};
 pub mod cell;
 mod compose;
 pub mod contact;
+pub mod guards;
 pub mod identify;
 pub mod limiter;
 pub mod motion;

@@ -21,6 +21,10 @@ use crate::estimator::surface_moving;
 /// The fewest samples a surface motion is confirmed on, whatever the cycle.
 const MIN_SAMPLES: f64 = 2.0;
 
+/// [`MIN_SAMPLES`] as a time in steps: half a step less, a margin for the rounding of the sum of the
+/// steps' `dt`.
+const CONFIRM_STEPS: f64 = MIN_SAMPLES - 0.5;
+
 /// The motion tests' state.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Motion {
@@ -122,7 +126,7 @@ impl Motion {
         // Confirmed over `motion_confirm`, and never on fewer than `MIN_SAMPLES` samples: on a slow
         // cycle one noisy sample would otherwise be a motion (half a cycle of margin for the sum's
         // rounding).
-        let confirm = p.motion_confirm.max((MIN_SAMPLES - 0.5) * dt);
+        let confirm = p.motion_confirm.max(CONFIRM_STEPS * dt);
         if confirmed(&mut self.time, surface_moving(v, v_raw, thr), confirm, dt) {
             self.hold = p.motion_hold;
         }
@@ -148,7 +152,7 @@ impl Motion {
                     self.run_against += dt;
                 }
             }
-            let opposed = p.opposed_confirm.max((MIN_SAMPLES - 0.5) * dt);
+            let opposed = p.opposed_confirm.max(CONFIRM_STEPS * dt);
             if self.run_with >= opposed && self.run_against >= opposed {
                 self.est_hold = p.motion_hold;
                 self.hold = p.motion_hold;

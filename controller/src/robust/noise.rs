@@ -10,6 +10,15 @@ use serde::{Deserialize, Serialize};
 
 use super::positive;
 
+/// Variance of the second difference `f_k − 2·f_{k−1} + f_{k−2}` of white noise, in units of the
+/// noise's variance: `1² + 2² + 1² = 6`, exactly.
+const SECOND_DIFFERENCE_GAIN: f64 = 6.0;
+
+/// The clip on a second difference, in its own standard deviations: three: 0.27 % of Gaussian noise's
+/// differences are clipped, which biases the variance down by 0.5 %, and an impact or a step cannot
+/// pass for noise.
+const CLIP_DEVIATIONS: f64 = 3.0;
+
 /// The noise meter's parameters (advanced: the defaults suit any cell).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -78,12 +87,12 @@ impl NoiseMeter {
             let clip = if self.age == 0.0 {
                 f64::INFINITY
             } else {
-                3.0 * (6.0 * self.var).sqrt() + self.p.clip_floor
+                CLIP_DEVIATIONS * (SECOND_DIFFERENCE_GAIN * self.var).sqrt() + self.p.clip_floor
             };
             self.age += dt;
             let a = (dt / self.age.min(self.p.window)).min(1.0);
             let d2 = (f - 2.0 * p1 + p2).clamp(-clip, clip);
-            self.var += a * (d2 * d2 / 6.0 - self.var);
+            self.var += a * (d2 * d2 / SECOND_DIFFERENCE_GAIN - self.var);
         }
         self.prev = Some((f, self.prev.map(|p| p.0)));
     }

@@ -4,7 +4,17 @@
 //! of the conditioned and the raw position.
 
 use super::cell::SENSOR_DELAY_STEPS;
-use crate::conditioning::{ConditioningParams, SignalFilter};
+use crate::conditioning::{CUTOFF_CAP, ConditioningParams, SignalFilter};
+
+/// Noise bandwidth of the second-order Butterworth low-pass, in units of its cut-off: white noise
+/// through it has the variance it has through an ideal low-pass this many cut-offs wide. Exactly
+/// `(π/4)/sin(π/4) = π/(2·√2) ≈ 1.1107` (an `n`-th order Butterworth: `(π/2n)/sin(π/2n)`), rounded.
+pub const NOISE_BANDWIDTH: f64 = 1.11;
+
+/// How long a step takes to pass the conditioning, in periods of its cut-off frequency (`1/f_c`):
+/// the group delay `√2/(2π·f_c) ≈ 0.23/f_c` and about two low-pass time constants `1/(2π·f_c)`
+/// beyond it, `≈ 0.54/f_c`, rounded up: 30 ms at 20 Hz.
+pub const STEP_TIME_PERIODS: f64 = 0.6;
 
 /// One step's conditioned signals.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -58,6 +68,7 @@ impl Past {
     /// Remember position `x` (m) reached after a step of `dt` (s); the position `delay` (s) before it,
     /// interpolated between the positions remembered (the oldest, further back).
     fn pair(&mut self, x: f64, dt: f64, delay: f64) -> f64 {
+        // The ring's length.
         const N: usize = SENSOR_DELAY_STEPS;
         self.head = (self.head + 1) % N;
         self.x[self.head] = x;
@@ -140,16 +151,22 @@ impl Conditioner {
         }
     }
 
+    /// The low-pass's cut-off at control period `cycle`, Hz: as configured, at most [`CUTOFF_CAP`] of
+    /// the sampling rate (as [`crate::conditioning`] designs it).
+    fn cutoff(&self, cycle: f64) -> f64 {
+        self.p.cutoff.min(CUTOFF_CAP / cycle)
+    }
+
     /// Low-frequency group delay of the conditioning at control period `cycle`, s.
     pub fn delay(&self, cycle: f64) -> f64 {
-        core::f64::consts::SQRT_2 / (core::f64::consts::TAU * self.p.cutoff.min(0.45 / cycle))
+        core::f64::consts::SQRT_2 / (core::f64::consts::TAU * self.cutoff(cycle))
     }
 
     /// How much of white noise's standard deviation passes the conditioning at control period
-    /// `cycle`: `√(2·B·cycle)`, `B = 1.11·f_c` the second-order low-pass's noise bandwidth.
+    /// `cycle`: `√(2·B·cycle)`, `B = NOISE_BANDWIDTH·f_c` the second-order low-pass's noise bandwidth.
     pub fn noise_gain(&self, cycle: f64) -> f64 {
-        let fc = self.p.cutoff.min(0.45 / cycle);
-        (2.0 * 1.11 * fc * cycle).sqrt().min(1.0)
+        let fc = self.cutoff(cycle);
+        (2.0 * NOISE_BANDWIDTH * fc * cycle).sqrt().min(1.0)
     }
 
     /// How long a step takes to pass the conditioning, s: about two of its low-pass time constants
@@ -157,7 +174,7 @@ impl Conditioner {
     /// a 12 ms cycle a step still passes when 30 ms of steps have counted). Innovations that last this
     /// long are no longer a jump.
     pub fn step_time(&self, cycle: f64) -> f64 {
-        0.6 / self.p.cutoff.min(0.45 / cycle) + cycle
+        STEP_TIME_PERIODS / self.cutoff(cycle) + cycle
     }
 }
 

@@ -12,7 +12,21 @@
 //! speed against 5 (the re-contact tripped the force limit); on a 4 ms cycle the command reverses
 //! within a cycle and the lag costs about one more millisecond.
 
+use super::guards::{DISTANCE_GUARD, SPEED_GUARD, STIFFNESS_GUARD};
 use super::{CellParams, LimitParams};
+
+/// What a table is keyed on: cycle, lag, the robot's and the sensor's delays, acceleration, velocity.
+const KEY_LEN: usize = 6;
+
+/// The relative change of the measured cycle that re-tabulates: 1 %, a choice that keeps a measured
+/// cycle's small wander from re-tabulating (each re-tabulation simulates [`POINTS`] stops in one
+/// control step) while a real change of the cycle does.
+const CYCLE_TOLERANCE: f64 = 0.01;
+
+/// How far below a whole number of cycles the delay is still counted as that many cycles, in cycles:
+/// a delay configured as `3 × 4 ms` is 3 cycles of a measured 4 ms cycle, not 4, whatever rounding
+/// the division leaves.
+const WHOLE_CYCLE_TOLERANCE: f64 = 1e-6;
 
 /// Speeds tabulated: `top·2^−i`, `i` = 0…`POINTS`−1 (top the limiter's velocity), so the slow
 /// approach is resolved as well as the fast search.
@@ -29,7 +43,7 @@ const MAX_STEPS: usize = 4096;
 pub struct Stopping {
     /// What the table was made for: cycle, lag, the robot's and the sensor's delays, acceleration,
     /// velocity (NaN: nothing yet).
-    key: [f64; 6],
+    key: [f64; KEY_LEN],
     /// `speed[i]` (m/s, falling) and the travel into the surface at that speed, m.
     speed: [f64; POINTS],
     travel: [f64; POINTS],
@@ -45,7 +59,7 @@ impl Stopping {
     /// Nothing tabulated yet.
     pub fn new() -> Self {
         Self {
-            key: [f64::NAN; 6],
+            key: [f64::NAN; KEY_LEN],
             speed: [0.0; POINTS],
             travel: [0.0; POINTS],
         }
@@ -61,13 +75,14 @@ impl Stopping {
             limits.max_acceleration,
             limits.max_velocity,
         ];
-        let same = (key[0] - self.key[0]).abs() <= 0.01 * self.key[0] && key[1..] == self.key[1..];
+        let same = (key[0] - self.key[0]).abs() <= CYCLE_TOLERANCE * self.key[0]
+            && key[1..] == self.key[1..];
         if same {
             return;
         }
         self.key = key;
         for i in 0..POINTS {
-            let v = limits.max_velocity * 0.5f64.powi(i as i32);
+            let v = limits.max_velocity / 2f64.powi(i as i32);
             self.speed[i] = v;
             self.travel[i] = travel(cell, cycle, limits, v);
         }
@@ -91,20 +106,20 @@ impl Stopping {
 
     /// The stopping time at `v`: the travel over the speed, s.
     pub fn time(&self, v: f64) -> f64 {
-        self.travel(v) / v.max(1e-12)
+        self.travel(v) / v.max(SPEED_GUARD)
     }
 
     /// The largest speed (at most `cap`, m/s, and the limiter's velocity) whose travel into
     /// stiffness `k` (N/m) stays within `force` (N).
     pub fn speed_within(&self, force: f64, k: f64, cap: f64) -> f64 {
-        let room = force.max(0.0) / k.max(1e-12);
+        let room = force.max(0.0) / k.max(STIFFNESS_GUARD);
         let (s, d) = (&self.speed, &self.travel);
         let v = if room >= d[0] {
             s[0]
         } else if let Some(i) = (1..POINTS).find(|&i| room >= d[i]) {
-            s[i] + (room - d[i]) / (d[i - 1] - d[i]).max(1e-18) * (s[i - 1] - s[i])
+            s[i] + (room - d[i]) / (d[i - 1] - d[i]).max(DISTANCE_GUARD) * (s[i - 1] - s[i])
         } else {
-            s[POINTS - 1] * room / d[POINTS - 1].max(1e-18)
+            s[POINTS - 1] * room / d[POINTS - 1].max(DISTANCE_GUARD)
         };
         v.min(cap)
     }
@@ -123,7 +138,7 @@ pub fn travel(cell: &CellParams, cycle: f64, limits: &LimitParams, v: f64) -> f6
     } else {
         1.0
     };
-    let delay_cycles = (cell.delay / t - 1e-6).ceil().max(0.0);
+    let delay_cycles = (cell.delay / t - WHOLE_CYCLE_TOLERANCE).ceil().max(0.0);
     // At the sample that sees the contact, the tool has gone up to one cycle in, and the commands of
     // the delay still move it on at `v`; then the first braked command arrives. At steady speed the
     // tool is `v·t/α` behind the command it follows. The last command sent is the origin.

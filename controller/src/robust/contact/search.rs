@@ -21,6 +21,7 @@
 use super::{ContactMachine, Thresholds};
 use crate::law::ContactState;
 use crate::robust::Stopping;
+use crate::robust::guards::STIFFNESS_GUARD;
 
 /// Standard deviations of `k̂_c` above the estimate the fast search takes the surface's stiffness
 /// for: its re-contact presses to the limit times `k_c/k̂_c`, and the limit is a trip (a 12 ms cell's
@@ -81,8 +82,8 @@ impl ContactMachine {
             reacquire: stop
                 .speed_within(max_force - seen, k_trip, c.reacquire_speed)
                 .max(near),
-            margin: c.reacquire_margin * f_r.max(c.contact_force) / k.max(1e-12),
-            penetration: f_r.max(c.contact_force) / k.max(1e-12),
+            margin: c.reacquire_margin * f_r.max(c.contact_force) / k.max(STIFFNESS_GUARD),
+            penetration: f_r.max(c.contact_force) / k.max(STIFFNESS_GUARD),
         }
     }
 

@@ -1,6 +1,7 @@
 //! The contact detector's thresholds, scaled to the set-point and the measured noise.
 
 use super::ContactMachine;
+use crate::robust::guards::{FORCE_GUARD, NOISE_GUARD};
 
 /// The detector's thresholds for one step, scaled to the set-point and the measured noise (see
 /// [`ContactMachine::thresholds`]).
@@ -40,6 +41,19 @@ pub const SIGNIFICANCE: f64 = 4.0;
 /// limit.
 pub const LIFT_NOISE: f64 = 2.0;
 
+/// The contact threshold's share of a small set-point: below twice `contact_force` the contact is
+/// declared at half the set-point, so that a small set-point's contact is still seen.
+pub const CONTACT_SHARE: f64 = 0.5;
+
+/// The steady contact's lift-off threshold's ceiling as a share of the set-point: a quarter. A hold
+/// at the set-point stays three quarters of it away, so [`LIFT_NOISE`] never raises the threshold into
+/// the contact's own force.
+pub const LIFT_OFF_SHARE: f64 = 0.25;
+
+/// The most consecutive samples a lift-off needs, however noisy: 64 ms at 1 kHz, 0.77 s on a 12 ms
+/// cycle. A bound on the count, which grows without one as the set-point nears the noise.
+pub const MAX_LIFT_SAMPLES: f64 = 64.0;
+
 impl ContactMachine {
     /// The thresholds for set-point `f_r` (N) and the conditioned force's noise `sigma_ff` (N) and the
     /// raw force's `sigma` (N): `contact_force` and `lift_force` as configured for a set-point of at
@@ -54,10 +68,13 @@ impl ContactMachine {
     /// a steady contact's lift-off counts samples below `lift_off` instead, as many in a row alike.
     pub fn thresholds(&self, f_r: f64, sigma: f64, sigma_ff: f64) -> Thresholds {
         let c = &self.p;
-        let contact = c.contact_force.min(0.5 * f_r).max(SIGNIFICANCE * sigma_ff);
+        let contact = c
+            .contact_force
+            .min(CONTACT_SHARE * f_r)
+            .max(SIGNIFICANCE * sigma_ff);
         let lift = c.lift_force * contact / c.contact_force;
         let lift_off = (lift + LIFT_NOISE * sigma)
-            .min(0.25 * f_r)
+            .min(LIFT_OFF_SHARE * f_r)
             .min(f_r - SIGNIFICANCE * sigma)
             .max(lift);
         // Two samples, one more per `below` of raw noise; and, as a hold at the set-point puts a raw
@@ -65,10 +82,10 @@ impl ContactMachine {
         // deviations, at least as many in a row as bring that down to a [`SIGNIFICANCE`] event,
         // `exp(−SIGNIFICANCE²/2)`.
         let in_a_row = |below: f64| {
-            let extra = (sigma / below.max(1e-9)).ceil();
-            let a = (f_r - below).max(0.0) / sigma.max(1e-12);
-            let run = 0.5 * SIGNIFICANCE * SIGNIFICANCE / (0.5 * a * a + core::f64::consts::LN_2);
-            (2.0 + extra).max(run.ceil()).min(64.0) as u32
+            let extra = (sigma / below.max(FORCE_GUARD)).ceil();
+            let a = (f_r - below).max(0.0) / sigma.max(NOISE_GUARD);
+            let run = SIGNIFICANCE * SIGNIFICANCE / 2.0 / (a * a / 2.0 + core::f64::consts::LN_2);
+            (2.0 + extra).max(run.ceil()).min(MAX_LIFT_SAMPLES) as u32
         };
         Thresholds {
             contact,

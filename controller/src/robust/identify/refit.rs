@@ -30,6 +30,11 @@ use super::Identifier;
 use crate::onset::{LineFit, OnsetFit};
 use crate::robust::contact::SIGNIFICANCE;
 
+/// Relative standard deviations of `k̂_c` by which `max_refit_change` widens: the largest change a
+/// re-fit may make is `max_refit_change·(1 + 3·σ_rel)`, three deviations covering what an unsure
+/// `k̂_c` may really be off by.
+const TRUST_DEVIATIONS: f64 = 3.0;
+
 /// A re-fit while it runs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Refit {
@@ -163,7 +168,7 @@ impl Identifier {
         let (pivot, pivot_var) = (refit.pivot, refit.pivot_var);
         // A change beyond `max_refit_change` (widened by what `k̂_c` is unsure of) is no stiffness
         // change the law believes: a surface moving slowly fits such a line too.
-        let trust = self.p.max_refit_change * (1.0 + 3.0 * self.kc_rel_sd());
+        let trust = self.p.max_refit_change * (1.0 + TRUST_DEVIATIONS * self.kc_rel_sd());
         // The stale spring on a surface moving at a constant speed, the other explanation (module
         // docs): a change must explain the window better.
         let moving = self.onset.moving_sse().unwrap_or(f64::INFINITY);

@@ -1,6 +1,7 @@
 //! The feed-forward: the predictor run on the raw surface `x − f/k̂_c`, its jump test, the motion
 //! tests it feeds, and the command that puts the tool on the surface predicted the delay ahead.
 
+use super::super::guards::VARIANCE_GUARD;
 use super::super::motion::threshold;
 use super::{SurfaceObserver, View};
 use crate::predictor::JumpTest;
@@ -81,7 +82,7 @@ impl SurfaceObserver {
         }
         let sv = p.motion_significance * v_std;
         let sa = p.motion_significance * self.pred.acceleration_std();
-        let m2 = v * v / (sv * sv + 1e-30) + a * a / (sa * sa + 1e-30);
+        let m2 = v * v / (sv * sv + VARIANCE_GUARD) + a * a / (sa * sa + VARIANCE_GUARD);
         let weight = if self.motion.established() {
             m2 / (m2 + 1.0)
         } else {
