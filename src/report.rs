@@ -90,11 +90,9 @@ pub fn sim(spec: &RunSpec, run: &RunResult, out: &Path, check: bool) -> Result<u
             ),
         ),
         (
-            "faults",
-            format!(
-                "{} sensor, {} non-finite, {} limited",
-                run.stats.sensor_faults, run.stats.nonfinite_inputs, run.stats.limited
-            ),
+            // Per-cycle conditions by their schema names: "fault" means only the process fault.
+            "conditions",
+            ::scenario::telemetry::condition_counts(&run.rows),
         ),
         ("law events", {
             let e = &run.law_events;
