@@ -93,8 +93,11 @@ impl RunSpec {
 /// What a run produced.
 #[derive(Clone, Debug)]
 pub struct RunResult {
-    /// One row per step.
+    /// One row per answered cycle: the run's control, then the return to the programmed path after
+    /// an early end (see [`control`](Self::control)).
     pub rows: Vec<Row>,
+    /// How many of `rows` are the run's control: the metrics and verdicts see only these.
+    pub control: usize,
     /// Loop counters.
     pub stats: LoopStats,
     /// The law's own event counters (contacts, lift-offs, limits that acted; zero for laws without).
@@ -114,13 +117,18 @@ pub struct RunResult {
 pub type Verdict = ::scenario::run::Check;
 
 impl RunResult {
+    /// The rows of the run's control (without the return to the path after an early end).
+    pub fn control_rows(&self) -> &[Row] {
+        &self.rows[..self.control]
+    }
+
     /// Check every target of the scenario. A run the loop ended early (a fault backed the tool off)
     /// meets none: what it measured before the fault is not the scenario's course.
     pub fn verdicts(&self, targets: &[Target]) -> Vec<Verdict> {
         targets
             .iter()
             .map(|t| {
-                let mut v = Verdict::of(t, &self.rows);
+                let mut v = Verdict::of(t, self.control_rows());
                 v.pass &= self.ended_early.is_none();
                 v
             })
@@ -191,16 +199,17 @@ where
     };
     let outcome = controller::run::run(&mut lp, limits, &mut sink);
     let (ended_early, interrupted) = sim_end(&outcome);
-    let rows = sink.finish(spec.plant.period);
+    let (rows, control) = sink.finish(spec.plant.period);
     progress(1.0);
     let wall = started.elapsed();
     drop(recorder);
     let stats = lp.stats();
     let law_events = lp.law().counters();
     drop(lp);
-    let metrics = Metrics::compute(&rows, 0.0, f64::INFINITY);
+    let metrics = Metrics::compute(&rows[..control], 0.0, f64::INFINITY);
     Ok(RunResult {
         rows,
+        control,
         stats,
         law_events,
         metrics,

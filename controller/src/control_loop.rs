@@ -239,8 +239,9 @@ impl<R: RobotLink, S: ForceSensor, L: CellLaw> ControlLoop<R, S, L> {
                 let dt = self.law_dt(&cycle);
                 self.guard.observe(&self.cfg.process, f, dt);
                 if let Some((o, c)) = self.step_law(&cycle, &w, dt, &mut fault) {
-                    (out, cmd) = (o, c);
+                    out = o;
                     let f_r = self.law.set_point();
+                    cmd = c.min(self.guard.search_limit(&self.cfg.process, &o));
                     tripped = match self.guard.check(&self.cfg.process, &o, f, f_r, dt) {
                         Err(t) => Some(t),
                         Ok(_) if fault == Some(Fault::EnvelopeLimited) => {
@@ -492,6 +493,78 @@ impl<R: RobotLink, S: ForceSensor, L: CellLaw> ControlLoop<R, S, L> {
         self.robot.reply(&command).map_err(LoopError::Robot)?;
         self.stats.cycles += 1;
         Ok(())
+    }
+
+    /// After the run ended early (a fault, the program's abort, the operator's stop), while the robot
+    /// still cycles: answer one cycle with the correction stepped back towards the programmed path —
+    /// the normal command towards zero at `retract_speed` (within `max_step`), but never towards the
+    /// part (a command already backed off behind the path stays), the tangential translation
+    /// likewise, the rotation in step with them ([`LoopConfig::return_cycles`]). `Ok(None)` once the
+    /// correction is there (no cycle answered): `Stop` follows. The law is not stepped.
+    pub fn unwind(&mut self) -> Result<Option<CycleReport>, LoopError<R::Error, S::Error>> {
+        let home = self.last_cmd <= 0.0
+            && self.side.translation.x == 0.0
+            && self.side.translation.y == 0.0
+            && self.side.rotation.iter().all(|r| *r == 0.0);
+        if home || !self.started {
+            return Ok(None);
+        }
+        let cycle = loop {
+            match self.robot.next_cycle() {
+                Ok(c) => break c,
+                Err(e) if e.kind().is_transient() => self.stats.robot_glitches += 1,
+                Err(e) => return Err(LoopError::Robot(e)),
+            }
+        };
+        let x = cycle.tool_offset().z;
+        let step = self.cfg.retract_step(cycle.period);
+        let toward = |v: f64, to: f64| {
+            if v > to {
+                (v - step).max(to)
+            } else {
+                (v + step).min(to)
+            }
+        };
+        let z = if self.last_cmd > 0.0 {
+            toward(self.last_cmd, 0.0)
+        } else {
+            self.last_cmd
+        };
+        let left = self
+            .cfg
+            .return_cycles(self.last_cmd.max(0.0), &self.side, cycle.period);
+        for i in 0..2 {
+            self.side.translation[i] = toward(self.side.translation[i], 0.0);
+        }
+        self.side.rotation *= if left > 1.0 { 1.0 - 1.0 / left } else { 0.0 };
+        let (wrench, sample) = match self.sensor.read() {
+            Ok(s) if s.wrench.is_finite() => (self.compensate(&s.wrench), Some(s)),
+            Ok(s) => (None, Some(s)),
+            Err(_) => (None, None),
+        };
+        let f = wrench.map(|w| self.cfg.force_sign * w.force.z);
+        let command = Correction {
+            process: self.process.state(),
+            ..self.command(z)
+        };
+        let out = Output {
+            x_cmd: z,
+            ..self.last_out
+        };
+        self.reply(&command, out)?;
+        self.stats.retract_cycles += 1;
+        Ok(Some(CycleReport {
+            cycle,
+            x,
+            f,
+            sample,
+            wrench,
+            compensated: self.gravity.is_some(),
+            out: self.last_out,
+            command,
+            set_point: self.law.set_point(),
+            fault: Some(Fault::Retracting),
+        }))
     }
 
     /// One cycle of the back-off after a fault: step the command towards the phase's target at

@@ -14,8 +14,10 @@
 //!    stands), or the robot link failing (errs, the link is gone).
 //!
 //! # Stop policy
-//! Wherever the link still stands, the robot's correction motion is ended cleanly with
-//! [`Cycler::stop`] (one more cycle answered with `stop` set, carrying the latched fault where the link
+//! After an early end — a fault, the robot program's abort, the operator's stop — while the link
+//! stands, the correction first returns to the programmed path ([`Cycler::unwind`]: at the retract
+//! speed, never towards the part; every cycle of it goes to the sink). Wherever the link still
+//! stands, the robot's correction motion is then ended cleanly with [`Cycler::stop`] (one more cycle answered with `stop` set, carrying the latched fault where the link
 //! has process channels). A failed robot link has no one left to tell. A robot link that falls silent
 //! after its first cycle is the normal end of a run whose robot owns the session
 //! ([`RunLimits::robot_session`]); everywhere else it is [`End::LinkLost`].
@@ -40,6 +42,12 @@ pub trait Cycler {
     fn robot_gone(e: &Self::Error) -> bool;
     /// Cycles answered so far.
     fn cycles(&self) -> u64;
+    /// After an early end, while the link stands: answer one cycle stepping the correction back
+    /// towards the programmed path (never towards the part); `Ok(None)` once it is there (default:
+    /// a cycler that commands nothing is always there).
+    fn unwind(&mut self) -> Result<Option<CycleReport>, Self::Error> {
+        Ok(None)
+    }
     /// True when the cycler's own work is done (a calibration that has its poses): the run then
     /// ends normally after the cycle just answered.
     fn done(&self) -> bool {
@@ -61,6 +69,9 @@ impl<R: RobotLink, S: ForceSensor, L: CellLaw> Cycler for ControlLoop<R, S, L> {
     fn cycles(&self) -> u64 {
         self.stats().cycles
     }
+    fn unwind(&mut self) -> Result<Option<CycleReport>, Self::Error> {
+        ControlLoop::unwind(self)
+    }
 }
 
 /// A robot program's state, for runs whose robot program the runner can see (a simulation).
@@ -79,6 +90,12 @@ pub trait Sink {
     /// Take one answered cycle's report. Return `false` to end the run normally after this cycle
     /// (the sink's own length: a calibration that has its poses).
     fn record(&mut self, report: &CycleReport) -> bool;
+    /// Take one cycle of the return to the programmed path after the run ended early
+    /// ([`Cycler::unwind`]): it happened and is recorded, but it is no longer the run's control
+    /// (default: [`record`](Self::record) it, its verdict ignored).
+    fn unwound(&mut self, report: &CycleReport) {
+        self.record(report);
+    }
     /// The robot program's state, checked before each cycle (default: none watched).
     fn program(&mut self) -> Program {
         Program::Running
@@ -195,6 +212,24 @@ impl<E> Outcome<E> {
     }
 }
 
+/// The most cycles the return after an early end answers (over half an hour at 4 ms): a cycler that
+/// never reports home is cut off here and `Stop` is sent where it stands.
+pub const MAX_UNWIND_CYCLES: u64 = 500_000;
+
+/// After an early end, bring the correction back to the programmed path before `Stop`: every cycle
+/// of the return goes to `sink` as any other (its result is not a verdict: the run has ended).
+/// An error when the link failed on the way (no `Stop` can follow); `Ok` when it is home (or
+/// [`MAX_UNWIND_CYCLES`] passed).
+fn unwind<C: Cycler>(cycler: &mut C, sink: &mut dyn Sink) -> Result<(), C::Error> {
+    for _ in 0..MAX_UNWIND_CYCLES {
+        match cycler.unwind()? {
+            Some(r) => sink.unwound(&r),
+            None => return Ok(()),
+        }
+    }
+    Ok(())
+}
+
 /// Run `cycler` until an end condition holds, hand every answered cycle to `sink`, and end the
 /// robot's correction motion cleanly wherever the link still stands.
 pub fn run<C: Cycler>(
@@ -242,7 +277,11 @@ pub fn run<C: Cycler>(
     let stop = match &end {
         End::RobotEnded(_) | End::LinkLost(_) => None,
         End::Stopped(Some(e)) if C::robot_gone(e) => None,
-        _ => Some(cycler.stop()),
+        End::Fault(_) | End::Program(Some(_)) | End::Stopped(_) => match unwind(cycler, sink) {
+            Ok(()) => Some(cycler.stop()),
+            Err(e) => Some(Err(e)),
+        },
+        End::Done | End::Program(None) => Some(cycler.stop()),
     };
     Outcome {
         end,
@@ -288,6 +327,10 @@ mod tests {
         answered: u64,
         stops: u32,
         stop_fails: bool,
+        /// Cycles the return to the path takes once asked (then it is home).
+        away: u32,
+        /// The return's cycles answered, and whether each came before any `Stop`.
+        unwound: Vec<bool>,
     }
 
     impl Script {
@@ -298,6 +341,8 @@ mod tests {
                 answered: 0,
                 stops: 0,
                 stop_fails: false,
+                away: 0,
+                unwound: Vec::new(),
             }
         }
     }
@@ -362,6 +407,15 @@ mod tests {
         }
         fn cycles(&self) -> u64 {
             self.answered
+        }
+        fn unwind(&mut self) -> Result<Option<CycleReport>, Err> {
+            if self.away == 0 {
+                return Ok(None);
+            }
+            self.away -= 1;
+            self.answered += 1;
+            self.unwound.push(self.stops == 0);
+            Ok(Some(report(self.k, false)))
         }
     }
 
@@ -477,6 +531,62 @@ mod tests {
         let mut c = Script::new(&[Step::Gone]);
         let o = run(&mut c, l, &mut ());
         assert!(matches!(o.end, End::LinkLost(_)), "{}", o.end);
+    }
+
+    /// After a fault, a program's abort or the operator's stop the correction returns to the path
+    /// (every cycle of it to the sink) before `Stop`; a run that ends normally stops where it is.
+    #[test]
+    fn an_early_end_returns_to_the_path_before_the_stop() {
+        struct Aborts(usize, Vec<CycleReport>);
+        impl Sink for Aborts {
+            fn record(&mut self, r: &CycleReport) -> bool {
+                self.1.push(*r);
+                true
+            }
+            fn program(&mut self) -> Program {
+                if self.1.len() >= self.0 {
+                    Program::Aborted("FAULT 5".into())
+                } else {
+                    Program::Running
+                }
+            }
+        }
+        let mut c = Script::new(&[Step::Ok, Step::Ok, Step::Fault]);
+        c.away = 4;
+        let mut seen = Vec::new();
+        let o = run(&mut c, limits(Some(10)), &mut seen);
+        assert!(matches!(o.end, End::Fault(Err::Fault)), "{}", o.end);
+        assert_eq!(
+            c.unwound, [true; 4],
+            "four return cycles, all before the Stop"
+        );
+        assert_eq!((seen.len(), c.stops), (2 + 4, 1));
+        assert_eq!(o.cycles, 3 + 4 + 1);
+
+        let mut c = Script::new(&[]);
+        c.away = 2;
+        let mut sink = Aborts(3, Vec::new());
+        let o = run(&mut c, limits(Some(10)), &mut sink);
+        assert!(matches!(o.end, End::Program(Some(_))), "{}", o.end);
+        assert_eq!((sink.1.len(), c.unwound.len(), c.stops), (5, 2, 1));
+
+        let stop = AtomicBool::new(true);
+        let mut c = Script::new(&[]);
+        c.away = 3;
+        let l = RunLimits {
+            stop: Some(&stop),
+            ..limits(None)
+        };
+        let o = run(&mut c, l, &mut ());
+        assert!(matches!(o.end, End::Stopped(None)), "{}", o.end);
+        assert_eq!((c.unwound.len(), c.stops), (3, 1));
+
+        // A normal end: no return.
+        let mut c = Script::new(&[]);
+        c.away = 3;
+        let o = run(&mut c, limits(Some(5)), &mut ());
+        assert!(matches!(o.end, End::Done));
+        assert_eq!((c.unwound.len(), c.stops, o.cycles), (0, 1, 6));
     }
 
     #[test]

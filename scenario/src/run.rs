@@ -102,6 +102,10 @@ pub struct Ended {
     /// That fault's code in the process contract (`FcState.Fault`: 2 force limit, 5 contact lost, …),
     /// `None` without one.
     pub fault_code: Option<i64>,
+    /// Why the robot program ended early, when it did (a simulated program's abort).
+    pub aborted: Option<String>,
+    /// The robot got its `Stop` at the end.
+    pub stopped: bool,
 }
 
 /// Run `scenario` on `plant` with `tuning` (the scenario's overrides and the plant's cell model
@@ -142,8 +146,12 @@ pub fn resolve_tuning(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuni
 /// The sink of a simulated run: one [`Row`] per answered cycle, the simulated robot program's end,
 /// and whatever else the caller hands each cycle to (a recorder, a progress bar).
 pub struct WorldSink<'a> {
-    /// One row per answered cycle (truth columns filled by [`WorldSink::finish`]).
+    /// One row per answered cycle of the run's control (truth columns filled by
+    /// [`WorldSink::finish`]).
     pub rows: Vec<Row>,
+    /// One row per cycle of the return to the programmed path after an early end
+    /// ([`Sink::unwound`]): recorded, but not the run's control, so no metric sees it.
+    pub after: Vec<Row>,
     world: &'a SharedWorld,
     has_program: bool,
     also: &'a mut dyn FnMut(&CycleReport, &Row),
@@ -160,17 +168,21 @@ impl<'a> WorldSink<'a> {
         let has_program = sim::world::lock(world).program().is_some();
         Self {
             rows: Vec::with_capacity(steps),
+            after: Vec::new(),
             world,
             has_program,
             also,
         }
     }
 
-    /// The rows, with the truth of the world's log filled in.
-    pub fn finish(mut self, period: f64) -> Vec<Row> {
+    /// Every row (the control's, then the return's), with the truth of the world's log filled in,
+    /// and how many of them are the control's.
+    pub fn finish(mut self, period: f64) -> (Vec<Row>, usize) {
+        let control = self.rows.len();
+        self.rows.append(&mut self.after);
         let truth = sim::world::lock(self.world).truth_log();
         fill_truth(&mut self.rows, &truth, period);
-        self.rows
+        (self.rows, control)
     }
 }
 
@@ -180,6 +192,12 @@ impl Sink for WorldSink<'_> {
         (self.also)(report, &row);
         self.rows.push(row);
         true
+    }
+
+    fn unwound(&mut self, report: &CycleReport) {
+        let row = Row::from_report(report, report.set_point);
+        (self.also)(report, &row);
+        self.after.push(row);
     }
 
     fn program(&mut self) -> Program {
@@ -199,6 +217,17 @@ impl Sink for WorldSink<'_> {
 /// [`run`], keeping the steps of a run that a fault ended (what led to it, its peak force); an error
 /// only when the law cannot be built.
 pub fn run_to_end(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) -> Result<Ended> {
+    run_watched(scenario, plant, tuning, &mut |_, _| {})
+}
+
+/// [`run_to_end`], handing every answered cycle's report and row to `watch` — the return to the
+/// programmed path after an early end included, which [`Ended::run`]'s rows leave out.
+pub fn run_watched(
+    scenario: &Scenario,
+    plant: &InnerLoopModel,
+    tuning: &Tuning,
+    watch: &mut dyn FnMut(&CycleReport, &Row),
+) -> Result<Ended> {
     let tuning = resolve_tuning(scenario, plant, tuning);
     let law = tuning.law.build().map_err(|e| anyhow!(e))?;
     let world = world(scenario, plant);
@@ -209,8 +238,7 @@ pub fn run_to_end(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) 
         tuning.loop_config(),
     );
     let steps = (scenario.duration / plant.period).round().max(1.0) as u64;
-    let mut nothing = |_: &CycleReport, _: &Row| {};
-    let mut sink = WorldSink::new(&world, steps as usize, &mut nothing);
+    let mut sink = WorldSink::new(&world, steps as usize, watch);
     let limits = RunLimits {
         cycles: Some(steps),
         ..RunLimits::default()
@@ -226,16 +254,28 @@ pub fn run_to_end(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) 
         ),
         _ => (None, None),
     };
+    let aborted = match &outcome.end {
+        End::Program(why) => why.clone(),
+        _ => None,
+    };
+    let stopped = outcome.stopped();
     let counters = lp.law().counters();
     let stats = lp.stats();
     drop(lp);
     Ok(Ended {
         run: Run {
-            rows: sink.finish(plant.period),
+            rows: {
+                // The return to the path after a fault is not the scenario's course.
+                let (mut rows, control) = sink.finish(plant.period);
+                rows.truncate(control);
+                rows
+            },
             counters,
             stats,
         },
         fault,
         fault_code,
+        aborted,
+        stopped,
     })
 }

@@ -4,6 +4,10 @@ use serde::{Deserialize, Serialize};
 
 use super::process::{Process, ProcessConfig};
 
+/// The rate at which a rotation the law commanded returns to zero after an early end, rad/s (no law
+/// commands a rotation yet; the curved-part work makes it a setting with the loop's rotation limit).
+pub const RETURN_TURN_RATE: f64 = 0.2;
+
 /// How the loop maps devices onto the 1-DOF law and what it refuses to command.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -49,6 +53,19 @@ impl LoopConfig {
     /// `retract_speed`, within `max_step`, m.
     pub(super) fn retract_step(&self, period: f64) -> f64 {
         (self.retract_speed * period).min(self.max_step)
+    }
+
+    /// How many cycles of `period` (s) the return to the programmed path takes at `retract_speed`
+    /// from the normal command `z` (m, towards the part) and the off-normal correction `side`: the
+    /// longest of the translations' returns, and of the rotation's at [`RETURN_TURN_RATE`] (at least
+    /// one cycle while anything is off the path).
+    pub(super) fn return_cycles(&self, z: f64, side: &hal::Correction, period: f64) -> f64 {
+        let step = self.retract_step(period);
+        let far = z
+            .max(side.translation.x.abs())
+            .max(side.translation.y.abs());
+        let turn = side.rotation.norm() / (RETURN_TURN_RATE * period);
+        (far / step).max(turn).ceil()
     }
 
     /// A process at OFF whose faults back off `retract_distance`, within the envelope.

@@ -34,6 +34,8 @@ pub(super) struct Guard {
     pub had_contact: bool,
     /// Robot time without contact after contact, s.
     pub lost: f64,
+    /// The law's command at its last step in contact, m: where a loss's search is measured from.
+    pub contact_cmd: f64,
 }
 
 impl Guard {
@@ -43,7 +45,20 @@ impl Guard {
         self.lost = 0.0;
     }
 
-    /// Filter a usable force sample taken `dt` after the last.
+    /// The deepest command the search for a lost surface may send (`+∞` while no contact is lost,
+    /// or for a law without a contact state): where the law last commanded in contact, plus
+    /// `search_depth`. The check trips on a step that wants beyond it; that step is sent clipped.
+    pub fn search_limit(&self, cfg: &ProcessConfig, out: &Output) -> f64 {
+        let searching = out.state.is_some_and(|s| s != ContactState::Contact)
+            && out.state != Some(ContactState::Approach);
+        if self.had_contact && searching {
+            self.contact_cmd + cfg.search_depth
+        } else {
+            f64::INFINITY
+        }
+    }
+
+    /// Filter a usable force sample    /// Filter a usable force sample taken `dt` after the last.
     pub fn observe(&mut self, cfg: &ProcessConfig, f: f64, dt: f64) {
         let a = (dt / (cfg.force_filter + dt)).clamp(0.0, 1.0);
         self.f_filt += a * (f - self.f_filt);
@@ -79,6 +94,7 @@ impl Guard {
         if in_contact {
             self.had_contact = true;
             self.lost = 0.0;
+            self.contact_cmd = out.x_cmd;
             return Ok(Touch::Contact);
         }
         if out.state == Some(ContactState::Approach) {
@@ -89,6 +105,20 @@ impl Guard {
             return Ok(Touch::Approach);
         }
         if self.had_contact {
+            // The search is a contact state machine's (the paper's law has none: its envelope and
+            // the contact-loss time bound it, and its reproduction stays exact).
+            let depth = out.x_cmd - self.contact_cmd;
+            if out.state.is_some() && depth > cfg.search_depth {
+                return Err((
+                    ProcessFault::ContactLost,
+                    format!(
+                        "contact lost: the search reached {:.1} mm beyond where the surface was \
+                         (search_depth {:.1} mm: the part's edge, or a hole?)",
+                        depth * 1e3,
+                        cfg.search_depth * 1e3
+                    ),
+                ));
+            }
             self.lost += dt;
             if self.lost > cfg.contact_loss_time {
                 return Err((
@@ -235,6 +265,43 @@ mod tests {
             .position(|_| g.check(&cfg, &lost, 0.0, 20.0, 0.004).is_err())
             .expect("a contact lost after the next contact still trips");
         assert!((124..=125).contains(&n), "{n}");
+    }
+
+    /// The search for a lost surface may command `search_depth` beyond the law's last command in
+    /// contact: a step that wants further is sent clipped there and trips fault 5.
+    #[test]
+    fn the_search_stops_at_its_depth_beyond_the_last_contact() {
+        let cfg = ProcessConfig::default();
+        let mut g = Guard::default();
+        let at = |state, x_cmd| Output {
+            x_cmd,
+            ..out(Some(state))
+        };
+        assert_eq!(
+            g.search_limit(&cfg, &at(ContactState::Approach, 0.0)),
+            f64::INFINITY
+        );
+        g.check(&cfg, &at(ContactState::Contact, 0.003), 20.0, 20.0, 0.004)
+            .unwrap();
+        let searching = at(ContactState::Reacquire, 0.004);
+        assert_eq!(g.search_limit(&cfg, &searching), 0.003 + cfg.search_depth);
+        assert_eq!(g.check(&cfg, &searching, 0.0, 20.0, 0.004), Ok(Touch::Free));
+        let deep = at(ContactState::Reacquire, 0.003 + cfg.search_depth + 1e-6);
+        let (code, why) = g.check(&cfg, &deep, 0.0, 20.0, 0.004).unwrap_err();
+        assert_eq!(code, ProcessFault::ContactLost);
+        assert!(why.contains("beyond where the surface was"), "{why}");
+        // The paper's law has no search to bound (its envelope does).
+        let mut g = Guard::default();
+        for _ in 0..100 {
+            g.observe(&cfg, 20.0, 0.004);
+        }
+        g.check(&cfg, &out(None), 20.0, 20.0, 0.004).unwrap();
+        let far = Output {
+            x_cmd: 1.0,
+            ..out(None)
+        };
+        assert_eq!(g.search_limit(&cfg, &far), f64::INFINITY);
+        assert!(g.check(&cfg, &far, 20.0, 20.0, 0.004).is_ok());
     }
 
     #[test]

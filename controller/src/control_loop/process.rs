@@ -10,6 +10,12 @@ use serde::{Deserialize, Serialize};
 use super::guard::{Guard, Touch, Tripped, back_off_target};
 use crate::law::Output;
 
+/// The default of [`ProcessConfig::search_depth`], m: the lost surface is searched for a few
+/// millimetres beyond where it was (docs/deploying.md, "Leaving the part").
+pub const SEARCH_DEPTH: f64 = 0.005;
+/// The largest [`ProcessConfig::search_depth`] accepted, m.
+pub const MAX_SEARCH_DEPTH: f64 = 0.02;
+
 /// How the process reacts to the program's commands. Forces in N, times in s.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -28,6 +34,11 @@ pub struct ProcessConfig {
     pub contact_loss_time: f64,
     /// Time constant of the force filter behind the `PRESSING` test and `FcState.F`, s.
     pub force_filter: f64,
+    /// How far beyond where contact was lost (the law's last command in contact) the search for the
+    /// lost surface may command, m; beyond it is a fault (code 5), and the tool backs off. A pass
+    /// that runs off the part's edge or over a hole otherwise follows the surface that is not there,
+    /// at search speed, until `contact_loss_time` ends it (18 mm in 0.5 s at 36 mm/s).
+    pub search_depth: f64,
 }
 
 impl Default for ProcessConfig {
@@ -39,6 +50,7 @@ impl Default for ProcessConfig {
             default_rate: 50.0,
             contact_loss_time: 0.5,
             force_filter: 0.01,
+            search_depth: SEARCH_DEPTH,
         }
     }
 }
@@ -67,6 +79,15 @@ impl ProcessConfig {
         pos("default_rate", self.default_rate)?;
         pos("contact_loss_time", self.contact_loss_time)?;
         pos("force_filter", self.force_filter)?;
+        pos("search_depth", self.search_depth)?;
+        if self.search_depth > MAX_SEARCH_DEPTH {
+            return Err(format!(
+                "process.search_depth is at most {} mm (the search for a lost surface must stay near \
+                 it), got {} mm",
+                MAX_SEARCH_DEPTH * 1e3,
+                self.search_depth * 1e3
+            ));
+        }
         Ok(())
     }
 

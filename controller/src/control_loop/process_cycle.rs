@@ -138,6 +138,7 @@ impl<R: RobotLink, S: ForceSensor, L: CellLaw> ControlLoop<R, S, L> {
         let Some((o, cmd)) = self.step_law(cycle, wrench, dt, fault) else {
             return (self.last_out, self.last_cmd);
         };
+        let cmd = cmd.min(self.process.guard.search_limit(&self.cfg.process, &o));
         if let Err((code, why)) = self.process.after_step(&o, f, dt) {
             self.process.latch(code, || why, cmd);
         } else if *fault == Some(Fault::EnvelopeLimited) {
