@@ -393,12 +393,17 @@ fn sim(mut a: SimArgs) -> Result<ExitCode> {
         spec.scenario.name, spec.scenario.description
     );
     println!(
-        "plant {} (period {} ms, lag {} ms, delay {} ms) · tuning {} · {} steps",
+        "plant {} (period {} ms, lag {} ms, delay {} ms) · tuning {}{} · {} steps",
         spec.plant_label,
         spec.plant.period * 1e3,
         spec.plant.tau * 1e3,
         spec.plant.delay() * 1e3,
         spec.tuning.name,
+        if tuning.is_none() && !spec.scenario.tuning_named {
+            " (the scenario names none: the shipped default)"
+        } else {
+            ""
+        },
         spec.steps()
     );
     let sensor = &spec.scenario.sensor;

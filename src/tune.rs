@@ -53,7 +53,24 @@ pub fn report(req: &TuneRequest) -> Result<(String, bool)> {
         LawConfig::Robust(p) => {
             let r = analyse_robust(p, req.k_min, req.k_max).map_err(|e| anyhow!(e))?;
             let covered = req.k_max < r.delay_independent_up_to;
-            Ok((format!("tuning {}:\n{r}", t.name), covered))
+            let verdict = if covered {
+                format!(
+                    "SAFE: the loop gain stays below 2 up to {:.0} N/m: stable for any delay and lag \
+                     before the estimator has learnt anything",
+                    req.k_max
+                )
+            } else {
+                format!(
+                    "UNSAFE without the estimator above {:.0} N/m (the loop gain reaches {:.2} at \
+                     {:.0} N/m): there the law relies on k̂_c learnt at first contact; \
+                     --k-max {:.0} or below gives an unconditional verdict",
+                    r.delay_independent_up_to,
+                    r.gain_max,
+                    req.k_max,
+                    (r.delay_independent_up_to * 0.999).floor()
+                )
+            };
+            Ok((format!("tuning {}:\n{r}\n{verdict}", t.name), covered))
         }
         law => {
             let imp = law
@@ -65,7 +82,11 @@ pub fn report(req: &TuneRequest) -> Result<(String, bool)> {
             if !r.is_safe()
                 && let Ok(p) = propose_impedance(imp.f_r, &req.model, req.k_min, req.k_max)
             {
-                text.push_str(&format!("\n\ninstead, for the same range and loop:\n{p}"));
+                text.push_str(&format!(
+                    "\n\ninstead, for the same range and loop:\n{p}\nUNSAFE: tuning {} as it \
+                     stands (above); the proposal is for the same range and loop",
+                    t.name
+                ));
             }
             Ok((text, r.is_safe()))
         }
@@ -102,7 +123,48 @@ mod tests {
             tuning: Some("robust".into()),
             f_r: 5.0,
         };
-        let (text, _) = report(&req).unwrap();
+        let (text, safe) = report(&req).unwrap();
         assert!(text.contains("below 2"), "{text}");
+        assert!(!safe);
+        assert!(
+            text.lines()
+                .last()
+                .unwrap()
+                .starts_with("UNSAFE without the estimator above 125000"),
+            "{text}"
+        );
+        let req = TuneRequest {
+            k_max: 100_000.0,
+            ..req
+        };
+        let (text, safe) = report(&req).unwrap();
+        assert!(safe);
+        assert!(
+            text.lines()
+                .last()
+                .unwrap()
+                .starts_with("SAFE: the loop gain"),
+            "{text}"
+        );
+    }
+
+    /// Every shipped tuning ends its report with a verdict line.
+    #[test]
+    fn every_tuning_gets_a_verdict() {
+        for name in crate::scenario::builtin_tuning_names() {
+            let req = TuneRequest {
+                k_min: 10_000.0,
+                k_max: 500_000.0,
+                model: loop_of_plant("p1").unwrap(),
+                tuning: Some(name.into()),
+                f_r: 5.0,
+            };
+            let (text, safe) = report(&req).unwrap_or_else(|e| panic!("{name}: {e}"));
+            let last = text.lines().last().unwrap();
+            assert!(
+                last.starts_with(if safe { "SAFE" } else { "UNSAFE" }),
+                "{name}: {last}"
+            );
+        }
     }
 }

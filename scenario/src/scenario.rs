@@ -130,9 +130,12 @@ pub struct Scenario {
     /// The robot's inner loop.
     #[serde(default)]
     pub plant: PlantSpec,
-    /// Default tuning (built-in name or file path).
+    /// Default tuning (built-in name or file path); [`DEFAULT_TUNING`] when the file names none.
     #[serde(default = "default_tuning")]
     pub tuning: String,
+    /// Whether the file named its tuning (else it runs [`DEFAULT_TUNING`], and the run says so).
+    #[serde(skip)]
+    pub tuning_named: bool,
     /// Start position along the normal, m; default 1 mm short of the surface.
     #[serde(default)]
     pub x0: Option<f64>,
@@ -153,8 +156,12 @@ pub struct Scenario {
     pub program: Option<Program>,
 }
 
+/// The tuning a scenario that names none runs: the shipped robust law (the paper's law faults where
+/// a real cell's delay and noise are; it is only ever chosen by name).
+pub const DEFAULT_TUNING: &str = "robust";
+
 fn default_tuning() -> String {
-    "paper".into()
+    DEFAULT_TUNING.into()
 }
 
 /// The longest simulated run accepted, s.
@@ -212,8 +219,11 @@ fn extent(s: &sim::Schedule, duration: f64) -> (f64, f64) {
 impl Scenario {
     /// Parse and validate TOML text; `origin` names the source in errors.
     pub fn from_toml(text: &str, origin: &str) -> Result<Self> {
-        let s: Self =
+        let mut s: Self =
             toml::from_str(text).map_err(|e| anyhow!("{origin}: {}", one_line(&e.to_string())))?;
+        s.tuning_named = text
+            .parse::<toml::Table>()
+            .is_ok_and(|t| t.contains_key("tuning"));
         s.validate()
             .with_context(|| format!("{origin}: invalid scenario"))?;
         Ok(s)
@@ -412,6 +422,17 @@ mod tests {
         for n in builtin_tuning_names() {
             load_tuning(n).unwrap();
         }
+    }
+
+    #[test]
+    fn a_scenario_without_a_tuning_runs_the_robust_law_and_knows_it() {
+        let text = "name = \"t\"\nduration = 1.0\n[environment]\nk_c = 1e4\nx_c = 0.001\n";
+        let s = Scenario::from_toml(text, "t.toml").unwrap();
+        assert_eq!((s.tuning.as_str(), s.tuning_named), ("robust", false));
+        let named = format!("tuning = \"paper\"\n{text}");
+        let s = Scenario::from_toml(&named, "t.toml").unwrap();
+        assert_eq!((s.tuning.as_str(), s.tuning_named), ("paper", true));
+        assert!(Scenario::builtins().unwrap().iter().all(|s| s.tuning_named));
     }
 
     #[test]
