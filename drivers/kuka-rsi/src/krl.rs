@@ -8,8 +8,9 @@ use crate::limits::PoscorrLimits;
 use crate::link::CorrectionMode;
 use crate::process::{FC_CMD, FC_STATE};
 
-/// What the robot must be set up with. The signal diagram itself (`.rsix`) is drawn in RSI Visual;
-/// the template lists the objects and parameters it must contain.
+/// What the robot must be set up with: the Ethernet config, the KRL template and the signal-flow
+/// context (`.rsix`, [`RobotSetup::rsix`]) it loads; the template's header lists the context's objects
+/// and parameters too (for RSI 3, where the diagram is drawn in RSI Visual).
 #[derive(Clone, Debug, PartialEq)]
 pub struct RobotSetup {
     /// The Ethernet config the ETHERNET object loads.
@@ -302,6 +303,7 @@ impl RobotSetup {
         vec![
             (format!("{}.xml", self.name), self.xml()),
             (format!("{}.src", self.name), self.krl()),
+            (format!("{}.rsix", self.name), self.rsix()),
         ]
     }
 
@@ -406,7 +408,10 @@ impl RobotSetup {
             e.ip, e.port
         );
         let _ = writeln!(k, "  ;");
-        let _ = writeln!(k, "  ; Signal diagram {n}.rsix (RSI Visual) must contain:");
+        let _ = writeln!(
+            k,
+            "  ; Signal flow {n}.rsix (written beside this file, RSI 4.1+; on RSI 3 draw it) contains:"
+        );
         let _ = writeln!(
             k,
             "  ;   ETHERNET  ConfigFile={n}.xml  Timeout={}  Precision={}",

@@ -22,6 +22,7 @@ pub mod layout;
 pub mod limits;
 pub mod link;
 pub mod process;
+pub mod rsix;
 pub mod session;
 pub mod wire;
 mod xml;
