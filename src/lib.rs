@@ -16,6 +16,7 @@ pub mod report;
 pub mod rig;
 pub mod robotiq;
 pub mod rsi;
+pub mod rt;
 pub mod runner;
 pub mod stop;
 pub mod tune;
