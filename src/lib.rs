@@ -7,6 +7,7 @@ pub mod ati;
 pub mod bench;
 pub mod candump;
 pub mod cell;
+pub mod check;
 pub mod egm;
 pub mod live;
 pub mod plot;

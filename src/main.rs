@@ -27,6 +27,9 @@ struct Cli {
 enum Command {
     /// Run the controller on a real cell from a config file (KUKA RSI + ATI CAN): record and plot.
     Run(RunArgs),
+    /// Check a cell file before the first robot cycle: addresses, limits, the robot's files, the
+    /// sensor and its tool model, the real-time permissions. Exit 0: ready.
+    Check(CheckArgs),
     /// Fit the tool's weight and the sensor bias from static poses the robot holds (for the cell file's [gravity]).
     Calibrate(CalibrateArgs),
     /// Simulate a cell: run a scenario, print a summary, write DIR/NAME.csv and DIR/NAME.png.
@@ -240,6 +243,13 @@ struct RunArgs {
 }
 
 #[derive(Args)]
+struct CheckArgs {
+    /// The cell configuration (TOML), as for `run`.
+    #[arg(long, short)]
+    config: PathBuf,
+}
+
+#[derive(Args)]
 struct CalibrateArgs {
     /// The cell configuration (TOML), as for `run`.
     #[arg(long, short)]
@@ -323,6 +333,22 @@ fn main() -> ExitCode {
         Command::Plot(a) => plot_trace(a),
         Command::Export(a) => export(a),
         Command::Run(a) => forcecell::cell::run(&a.config, a.live).map(ExitCode::from),
+        Command::Check(a) => forcecell::check::check(&a.config).map(|findings| {
+            for f in &findings {
+                println!("{f}");
+            }
+            let failed = findings
+                .iter()
+                .filter(|f| f.verdict == forcecell::check::Verdict::Fail)
+                .count();
+            if failed == 0 {
+                println!("ready");
+                ExitCode::SUCCESS
+            } else {
+                println!("not ready: {failed} problem(s) above");
+                ExitCode::from(forcecell::stop::CHECK_FAILED)
+            }
+        }),
         Command::Calibrate(a) => {
             forcecell::cell::calibrate(&a.config, a.poses).map(|()| ExitCode::SUCCESS)
         }

@@ -1,0 +1,157 @@
+//! `forcecell check --config cell.toml` against a simulated FT 300 in another process: the shipped
+//! example cell file (its addresses moved to loopback, its sensor to the simulated one) is ready,
+//! and each broken cell file is not, with the problem and its fix named.
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::Stdio;
+
+use common::{Kill, forcecell, run};
+
+/// A simulated FT 300 reporting `fz` N (the tool's weight, hanging still), served until dropped.
+fn ft300(dir: &Path, fz: &str) -> Kill {
+    let link = dir.join("ft300");
+    let mut child = forcecell()
+        .args(["sim-sensor", "robotiq", "--link"])
+        .arg(&link)
+        .args(["--fz", fz, "--noise", "0", "--seconds", "300"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start sim-sensor");
+    let mut first = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut first)
+        .unwrap();
+    assert_eq!(first.trim(), link.display().to_string());
+    Kill(child)
+}
+
+/// `examples/cell.toml` with its addresses on loopback (port `port`) and the simulated FT 300 at
+/// `dir/ft300` as its sensor; `edit` changes it further.
+fn cell(dir: &Path, port: u16, edit: impl Fn(String) -> String) -> std::path::PathBuf {
+    let example =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/cell.toml"))
+            .unwrap();
+    let mut out = String::new();
+    for line in example.lines() {
+        let key = line.split('=').next().unwrap_or("").trim();
+        let line = match key {
+            "listen" => format!("listen = \"127.0.0.1:{port}\""),
+            "robot_ip" => "robot_ip = \"127.0.0.1\"".into(),
+            "kind" if line.contains("\"ati\"") => format!(
+                "kind = \"robotiq\"\nport = \"{}\"",
+                dir.join("ft300").display()
+            ),
+            "can" | "base" | "bitrate" | "slot" | "poll_hz" | "tare" => continue,
+            _ => line.to_string(),
+        };
+        out.push_str(&line);
+        out.push('\n');
+    }
+    let path = dir.join("cell.toml");
+    std::fs::write(&path, edit(out)).unwrap();
+    path
+}
+
+fn check(path: &Path) -> (Option<i32>, String) {
+    let (out, text) = run(&["check", "--config", path.to_str().unwrap()]);
+    (out.status.code(), text)
+}
+
+#[test]
+fn the_example_cell_is_ready_against_the_simulated_peers() {
+    let dir = tempfile::tempdir().unwrap();
+    let _sensor = ft300(dir.path(), "19.613"); // 2.0 kg, the example's tool
+    let path = cell(dir.path(), 49311, |s| s);
+    let (code, text) = check(&path);
+    assert_eq!(code, Some(0), "{text}");
+    assert!(text.trim_end().ends_with("ready"), "{text}");
+    assert!(!text.contains("FAIL"), "{text}");
+    for line in [
+        "ok    listen 127.0.0.1:49311 is this PC's address",
+        "ok    robot 127.0.0.1 is on loopback",
+        "ok    the Ethernet config",
+        "answers: ",
+        "the tool weighs 19.6",
+    ] {
+        assert!(text.contains(line), "{line:?} in\n{text}");
+    }
+    assert!(
+        text.contains("real-time settings granted") || text.contains("warn  SCHED_FIFO"),
+        "{text}"
+    );
+}
+
+#[test]
+fn each_broken_cell_file_is_not_ready_and_names_its_problem() {
+    let dir = tempfile::tempdir().unwrap();
+    let _sensor = ft300(dir.path(), "19.613");
+    let robot = dir.path().join("robot");
+    let (out, text) = run(&[
+        "rsi-config",
+        "--ip",
+        "127.0.0.1",
+        "--port",
+        "49312",
+        "--out",
+        robot.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{text}");
+    let xml = robot.join("forcecell_rsi.xml");
+    let cases: Vec<(&str, Box<dyn Fn(String) -> String>, &str)> = vec![
+        (
+            "a listen address that is not this PC's",
+            Box::new(|s| s.replace("127.0.0.1:49312", "192.0.2.1:49312")),
+            "FAIL  listen 192.0.2.1:49312",
+        ),
+        (
+            "no sensor on the port",
+            Box::new(|s| s.replace("/ft300\"", "/no-such-ft300\"")),
+            "FAIL  Robotiq FT 300 on",
+        ),
+        (
+            "a tool model for another tool",
+            Box::new(|s| s.replace("signed_mass = 2.0", "signed_mass = 3.0")),
+            "the [gravity] model says 29.42 N",
+        ),
+        (
+            "POSCORRMON inside POSCORR",
+            Box::new(|s| s.replace("poscorrmon_mm = 6.0", "poscorrmon_mm = 4.0")),
+            "FAIL  POSCORRMON 4.0 mm is below POSCORR 5.0 mm",
+        ),
+        (
+            "an unknown tuning",
+            Box::new(|s| s.replace("tuning = \"robust\"", "tuning = \"no-such-tuning\"")),
+            "FAIL  tuning no-such-tuning",
+        ),
+        (
+            "a robot whose POSCORR is not the cell file's",
+            Box::new({
+                let xml = xml.clone();
+                move |s| {
+                    s.replace("poscorr_mm = 5.0", "poscorr_mm = 4.0").replace(
+                        "[robot]\n",
+                        &format!("[robot]\nethernet_config = \"{}\"\n", xml.display()),
+                    )
+                }
+            }),
+            "POSCORR is 5.0 mm, robot.poscorr_mm says 4.0 mm",
+        ),
+    ];
+    for (what, edit, want) in cases {
+        let path = cell(dir.path(), 49312, edit);
+        let (code, text) = check(&path);
+        assert_eq!(code, Some(1), "{what}: {text}");
+        assert!(text.contains(want), "{what}: {want:?} in\n{text}");
+        assert!(text.contains("fix: "), "{what}: {text}");
+        assert!(text.contains("not ready: "), "{what}: {text}");
+    }
+    // A file that is not a cell file at all is an error (2), as for `run`.
+    std::fs::write(dir.path().join("bad.toml"), "tuning = 3\n").unwrap();
+    let (code, text) = check(&dir.path().join("bad.toml"));
+    assert_eq!(code, Some(2), "{text}");
+    assert!(text.starts_with("error: "), "{text}");
+}
