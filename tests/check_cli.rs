@@ -56,6 +56,9 @@ fn cell(dir: &Path, port: u16, edit: impl Fn(String) -> String) -> std::path::Pa
     path
 }
 
+/// A broken cell file: what is wrong, how the example is edited into it, what `check` must say.
+type Case = (&'static str, Box<dyn Fn(String) -> String>, &'static str);
+
 fn check(path: &Path) -> (Option<i32>, String) {
     let (out, text) = run(&["check", "--config", path.to_str().unwrap()]);
     (out.status.code(), text)
@@ -101,7 +104,7 @@ fn each_broken_cell_file_is_not_ready_and_names_its_problem() {
     ]);
     assert!(out.status.success(), "{text}");
     let xml = robot.join("forcecell_rsi.xml");
-    let cases: Vec<(&str, Box<dyn Fn(String) -> String>, &str)> = vec![
+    let cases: Vec<Case> = vec![
         (
             "a listen address that is not this PC's",
             Box::new(|s| s.replace("127.0.0.1:49312", "192.0.2.1:49312")),
