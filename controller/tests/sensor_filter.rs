@@ -83,28 +83,18 @@ fn a_filtered_bounce_at_a_small_set_point_on_a_slow_cell_settles() {
 #[test]
 #[ignore = "2736 closed-loop runs: the known limits' figures, not a criterion"]
 fn filtered_sensors() {
-    // (bandwidth, step faults, unsettled steps, touch-down misses, sine faults) measured
-    // Sines on a fault were 41, 89, 65, 64 and 71 before the predictor's acceleration bound took
-    // the velocity inferred with the excess along; with it four 200 Hz steps that ended on a fault
-    // no longer do but never settle (the 12 ms cell's holds at f_r 2 N on 500 kN/m, whose
-    // touch-down already rings: the steps are ±0.02 and ±0.1 mm).
-    // With the observer learning from a velocity a still measurement contradicts: 50 Hz sines 73 →
-    // 77 and one step settled, 100 / 200 / 400 Hz sines 59 / 58 / 66 → 56 / 57 / 64. With a filtered
-    // force's tail behind the surface off the onset fit's line: at 100 / 200 / 400 Hz steps on a
-    // fault 5 / 5 / 9 → 4, unsettled 4 / 4 / 0 → 0, touch-downs over their bound 2 / 1 / 1 → 1 / 0 /
-    // 0, sines on a fault 56 / 57 / 64 → 53 / 41 / 40.
-    // A touch-down's bound counts the sensor's delay in its floor since: the 50 Hz misses were 5
-    // over the cell's floor alone, 1 with the filter's 4.5 ms counted (f_r 50 N on 500 kN/m on P2,
-    // 124 N against 120.5 N); at 100 Hz 1 and 0. Since a steady contact's lift-off threshold rises
-    // with the measured noise, sines on a fault 36 / 77 / 53 / 41 / 40 → 37 / 74 / 55 / 39 / 42
-    // (247 either way).
-    let rows = [
-        (0.0, 4, 0, 0, 37),
-        (50.0, 6, 0, 1, 74),
-        (100.0, 4, 0, 0, 55),
-        (200.0, 4, 0, 0, 39),
-        (400.0, 4, 0, 0, 42),
-    ];
+    // Per bandwidth (0: no filter): step faults, unsettled steps, touch-down misses, sine faults;
+    // bounds in tests/census-bounds.toml, their history in docs/robust-law-limits.md.
+    let rows = [0.0, 50.0, 100.0, 200.0, 400.0].map(|bandwidth: f64| {
+        let b = |what: &str| common::bound("filtered_sensors", &format!("{bandwidth} Hz {what}"));
+        (
+            bandwidth,
+            b("step faults"),
+            b("unsettled"),
+            b("touch-downs"),
+            b("sine faults"),
+        )
+    });
     for (bandwidth, steps_measured, unsettled_measured, touch_measured, sines_measured) in rows {
         let (mut faults, mut unsettled) = (0, 0);
         for plant in &CELLS {
@@ -164,13 +154,16 @@ fn filtered_sensors() {
              touch-downs over their bound ({over_cell} over the cell's floor alone); {sines} of 648 \
              sines on a fault"
         );
-        assert!(faults <= steps_measured, "{faults} > {steps_measured}");
         assert!(
-            unsettled <= unsettled_measured,
+            faults as f64 <= steps_measured,
+            "{faults} > {steps_measured}"
+        );
+        assert!(
+            unsettled as f64 <= unsettled_measured,
             "{unsettled} > {unsettled_measured}"
         );
-        assert!(touch <= touch_measured, "{touch} > {touch_measured}");
-        assert!(sines <= sines_measured, "{sines} > {sines_measured}");
+        assert!(touch as f64 <= touch_measured, "{touch} > {touch_measured}");
+        assert!(sines as f64 <= sines_measured, "{sines} > {sines_measured}");
     }
 }
 
@@ -181,9 +174,9 @@ fn filtered_sensors() {
 #[test]
 #[ignore = "540 closed-loop runs: the known limits' figures, not a criterion"]
 fn filtered_stiffness_changes() {
-    // (bandwidth, misses measured)
-    let rows = [(0.0, 0), (50.0, 11), (100.0, 4), (200.0, 1), (400.0, 0)];
-    for (bandwidth, measured) in rows {
+    // Per bandwidth, the misses' bound in tests/census-bounds.toml.
+    for bandwidth in [0.0f64, 50.0, 100.0, 200.0, 400.0] {
+        let measured = common::bound("filtered_stiffness_changes", &format!("{bandwidth} Hz"));
         let mut misses = 0;
         for plant in &CELLS {
             for k_c in [20e3, 70e3, 200e3] {
@@ -201,6 +194,6 @@ fn filtered_stiffness_changes() {
             }
         }
         println!("{bandwidth} Hz: {misses} of 108 stiffness changes on a fault or k̂_c > 10 % off");
-        assert!(misses <= measured, "{misses} > {measured}");
+        assert!(misses as f64 <= measured, "{misses} > {measured}");
     }
 }
