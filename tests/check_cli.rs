@@ -4,29 +4,13 @@
 
 mod common;
 
-use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::Stdio;
 
-use common::{Kill, forcecell, run};
+use common::{Kill, run};
 
-/// A simulated FT 300 reporting `fz` N (the tool's weight, hanging still), served until dropped.
+/// A simulated FT 300 reporting `fz` N (the tool's weight, hanging still) at `dir/ft300`.
 fn ft300(dir: &Path, fz: &str) -> Kill {
-    let link = dir.join("ft300");
-    let mut child = forcecell()
-        .args(["sim-sensor", "robotiq", "--link"])
-        .arg(&link)
-        .args(["--fz", fz, "--noise", "0", "--seconds", "300"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("start sim-sensor");
-    let mut first = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut first)
-        .unwrap();
-    assert_eq!(first.trim(), link.display().to_string());
-    Kill(child)
+    common::ft300(&dir.join("ft300"), fz)
 }
 
 /// `examples/cell.toml` with its addresses on loopback (port `port`) and the simulated FT 300 at

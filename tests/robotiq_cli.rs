@@ -4,29 +4,13 @@
 
 mod common;
 
-use std::io::{BufRead, BufReader};
-use std::process::Stdio;
-
-use common::{Kill, forcecell, run};
+use common::run;
 
 #[test]
 fn sensor_commands_talk_to_the_simulated_ft300_in_another_process() {
     let dir = tempfile::tempdir().unwrap();
     let link = dir.path().join("ft300");
-    let mut child = forcecell()
-        .args(["sim-sensor", "robotiq", "--link"])
-        .arg(&link)
-        .args(["--fz", "12.5", "--noise", "0", "--seconds", "120"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("start sim-sensor");
-    let mut first = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut first)
-        .unwrap();
-    let _sensor = Kill(child);
-    assert_eq!(first.trim(), link.display().to_string(), "prints the path");
+    let _sensor = common::ft300(&link, "12.5");
     let port = link.to_str().unwrap();
 
     let (out, info) = run(&["sensor", "robotiq", "--port", port, "info"]);

@@ -537,34 +537,8 @@ impl<R: RobotLink, S: ForceSensor, L: CellLaw> ControlLoop<R, S, L> {
             self.side.translation[i] = toward(self.side.translation[i], 0.0);
         }
         self.side.rotation *= if left > 1.0 { 1.0 - 1.0 / left } else { 0.0 };
-        let (wrench, sample) = match self.sensor.read() {
-            Ok(s) if s.wrench.is_finite() => (self.compensate(&s.wrench), Some(s)),
-            Ok(s) => (None, Some(s)),
-            Err(_) => (None, None),
-        };
-        let f = wrench.map(|w| self.cfg.force_sign * w.force.z);
-        let command = Correction {
-            process: self.process.state(),
-            ..self.command(z)
-        };
-        let out = Output {
-            x_cmd: z,
-            ..self.last_out
-        };
-        self.reply(&command, out)?;
-        self.stats.retract_cycles += 1;
-        Ok(Some(CycleReport {
-            cycle,
-            x,
-            f,
-            sample,
-            wrench,
-            compensated: self.gravity.is_some(),
-            out: self.last_out,
-            command,
-            set_point: self.law.set_point(),
-            fault: Some(Fault::Retracting),
-        }))
+        let reading = self.read_backing_off();
+        self.reply_backing_off(cycle, x, z, reading).map(Some)
     }
 
     /// One cycle of the back-off after a fault: step the command towards the phase's target at
@@ -576,12 +550,8 @@ impl<R: RobotLink, S: ForceSensor, L: CellLaw> ControlLoop<R, S, L> {
         cycle: Cycle,
         x: f64,
     ) -> Result<CycleReport, LoopError<R::Error, S::Error>> {
-        let (wrench, sample) = match self.sensor.read() {
-            Ok(s) if s.wrench.is_finite() => (self.compensate(&s.wrench), Some(s)),
-            Ok(s) => (None, Some(s)),
-            Err(_) => (None, None),
-        };
-        let f = wrench.map(|w| self.cfg.force_sign * w.force.z);
+        let reading = self.read_backing_off();
+        let f = reading.2;
         let floor = -self.cfg.max_offset;
         let step = self.cfg.retract_step(cycle.period);
         let target = match &mut self.phase {
@@ -599,22 +569,47 @@ impl<R: RobotLink, S: ForceSensor, L: CellLaw> ControlLoop<R, S, L> {
             Phase::Control => unreachable!("retract() runs only after a fault"),
         };
         let cmd = (self.last_cmd - step).max(target);
-        let command = Correction {
-            process: self.process.state(),
-            ..self.command(cmd)
-        };
-        let out = Output {
-            x_cmd: cmd,
-            ..self.last_out
-        };
-        self.reply(&command, out)?;
-        self.stats.retract_cycles += 1;
+        let report = self.reply_backing_off(cycle, x, cmd, reading)?;
         if cmd <= target
             && let Phase::Retract { end, .. } =
                 core::mem::replace(&mut self.phase, Phase::Halted { target })
         {
             return Err(end.widen());
         }
+        Ok(report)
+    }
+
+    /// A sample read while backing off: the wrench (compensated) where usable, the raw sample, the
+    /// normal force.
+    fn read_backing_off(&mut self) -> (Option<Wrench>, Option<Sample>, Option<f64>) {
+        let (wrench, sample) = match self.sensor.read() {
+            Ok(s) if s.wrench.is_finite() => (self.compensate(&s.wrench), Some(s)),
+            Ok(s) => (None, Some(s)),
+            Err(_) => (None, None),
+        };
+        let f = wrench.map(|w| self.cfg.force_sign * w.force.z);
+        (wrench, sample, f)
+    }
+
+    /// Answer a cycle of a back-off or of the return to the path with the normal command `z` (the
+    /// law not stepped), and report it with `reading`.
+    fn reply_backing_off(
+        &mut self,
+        cycle: Cycle,
+        x: f64,
+        z: f64,
+        (wrench, sample, f): (Option<Wrench>, Option<Sample>, Option<f64>),
+    ) -> Result<CycleReport, LoopError<R::Error, S::Error>> {
+        let command = Correction {
+            process: self.process.state(),
+            ..self.command(z)
+        };
+        let out = Output {
+            x_cmd: z,
+            ..self.last_out
+        };
+        self.reply(&command, out)?;
+        self.stats.retract_cycles += 1;
         Ok(CycleReport {
             cycle,
             x,

@@ -28,6 +28,26 @@ impl Drop for Kill {
     }
 }
 
+/// A simulated FT 300 (`forcecell sim-sensor robotiq`) on a pseudo-terminal linked at `link`,
+/// reporting `fz` N and nothing else, served until dropped.
+pub fn ft300(link: &Path, fz: &str) -> Kill {
+    let mut child = forcecell()
+        .args(["sim-sensor", "robotiq", "--link"])
+        .arg(link)
+        .args(["--fz", fz, "--noise", "0", "--seconds", "300"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start sim-sensor");
+    let mut first = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut first)
+        .unwrap();
+    let sensor = Kill(child);
+    assert_eq!(first.trim(), link.display().to_string(), "prints the path");
+    sensor
+}
+
 /// Run `forcecell ARGS` to its end; returns its output and stdout + stderr as text.
 pub fn run(args: &[&str]) -> (Output, String) {
     let out = forcecell().args(args).output().expect("run forcecell");
