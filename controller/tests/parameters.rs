@@ -1,0 +1,75 @@
+//! The parameter table of `docs/robust-law.md` is the shipped `robust` tuning's: every parameter the
+//! tuning has is a row, every row is a parameter, and the row's shipped value is the tuning's.
+
+use scenario::scenario::load_tuning;
+
+/// Every numeric leaf of `t` as `(dotted key, value)`, the law's keys without their `law.` prefix.
+fn flatten(t: &toml::Table, prefix: &str, out: &mut Vec<(String, f64)>) {
+    for (k, v) in t {
+        let name = match prefix {
+            "" => k.clone(),
+            p => format!("{p}.{k}"),
+        };
+        let key = name.strip_prefix("law.").unwrap_or(&name).to_string();
+        match v {
+            toml::Value::Table(t) => flatten(t, &name, out),
+            toml::Value::Float(f) => out.push((key, *f)),
+            toml::Value::Integer(i) => out.push((key, *i as f64)),
+            // The law's kind, the tuning's name and description: not parameters.
+            toml::Value::String(_) => {}
+            v => panic!("{name}: {v}"),
+        }
+    }
+}
+
+/// The table's rows: `(parameter, shipped value as written)`.
+fn table() -> Vec<(String, String)> {
+    let doc = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/robust-law.md"),
+    )
+    .unwrap();
+    let start = doc.find("## Parameters").expect("a Parameters section");
+    doc[start..]
+        .lines()
+        .skip_while(|l| !l.starts_with("| parameter"))
+        .skip(2)
+        .take_while(|l| l.starts_with('|'))
+        .map(|l| {
+            let cells: Vec<&str> = l.split('|').map(str::trim).collect();
+            (cells[1].trim_matches('`').to_string(), cells[3].to_string())
+        })
+        .collect()
+}
+
+#[test]
+fn the_docs_parameter_table_is_the_shipped_tuning() {
+    let tuning = load_tuning("robust").unwrap();
+    let text = toml::to_string(&tuning).unwrap();
+    let mut params = Vec::new();
+    flatten(&text.parse().unwrap(), "", &mut params);
+    let rows = table();
+    let mut wrong = Vec::new();
+    for (key, value) in &params {
+        match rows.iter().find(|(k, _)| k == key) {
+            None => wrong.push(format!("{key} = {value} has no row")),
+            Some((_, written)) => {
+                let v: f64 = written
+                    .replace('−', "-")
+                    .parse()
+                    .unwrap_or_else(|_| panic!("{key}: shipped {written:?} is not a number"));
+                if v != *value {
+                    wrong.push(format!(
+                        "{key}: the table says {written}, the tuning {value}"
+                    ));
+                }
+            }
+        }
+    }
+    for (key, _) in &rows {
+        if !params.iter().any(|(k, _)| k == key) {
+            wrong.push(format!("row {key} is no parameter of the tuning"));
+        }
+    }
+    assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+    println!("{} parameters", params.len());
+}
