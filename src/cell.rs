@@ -496,6 +496,13 @@ impl CellConfig {
                 }
             }
         };
+        // Before anything moves: a configuration the force control cannot work through is refused.
+        ethernet
+            .check_for_control(r.process)
+            .map_err(|e| match &r.ethernet_config {
+                Some(p) => anyhow!("{}: {e}", p.display()),
+                None => anyhow!("{e}"),
+            })?;
         let mut lc = LinkConfig::new(ethernet, RobotFilter::Ip(r.robot_ip));
         lc.bind = Some(r.listen);
         lc.period = Duration::from_millis(u64::from(r.cycle_ms));
@@ -537,6 +544,8 @@ pub struct CellOutcome {
     pub ended: String,
     /// Whether `Stop` was sent.
     pub stopped: bool,
+    /// `sent`, or `not sent` and the real reason (for the end message).
+    pub stop_note: String,
     /// Which way it ended.
     pub end: CellEnd,
 }
@@ -631,6 +640,7 @@ where
         stats: lp.stats(),
         ended,
         stopped: o.stopped(),
+        stop_note: o.stop_note(),
         end,
     })
 }
@@ -687,6 +697,8 @@ fn open_devices(
 pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
     let cfg = CellConfig::load(path)?;
     let tuning = cfg.tuning()?;
+    // Before anything moves: the robot's configuration is one the force control can work through.
+    cfg.link_config(&tuning)?;
     // Before anything moves: a recording that cannot be written is found now, not after the run.
     let csv = reserve_recording(&cfg.record)?;
     let stem = csv.with_extension("");
@@ -732,15 +744,7 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
     let out = run_cell_recorded(&cfg, &tuning, robot, sensor, stop, Some(tx))?;
     println!(
         "{}; {} cycles, {} sensor faults, {} limited; Stop {}",
-        out.ended,
-        out.stats.cycles,
-        out.stats.sensor_faults,
-        out.stats.limited,
-        if out.stopped {
-            "sent"
-        } else {
-            "not sent (no robot cycle to answer)"
-        }
+        out.ended, out.stats.cycles, out.stats.sensor_faults, out.stats.limited, out.stop_note
     );
     crate::rsi::print_link(link.diagnostics());
     let recorded = recording.finish(Vec::new())?;

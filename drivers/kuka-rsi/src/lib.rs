@@ -35,4 +35,4 @@ pub use limits::{Limits, PoscorrLimits};
 pub use link::{CorrectionMode, LinkConfig, LinkError, RobotFilter, RsiLink};
 pub use process::{CommandSlots, ProcessChannels, ProcessError, StateSlots};
 pub use session::{Outgoing, Rejected, RsiSession};
-pub use xml::ParseError;
+pub use xml::{MAX_ATTRIBUTES, ParseError};
