@@ -546,6 +546,8 @@ pub struct CellOutcome {
     pub stopped: bool,
     /// `sent`, or `not sent` and the real reason (for the end message).
     pub stop_note: String,
+    /// The law's last contact-stiffness estimate, N/m (for the link's advisories).
+    pub kc_hat: Option<f64>,
     /// Which way it ended.
     pub end: CellEnd,
 }
@@ -641,6 +643,7 @@ where
         ended,
         stopped: o.stopped(),
         stop_note: o.stop_note(),
+        kc_hat: sink.kc_hat,
         end,
     })
 }
@@ -651,6 +654,8 @@ struct RecordSink {
     recorder: Option<Recorder>,
     rows: Vec<Row>,
     last_t: f64,
+    /// The law's last finite contact-stiffness estimate, N/m.
+    kc_hat: Option<f64>,
 }
 
 impl RecordSink {
@@ -659,6 +664,7 @@ impl RecordSink {
             recorder,
             rows: Vec::new(),
             last_t: 0.0,
+            kc_hat: None,
         }
     }
 }
@@ -666,6 +672,9 @@ impl RecordSink {
 impl Sink for RecordSink {
     fn record(&mut self, r: &controller::CycleReport) -> bool {
         self.last_t = r.cycle.t;
+        if r.out.kc_hat.is_finite() && r.out.kc_hat > 0.0 {
+            self.kc_hat = Some(r.out.kc_hat);
+        }
         match &mut self.recorder {
             Some(tx) => {
                 tx.push(Record::from_report(r, r.set_point));
@@ -747,6 +756,14 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
         out.ended, out.stats.cycles, out.stats.sensor_faults, out.stats.limited, out.stop_note
     );
     crate::rsi::print_link(link.diagnostics());
+    // What the first cycles showed that degrades control, at the stiffness the law estimated (the
+    // paper's 50 kN/m when it estimated none).
+    for w in link.diagnostics().advisories(
+        f64::from(cfg.robot.cycle_ms) * 1e-3,
+        out.kc_hat.unwrap_or(50e3),
+    ) {
+        println!("{w}");
+    }
     let recorded = recording.finish(Vec::new())?;
     println!("recorded {recorded}");
     if let Some(log) = &can_log {
