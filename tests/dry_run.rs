@@ -260,3 +260,68 @@ fn a_client_without_fc_cmd_sees_a_lost_contact_end_in_a_retract_and_stop() {
     // About 0.5 s of search at most: the run ended long before the scenario's 4 s.
     assert!(z.len() < 700, "{} cycles", z.len());
 }
+
+/// `--ethernet-config FILE`: the dry run reads what the robot's own configuration says it sends and
+/// answers in its layout — here a configuration with axis corrections only (`<AK A1..A6/>`, `Stop`),
+/// which `run` would refuse (said at start), answered with zeros in that layout.
+#[test]
+fn the_dry_run_answers_in_the_robots_own_layout() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/rsi-corpus/configs/axis-only.xml");
+    let (mut child, listen) = start(
+        dir.path(),
+        &[
+            "--scenario",
+            "pass-flat-20n",
+            "--ethernet-config",
+            cfg.to_str().unwrap(),
+        ],
+    );
+    let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+    sock.connect(&listen).unwrap();
+    sock.set_read_timeout(Some(Duration::from_millis(200)))
+        .unwrap();
+    let mut replies = Vec::new();
+    let mut ipoc = 77_000u64;
+    let mut buf = [0u8; 2048];
+    for _ in 0..200 {
+        if replies.len() == 20 {
+            break;
+        }
+        // What axis-only.xml's SEND says: RIst, RSol, AIPos.
+        let rob = format!(
+            "<Rob Type=\"KUKA\"><RIst X=\"445.0\" Y=\"0.0\" Z=\"890.0\" A=\"180.0\" B=\"0.0\" C=\"180.0\"/>\
+             <RSol X=\"445.0\" Y=\"0.0\" Z=\"890.0\" A=\"180.0\" B=\"0.0\" C=\"180.0\"/>\
+             <AIPos A1=\"0.0\" A2=\"-90.0\" A3=\"90.0\" A4=\"0.0\" A5=\"90.0\" A6=\"0.0\"/><IPOC>{ipoc}</IPOC></Rob>"
+        );
+        if sock.send(rob.as_bytes()).is_err() {
+            std::thread::sleep(Duration::from_millis(100));
+            continue;
+        }
+        match sock.recv(&mut buf) {
+            Ok(n) => {
+                replies.push(String::from_utf8_lossy(&buf[..n]).into_owned());
+                ipoc += 4;
+            }
+            Err(_) => std::thread::sleep(Duration::from_millis(50)),
+        }
+    }
+    child.kill().unwrap();
+    let o = finish(child);
+    let out = text(&o.stdout);
+    assert_eq!(replies.len(), 20, "{out}\n{}", text(&o.stderr));
+    for (k, sen) in replies.iter().enumerate() {
+        assert!(sen.starts_with("<Sen Type=\"ImFree\">"), "{sen}");
+        assert!(sen.contains("<AK A1=\"0.0000\" A2=\"0.0000\""), "{sen}");
+        assert!(sen.contains("<Stop>0</Stop>"), "{sen}");
+        assert!(!sen.contains("RKorr"), "{sen}");
+        assert!(
+            sen.contains(&format!("<IPOC>{}</IPOC>", 77_000 + 4 * k as u64)),
+            "{sen}"
+        );
+    }
+    assert!(
+        out.contains("`forcecell run` would refuse") && out.contains("no Cartesian correction"),
+        "{out}"
+    );
+}
