@@ -495,6 +495,14 @@ impl RobotSide {
                     crate::stop::flag(),
                 );
                 let run = run_recorded(&spec, &world, robot, sensor, recorder, progress)?;
+                // What the client's first cycles showed that degrades control, at the virtual
+                // workpiece's stiffness.
+                for w in link.diagnostics().advisories(
+                    link.config().period.as_secs_f64(),
+                    spec.scenario.environment.k_c,
+                ) {
+                    println!("{w}");
+                }
                 Ok((
                     run,
                     Some(WireSummary::Rsi {

@@ -33,6 +33,12 @@ struct Robot {
     ipoc: u64,
     /// The correction along the tool's z in effect, mm.
     z_corr: f64,
+    /// Decimals of the positions sent (a KUKA ETHERNET object's `Precision`), and the IPOC step.
+    decimals: usize,
+    step: u64,
+    /// X along the pass, mm, and its change per cycle.
+    x: f64,
+    dx: f64,
 }
 
 impl Robot {
@@ -45,6 +51,10 @@ impl Robot {
             sock,
             ipoc: 5_000_000,
             z_corr: 0.0,
+            decimals: 4,
+            step: 4,
+            x: 445.0,
+            dx: 0.0,
         }
     }
 
@@ -53,9 +63,10 @@ impl Robot {
     fn cycle(&mut self, fc: Option<&str>) -> Option<String> {
         let z_sol = 890.0;
         let z_ist = z_sol - self.z_corr;
+        let (p, x) = (self.decimals, self.x);
         let rob = format!(
-            "<Rob Type=\"KUKA\"><RIst X=\"445.0000\" Y=\"0.0000\" Z=\"{z_ist:.4}\" A=\"180.0000\" B=\"0.0000\" C=\"180.0000\"/>\
-             <RSol X=\"445.0000\" Y=\"0.0000\" Z=\"{z_sol:.4}\" A=\"180.0000\" B=\"0.0000\" C=\"180.0000\"/>\
+            "<Rob Type=\"KUKA\"><RIst X=\"{x:.p$}\" Y=\"0.0000\" Z=\"{z_ist:.p$}\" A=\"180.0000\" B=\"0.0000\" C=\"180.0000\"/>\
+             <RSol X=\"{x:.p$}\" Y=\"0.0000\" Z=\"{z_sol:.p$}\" A=\"180.0000\" B=\"0.0000\" C=\"180.0000\"/>\
              <AIPos A1=\"0.0000\" A2=\"-90.0000\" A3=\"90.0000\" A4=\"0.0000\" A5=\"90.0000\" A6=\"0.0000\"/>\
              <ASPos A1=\"0.0000\" A2=\"-90.0000\" A3=\"90.0000\" A4=\"0.0000\" A5=\"90.0000\" A6=\"0.0000\"/>\
              <Delay D=\"0\"/>{}<IPOC>{}</IPOC></Rob>",
@@ -73,7 +84,8 @@ impl Robot {
             match self.sock.recv(&mut buf) {
                 Ok(n) => {
                     let sen = String::from_utf8_lossy(&buf[..n]).into_owned();
-                    self.ipoc += 4;
+                    self.ipoc += self.step;
+                    self.x += self.dx;
                     self.z_corr = attr(&sen, "RKorr", "Z").expect("every reply corrects");
                     return Some(sen);
                 }
@@ -324,4 +336,35 @@ fn the_dry_run_answers_in_the_robots_own_layout() {
         out.contains("`forcecell run` would refuse") && out.contains("no Cartesian correction"),
         "{out}"
     );
+}
+
+/// A client that sends positions at 0.1 mm (`Precision 1`) and steps its IPOC by 1 per cycle, as
+/// several robot-side simulators do: the dry run says both, with the steady force error the
+/// resolution implies at the workpiece's stiffness, and the fix.
+#[test]
+fn coarse_positions_and_an_ipoc_step_of_one_are_warned() {
+    let dir = tempfile::tempdir().unwrap();
+    let (child, listen) = start(dir.path(), &["--scenario", "pass-flat-20n"]);
+    let mut robot = Robot::connect(&listen);
+    robot.decimals = 1;
+    robot.step = 1;
+    robot.dx = 0.1;
+    let mut last = String::new();
+    for _ in 0..10_000 {
+        let Some(sen) = robot.cycle(None) else { break };
+        let stop = sen.contains("<Stop>1</Stop>");
+        last = sen;
+        if stop {
+            break;
+        }
+    }
+    assert!(last.contains("<Stop>1</Stop>"), "{last}");
+    let o = finish(child);
+    let out = text(&o.stdout);
+    assert!(
+        out.contains("warning: the robot sends positions at 0.1000 mm resolution")
+            && out.contains("k*q/2"),
+        "{out}"
+    );
+    assert!(out.contains("IPOC steps by 1 per cycle, not 4"), "{out}");
 }
