@@ -202,7 +202,7 @@ impl<E: fmt::Display> Outcome<E> {
     pub fn stop_note(&self) -> String {
         match &self.stop {
             Some(Ok(())) => "sent".into(),
-            Some(Err(_)) if self.cycles == 0 => "not sent (no robot cycle to answer)".into(),
+            _ if self.cycles == 0 => "not sent (no robot cycle to answer)".into(),
             Some(Err(e)) => format!("not sent: {e}"),
             None => match &self.end {
                 End::RobotEnded(_) => {
@@ -298,6 +298,13 @@ mod stop_note_tests {
             cycles: 10,
         };
         assert!(gone.stop_note().contains("link was gone"));
+        // Interrupted before the first datagram: nothing was ever answered.
+        let never = Outcome::<&str> {
+            end: End::Stopped(Some("silent")),
+            stop: None,
+            cycles: 0,
+        };
+        assert_eq!(never.stop_note(), "not sent (no robot cycle to answer)");
     }
 }
 
