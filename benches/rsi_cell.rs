@@ -18,6 +18,7 @@ fn args(robot: RobotBackend) -> RsiArgs {
         realtime: false,
         external_robot: None,
         process_channels: false,
+        ethernet_config: None,
     }
 }
 

@@ -37,6 +37,10 @@ pub struct RsiArgs {
     /// gets the scenario's own course (its program, if it has one, run on the client's behalf).
     #[arg(long, requires = "external_robot")]
     pub process_channels: bool,
+    /// With `--external-robot`: the Ethernet configuration the client (robot) uses; the dry run reads
+    /// what it says the robot sends and answers in its layout (default: `forcecell rsi-config`'s).
+    #[arg(long, value_name = "FILE", requires = "external_robot")]
+    pub ethernet_config: Option<std::path::PathBuf>,
 }
 
 /// The default wire: the RSI driver against the simulated KUKA controller over loopback UDP, in lockstep.
@@ -47,6 +51,7 @@ impl Default for RsiArgs {
             realtime: false,
             external_robot: None,
             process_channels: false,
+            ethernet_config: None,
         }
     }
 }

@@ -496,6 +496,13 @@ impl CellConfig {
                 }
             }
         };
+        // Before anything moves: a configuration the force control cannot work through is refused.
+        ethernet
+            .check_for_control(r.process)
+            .map_err(|e| match &r.ethernet_config {
+                Some(p) => anyhow!("{}: {e}", p.display()),
+                None => anyhow!("{e}"),
+            })?;
         let mut lc = LinkConfig::new(ethernet, RobotFilter::Ip(r.robot_ip));
         lc.bind = Some(r.listen);
         lc.period = Duration::from_millis(u64::from(r.cycle_ms));
@@ -537,6 +544,10 @@ pub struct CellOutcome {
     pub ended: String,
     /// Whether `Stop` was sent.
     pub stopped: bool,
+    /// `sent`, or `not sent` and the real reason (for the end message).
+    pub stop_note: String,
+    /// The law's last contact-stiffness estimate, N/m (for the link's advisories).
+    pub kc_hat: Option<f64>,
     /// Which way it ended.
     pub end: CellEnd,
 }
@@ -631,6 +642,8 @@ where
         stats: lp.stats(),
         ended,
         stopped: o.stopped(),
+        stop_note: o.stop_note(),
+        kc_hat: sink.kc_hat,
         end,
     })
 }
@@ -641,6 +654,8 @@ struct RecordSink {
     recorder: Option<Recorder>,
     rows: Vec<Row>,
     last_t: f64,
+    /// The law's last finite contact-stiffness estimate, N/m.
+    kc_hat: Option<f64>,
 }
 
 impl RecordSink {
@@ -649,6 +664,7 @@ impl RecordSink {
             recorder,
             rows: Vec::new(),
             last_t: 0.0,
+            kc_hat: None,
         }
     }
 }
@@ -656,6 +672,9 @@ impl RecordSink {
 impl Sink for RecordSink {
     fn record(&mut self, r: &controller::CycleReport) -> bool {
         self.last_t = r.cycle.t;
+        if r.out.kc_hat.is_finite() && r.out.kc_hat > 0.0 {
+            self.kc_hat = Some(r.out.kc_hat);
+        }
         match &mut self.recorder {
             Some(tx) => {
                 tx.push(Record::from_report(r, r.set_point));
@@ -687,6 +706,8 @@ fn open_devices(
 pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
     let cfg = CellConfig::load(path)?;
     let tuning = cfg.tuning()?;
+    // Before anything moves: the robot's configuration is one the force control can work through.
+    cfg.link_config(&tuning)?;
     // Before anything moves: a recording that cannot be written is found now, not after the run.
     let csv = reserve_recording(&cfg.record)?;
     let stem = csv.with_extension("");
@@ -732,17 +753,17 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
     let out = run_cell_recorded(&cfg, &tuning, robot, sensor, stop, Some(tx))?;
     println!(
         "{}; {} cycles, {} sensor faults, {} limited; Stop {}",
-        out.ended,
-        out.stats.cycles,
-        out.stats.sensor_faults,
-        out.stats.limited,
-        if out.stopped {
-            "sent"
-        } else {
-            "not sent (no robot cycle to answer)"
-        }
+        out.ended, out.stats.cycles, out.stats.sensor_faults, out.stats.limited, out.stop_note
     );
     crate::rsi::print_link(link.diagnostics());
+    // What the first cycles showed that degrades control, at the stiffness the law estimated (the
+    // paper's 50 kN/m when it estimated none).
+    for w in link.diagnostics().advisories(
+        f64::from(cfg.robot.cycle_ms) * 1e-3,
+        out.kc_hat.unwrap_or(50e3),
+    ) {
+        println!("{w}");
+    }
     let recorded = recording.finish(Vec::new())?;
     println!("recorded {recorded}");
     if let Some(log) = &can_log {

@@ -29,7 +29,7 @@ pub fn sim(spec: &RunSpec, run: &RunResult, out: &Path, check: bool) -> Result<u
             if stop_sent {
                 "sent to the robot"
             } else {
-                "not sent (no robot cycle to answer)"
+                run.stop_note.as_str()
             }
         );
     }

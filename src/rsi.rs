@@ -212,7 +212,12 @@ impl RobotSide {
                     "--external-robot speaks RSI only so far; an external EGM client is not supported yet"
                 );
             }
-            return Self::external(spec, addr, args.process_channels);
+            return Self::external(
+                spec,
+                addr,
+                args.process_channels,
+                args.ethernet_config.as_deref(),
+            );
         }
         match args.robot {
             RobotBackend::Inproc if args.realtime => {
@@ -331,7 +336,12 @@ impl RobotSide {
         })
     }
 
-    fn external(spec: &RunSpec, addr: SocketAddr, process: bool) -> Result<Self> {
+    fn external(
+        spec: &RunSpec,
+        addr: SocketAddr,
+        process: bool,
+        ethernet_config: Option<&std::path::Path>,
+    ) -> Result<Self> {
         let mut spec = spec.clone();
         if process {
             // The client runs its own robot program: the scenario's is not run on its behalf.
@@ -350,19 +360,42 @@ impl RobotSide {
             std::net::IpAddr::V4(ip) => ip,
             std::net::IpAddr::V6(_) => bail!("RSI is IPv4: give an IPv4 ADDR:PORT"),
         };
-        let mut ethernet = EthernetConfig::forcecell(ip, addr.port(), false);
-        if process {
-            ethernet = ethernet.with_process(ProcessChannels::default());
-        }
+        let ethernet = match ethernet_config {
+            // The robot's own file: its layout both ways. What `run` would refuse is said, and the
+            // dry run still answers in that layout (zeros where forcecell has nothing to send).
+            Some(p) => {
+                let text = std::fs::read_to_string(p)
+                    .with_context(|| format!("cannot read Ethernet config {}", p.display()))?;
+                let e =
+                    EthernetConfig::parse(&text).map_err(|e| anyhow!("{}: {e}", p.display()))?;
+                if let Err(why) = e.check_for_control(process) {
+                    println!(
+                        "warning: `forcecell run` would refuse {}: {why}; the dry run answers in its layout anyway",
+                        p.display()
+                    );
+                }
+                e
+            }
+            None => {
+                let e = EthernetConfig::forcecell(ip, addr.port(), false);
+                if process {
+                    e.with_process(ProcessChannels::default())
+                } else {
+                    e
+                }
+            }
+        };
+        let sentype = ethernet.sentype.clone();
         let (limits, poscorr, poscorrmon) = cell_limits(&spec.tuning.loop_cfg);
         let mut lc = LinkConfig::new(ethernet, RobotFilter::Any);
+        lc.bind = Some(addr);
         lc.limits = limits;
         lc.poscorr = poscorr;
         lc.poscorrmon = poscorrmon;
         lc.first_contact_timeout = Some(FIRST_CONTACT_POLL);
         let link = RsiLink::bind(lc).context("RSI driver")?;
         println!(
-            "listening for an RSI client on {} (SENTYPE ImFree; `forcecell rsi-config` writes its files)",
+            "listening for an RSI client on {} (SENTYPE {sentype}; `forcecell rsi-config` writes its files)",
             link.local_addr()?
         );
         Ok(Self {
@@ -462,6 +495,14 @@ impl RobotSide {
                     crate::stop::flag(),
                 );
                 let run = run_recorded(&spec, &world, robot, sensor, recorder, progress)?;
+                // What the client's first cycles showed that degrades control, at the virtual
+                // workpiece's stiffness.
+                for w in link.diagnostics().advisories(
+                    link.config().period.as_secs_f64(),
+                    spec.scenario.environment.k_c,
+                ) {
+                    println!("{w}");
+                }
                 Ok((
                     run,
                     Some(WireSummary::Rsi {

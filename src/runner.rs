@@ -111,6 +111,8 @@ pub struct RunResult {
     /// Stopped by SIGINT/SIGTERM ([`crate::stop::requested`]) before the end; `Some(true)` when the
     /// robot then got `Stop`, `Some(false)` when it could not (no cycle came).
     pub interrupted: Option<bool>,
+    /// `sent`, or `not sent` and the real reason ([`controller::run::Outcome::stop_note`]).
+    pub stop_note: String,
 }
 
 /// A scenario target checked against a run (the same check as the controller's scenario tests).
@@ -216,6 +218,7 @@ where
         wall,
         ended_early,
         interrupted,
+        stop_note: outcome.stop_note(),
     })
 }
 

@@ -33,6 +33,12 @@ struct Robot {
     ipoc: u64,
     /// The correction along the tool's z in effect, mm.
     z_corr: f64,
+    /// Decimals of the positions sent (a KUKA ETHERNET object's `Precision`), and the IPOC step.
+    decimals: usize,
+    step: u64,
+    /// X along the pass, mm, and its change per cycle.
+    x: f64,
+    dx: f64,
 }
 
 impl Robot {
@@ -45,6 +51,10 @@ impl Robot {
             sock,
             ipoc: 5_000_000,
             z_corr: 0.0,
+            decimals: 4,
+            step: 4,
+            x: 445.0,
+            dx: 0.0,
         }
     }
 
@@ -53,9 +63,10 @@ impl Robot {
     fn cycle(&mut self, fc: Option<&str>) -> Option<String> {
         let z_sol = 890.0;
         let z_ist = z_sol - self.z_corr;
+        let (p, x) = (self.decimals, self.x);
         let rob = format!(
-            "<Rob Type=\"KUKA\"><RIst X=\"445.0000\" Y=\"0.0000\" Z=\"{z_ist:.4}\" A=\"180.0000\" B=\"0.0000\" C=\"180.0000\"/>\
-             <RSol X=\"445.0000\" Y=\"0.0000\" Z=\"{z_sol:.4}\" A=\"180.0000\" B=\"0.0000\" C=\"180.0000\"/>\
+            "<Rob Type=\"KUKA\"><RIst X=\"{x:.p$}\" Y=\"0.0000\" Z=\"{z_ist:.p$}\" A=\"180.0000\" B=\"0.0000\" C=\"180.0000\"/>\
+             <RSol X=\"{x:.p$}\" Y=\"0.0000\" Z=\"{z_sol:.p$}\" A=\"180.0000\" B=\"0.0000\" C=\"180.0000\"/>\
              <AIPos A1=\"0.0000\" A2=\"-90.0000\" A3=\"90.0000\" A4=\"0.0000\" A5=\"90.0000\" A6=\"0.0000\"/>\
              <ASPos A1=\"0.0000\" A2=\"-90.0000\" A3=\"90.0000\" A4=\"0.0000\" A5=\"90.0000\" A6=\"0.0000\"/>\
              <Delay D=\"0\"/>{}<IPOC>{}</IPOC></Rob>",
@@ -73,7 +84,8 @@ impl Robot {
             match self.sock.recv(&mut buf) {
                 Ok(n) => {
                     let sen = String::from_utf8_lossy(&buf[..n]).into_owned();
-                    self.ipoc += 4;
+                    self.ipoc += self.step;
+                    self.x += self.dx;
                     self.z_corr = attr(&sen, "RKorr", "Z").expect("every reply corrects");
                     return Some(sen);
                 }
@@ -262,4 +274,100 @@ fn a_client_without_fc_cmd_sees_a_lost_contact_end_in_a_retract_and_stop() {
     assert_eq!(z[z.len() - 1], 0.0, "back on the path before the Stop");
     // About 0.5 s of search at most: the run ended long before the scenario's 4 s.
     assert!(z.len() < 700, "{} cycles", z.len());
+}
+
+/// `--ethernet-config FILE`: the dry run reads what the robot's own configuration says it sends and
+/// answers in its layout — here a configuration with axis corrections only (`<AK A1..A6/>`, `Stop`),
+/// which `run` would refuse (said at start), answered with zeros in that layout.
+#[test]
+fn the_dry_run_answers_in_the_robots_own_layout() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/rsi-corpus/configs/axis-only.xml");
+    let (mut child, listen) = start(
+        dir.path(),
+        &[
+            "--scenario",
+            "pass-flat-20n",
+            "--ethernet-config",
+            cfg.to_str().unwrap(),
+        ],
+    );
+    let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+    sock.connect(&listen).unwrap();
+    sock.set_read_timeout(Some(Duration::from_millis(200)))
+        .unwrap();
+    let mut replies = Vec::new();
+    let mut ipoc = 77_000u64;
+    let mut buf = [0u8; 2048];
+    for _ in 0..200 {
+        if replies.len() == 20 {
+            break;
+        }
+        // What axis-only.xml's SEND says: RIst, RSol, AIPos.
+        let rob = format!(
+            "<Rob Type=\"KUKA\"><RIst X=\"445.0\" Y=\"0.0\" Z=\"890.0\" A=\"180.0\" B=\"0.0\" C=\"180.0\"/>\
+             <RSol X=\"445.0\" Y=\"0.0\" Z=\"890.0\" A=\"180.0\" B=\"0.0\" C=\"180.0\"/>\
+             <AIPos A1=\"0.0\" A2=\"-90.0\" A3=\"90.0\" A4=\"0.0\" A5=\"90.0\" A6=\"0.0\"/><IPOC>{ipoc}</IPOC></Rob>"
+        );
+        if sock.send(rob.as_bytes()).is_err() {
+            std::thread::sleep(Duration::from_millis(100));
+            continue;
+        }
+        match sock.recv(&mut buf) {
+            Ok(n) => {
+                replies.push(String::from_utf8_lossy(&buf[..n]).into_owned());
+                ipoc += 4;
+            }
+            Err(_) => std::thread::sleep(Duration::from_millis(50)),
+        }
+    }
+    child.kill().unwrap();
+    let o = finish(child);
+    let out = text(&o.stdout);
+    assert_eq!(replies.len(), 20, "{out}\n{}", text(&o.stderr));
+    for (k, sen) in replies.iter().enumerate() {
+        assert!(sen.starts_with("<Sen Type=\"ImFree\">"), "{sen}");
+        assert!(sen.contains("<AK A1=\"0.0000\" A2=\"0.0000\""), "{sen}");
+        assert!(sen.contains("<Stop>0</Stop>"), "{sen}");
+        assert!(!sen.contains("RKorr"), "{sen}");
+        assert!(
+            sen.contains(&format!("<IPOC>{}</IPOC>", 77_000 + 4 * k as u64)),
+            "{sen}"
+        );
+    }
+    assert!(
+        out.contains("`forcecell run` would refuse") && out.contains("no Cartesian correction"),
+        "{out}"
+    );
+}
+
+/// A client that sends positions at 0.1 mm (`Precision 1`) and steps its IPOC by 1 per cycle, as
+/// several robot-side simulators do: the dry run says both, with the steady force error the
+/// resolution implies at the workpiece's stiffness, and the fix.
+#[test]
+fn coarse_positions_and_an_ipoc_step_of_one_are_warned() {
+    let dir = tempfile::tempdir().unwrap();
+    let (child, listen) = start(dir.path(), &["--scenario", "pass-flat-20n"]);
+    let mut robot = Robot::connect(&listen);
+    robot.decimals = 1;
+    robot.step = 1;
+    robot.dx = 0.1;
+    let mut last = String::new();
+    for _ in 0..10_000 {
+        let Some(sen) = robot.cycle(None) else { break };
+        let stop = sen.contains("<Stop>1</Stop>");
+        last = sen;
+        if stop {
+            break;
+        }
+    }
+    assert!(last.contains("<Stop>1</Stop>"), "{last}");
+    let o = finish(child);
+    let out = text(&o.stdout);
+    assert!(
+        out.contains("warning: the robot sends positions at 0.1000 mm resolution")
+            && out.contains("k*q/2"),
+        "{out}"
+    );
+    assert!(out.contains("IPOC steps by 1 per cycle, not 4"), "{out}");
 }

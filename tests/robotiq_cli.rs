@@ -16,7 +16,7 @@ fn sensor_commands_talk_to_the_simulated_ft300_in_another_process() {
     let (out, info) = run(&["sensor", "robotiq", "--port", port, "info"]);
     assert!(out.status.success(), "{info}");
     assert!(info.contains("firmware         FTS-3.1.0"), "{info}");
-    assert!(info.contains("serial           FTS30042"), "{info}");
+    assert!(info.contains("serial           FTS-875704368"), "{info}");
     assert!(info.contains("production year  2021"), "{info}");
     assert!(info.contains("Fz 12.50 N"), "{info}");
 

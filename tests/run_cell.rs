@@ -474,3 +474,51 @@ can = "vcan0"
         "the correction is back at zero"
     );
 }
+
+/// `forcecell run` with the robot's own Ethernet configuration (from `tests/rsi-corpus/`): one that
+/// the force control cannot work through is refused with one line naming what is missing, before the
+/// recording directory is made, the sensor opened or the port bound.
+#[test]
+fn run_refuses_a_configuration_it_cannot_control_through_before_anything_moves() {
+    let corpus = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/rsi-corpus/configs");
+    let cases = [
+        (
+            "axis-only.xml",
+            false,
+            "RECEIVE has no Cartesian correction RKorr.X, RKorr.Y, RKorr.Z (it has axis corrections only",
+        ),
+        ("no-stop.xml", false, "RECEIVE has no Stop channel"),
+        ("onlysend.xml", false, "ONLYSEND is TRUE"),
+        (
+            "internal-receive.xml",
+            true,
+            "process = true but SEND has no FcCmd and RECEIVE no FcState",
+        ),
+    ];
+    for (file, process, words) in cases {
+        let dir = tempfile::tempdir().unwrap();
+        let cell = CELL
+            .replace(
+                "[robot]",
+                &format!(
+                    "record = {:?}\n\n[robot]\nethernet_config = {:?}\nprocess = {process}",
+                    dir.path().join("rec").display().to_string(),
+                    corpus.join(file).display().to_string()
+                ),
+            )
+            // A port nothing else uses: the refusal must come before it is bound.
+            .replace("127.0.0.1:0", "127.0.0.1:1");
+        std::fs::write(dir.path().join("cell.toml"), cell).unwrap();
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_forcecell"))
+            .args(["run", "--config", "cell.toml"])
+            .current_dir(dir.path())
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{file}: {err}");
+        assert!(err.contains(words), "{file}: {err}");
+        assert!(err.contains(file), "{file}: names the file: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(!dir.path().join("rec").exists(), "{file}: nothing recorded");
+    }
+}

@@ -230,6 +230,25 @@ fn unwind<C: Cycler>(cycler: &mut C, sink: &mut dyn Sink) -> Result<(), C::Error
     Ok(())
 }
 
+impl<E: fmt::Display> Outcome<E> {
+    /// The real reason the `Stop` was or was not sent, for the end message: `sent`, or `not sent`
+    /// and why (no cycle was ever answered, the robot was gone, or the stop's own error, e.g. a
+    /// configuration without a `Stop` channel).
+    pub fn stop_note(&self) -> String {
+        match &self.stop {
+            Some(Ok(())) => "sent".into(),
+            _ if self.cycles == 0 => "not sent (no robot cycle to answer)".into(),
+            Some(Err(e)) => format!("not sent: {e}"),
+            None => match &self.end {
+                End::RobotEnded(_) => {
+                    "not sent (the robot had ended its session: no cycle left to answer)".into()
+                }
+                _ => "not sent (the robot link was gone: no cycle left to answer)".into(),
+            },
+        }
+    }
+}
+
 /// Run `cycler` until an end condition holds, hand every answered cycle to `sink`, and end the
 /// robot's correction motion cleanly wherever the link still stands.
 pub fn run<C: Cycler>(
@@ -287,6 +306,44 @@ pub fn run<C: Cycler>(
         end,
         stop,
         cycles: cycler.cycles(),
+    }
+}
+
+#[cfg(test)]
+mod stop_note_tests {
+    use super::*;
+
+    #[test]
+    fn the_stop_note_gives_the_stops_own_reason_once_cycles_were_answered() {
+        let o = |stop, cycles| Outcome::<&str> {
+            end: End::Done,
+            stop,
+            cycles,
+        };
+        // A configuration without a Stop channel after 3001 answered cycles: that is the reason.
+        let n = o(
+            Some(Err("cannot stop: this configuration has no Stop channel")),
+            3001,
+        )
+        .stop_note();
+        assert!(n.contains("no Stop channel"), "{n}");
+        assert!(!n.contains("no robot cycle"), "{n}");
+        assert_eq!(o(Some(Ok(())), 5).stop_note(), "sent");
+        let n = o(Some(Err("no cycle")), 0).stop_note();
+        assert!(n.contains("no robot cycle to answer"), "{n}");
+        let gone = Outcome::<&str> {
+            end: End::LinkLost("silent"),
+            stop: None,
+            cycles: 10,
+        };
+        assert!(gone.stop_note().contains("link was gone"));
+        // Interrupted before the first datagram: nothing was ever answered.
+        let never = Outcome::<&str> {
+            end: End::Stopped(Some("silent")),
+            stop: None,
+            cycles: 0,
+        };
+        assert_eq!(never.stop_note(), "not sent (no robot cycle to answer)");
     }
 }
 

@@ -68,13 +68,54 @@ pub struct Ft300Config {
     pub link: Option<PathBuf>,
 }
 
-/// The identity of the simulated sensor: firmware `FTS-3.1.0`, serial `FTS30042`, 2021.
+/// The identity of the simulated sensor: firmware `FTS-3.1.0`, serial registers
+/// `0x4654 0x5333 0x3030 0x3432`, which the vendor's host driver reads as `FTS-875704368`
+/// ([`Identity::serial_text`]), 2021.
 pub fn example_identity() -> Identity {
     Identity {
         firmware: *b"FTS\x03\x01\x00",
-        serial: *b"FTS30042",
+        serial: Identity::serial_bytes(*b"FTS", b'3', 875_704_368),
         year: 2021,
     }
+}
+
+/// Bits one byte takes on the FT 300's line: start, 8 data, stop (8N1).
+pub const BITS_PER_BYTE: u32 = 10;
+
+/// The time `bytes` take on a serial line at `baud` bit/s, [`BITS_PER_BYTE`] each.
+pub fn wire_time(bytes: usize, baud: u32) -> Duration {
+    Duration::from_nanos(bytes as u64 * u64::from(BITS_PER_BYTE) * 1_000_000_000 / u64::from(baud))
+}
+
+/// Modbus RTU's end-of-frame silence: 3.5 character times (the slave knows the request ended only
+/// after it).
+pub fn frame_gap(baud: u32) -> Duration {
+    Duration::from_nanos(35 * u64::from(BITS_PER_BYTE) * 100_000_000 / u64::from(baud))
+}
+
+/// The RTU bytes of a request to the sensor and of its answer (`ok`: the normal response, else an
+/// exception: address, function, code, CRC).
+pub fn rtu_sizes(req: &Request<'_>, ok: bool) -> (usize, usize) {
+    let request = match req {
+        Request::ReadHoldingRegisters(..) | Request::WriteSingleRegister(..) => 8,
+        Request::WriteMultipleRegisters(_, words) => 9 + 2 * words.len(),
+        _ => 8,
+    };
+    let reply = match req {
+        _ if !ok => 5,
+        Request::ReadHoldingRegisters(_, n) => 5 + 2 * usize::from(*n),
+        _ => 8,
+    };
+    (request, reply)
+}
+
+/// How long after a request's first byte the simulated sensor's answer has fully left it, at
+/// `baud`: the request's bytes, the end-of-frame silence, the answer's bytes. A pseudo-terminal
+/// moves bytes at once; the simulated sensor holds each answer back until this time, so a master
+/// polls it no faster than the wire allows (at 19 200 bit/s, reading the six wrench registers takes
+/// 8 + 17 bytes, 13.0 ms, plus 1.8 ms of silence: at most 67 polls a second).
+pub fn exchange_time(request_bytes: usize, reply_bytes: usize, baud: u32) -> Duration {
+    wire_time(request_bytes + reply_bytes, baud) + frame_gap(baud)
 }
 
 impl Default for Ft300Config {
@@ -204,12 +245,14 @@ impl tokio_modbus::server::Service for Registers {
     type Request = SlaveRequest<'static>;
     type Response = Option<Response>;
     type Exception = ExceptionCode;
-    type Future = std::future::Ready<Result<Option<Response>, ExceptionCode>>;
+    type Future = std::pin::Pin<
+        Box<dyn std::future::Future<Output = Result<Option<Response>, ExceptionCode>> + Send>,
+    >;
 
     fn call(&self, req: SlaveRequest<'static>) -> Self::Future {
         if req.slave != SLAVE {
             // Another slave on the bus: silence.
-            return std::future::ready(Ok(None));
+            return Box::pin(std::future::ready(Ok(None)));
         }
         let mut c = self.0.lock();
         c.stats.modbus_requests += 1;
@@ -236,7 +279,8 @@ impl tokio_modbus::server::Service for Registers {
             }
             Request::WriteSingleRegister(addr, _) => {
                 if addr == REG_STREAM {
-                    // The manual asks for function 0x10.
+                    // The manual documents FC03 and FC16 only, and starts the stream with FC16;
+                    // a device answers an undocumented function with exception 01.
                     Err(ExceptionCode::IllegalFunction)
                 } else {
                     Err(ExceptionCode::IllegalDataAddress)
@@ -244,7 +288,14 @@ impl tokio_modbus::server::Service for Registers {
             }
             _ => Err(ExceptionCode::IllegalFunction),
         };
-        std::future::ready(result)
+        // The answer leaves when the wire would have carried the request and the answer.
+        let (rq, rp) = rtu_sizes(&req.request, result.is_ok());
+        let due = exchange_time(rq, rp, robotiq::codec::BAUD);
+        drop(c);
+        Box::pin(async move {
+            tokio::time::sleep(due).await;
+            result
+        })
     }
 }
 
@@ -559,6 +610,30 @@ async fn device(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The simulator's own pacing: each answer is held for its bytes' time on a 19 200 bit/s line,
+    /// 10 bits a byte, so a register poll is bounded by the wire's arithmetic (no clock read here).
+    #[test]
+    fn an_answer_takes_its_bytes_time_on_the_wire() {
+        let baud = robotiq::codec::BAUD;
+        // One byte: 10 bits at 19 200 bit/s.
+        assert_eq!(wire_time(1, baud), Duration::from_nanos(520_833));
+        assert_eq!(frame_gap(baud), Duration::from_nanos(1_822_916));
+        // Reading the six wrench registers: an 8-byte request, a 5 + 12 = 17-byte answer.
+        let poll = Request::ReadHoldingRegisters(REG_WRENCH, 6);
+        assert_eq!(rtu_sizes(&poll, true), (8, 17));
+        let t = exchange_time(8, 17, baud);
+        assert_eq!(t, wire_time(25, baud) + frame_gap(baud));
+        // 25 bytes alone allow 76.8 polls a second; with the silence, 67.4.
+        let rate = 1.0 / t.as_secs_f64();
+        assert!(rate < 1.0 / wire_time(25, baud).as_secs_f64());
+        assert!((67.0..68.0).contains(&rate), "{rate}");
+        // The stream start, as FC16 (9 + 2 bytes, 8 back) or refused FC06 (8, exception 5 back).
+        let start = Request::WriteMultipleRegisters(REG_STREAM, vec![STREAM_START].into());
+        assert_eq!(rtu_sizes(&start, true), (11, 8));
+        let fc6 = Request::WriteSingleRegister(REG_STREAM, STREAM_START);
+        assert_eq!(rtu_sizes(&fc6, false), (8, 5));
+    }
 
     #[test]
     fn faults_shape_the_bytes() {

@@ -276,3 +276,34 @@ fn a_run_of_bad_frames_makes_the_link_corrupt_until_the_window_clears() {
     assert_eq!(c.corrupt_events, 1);
     assert!(is_still(&ft.read().unwrap()));
 }
+
+/// Register polls over the pty: every one answered with the sensor's values and identity, the
+/// serial as the vendor's driver reads it. The rate is printed for docs/wire-robotiq.md, never
+/// asserted (the bound is the simulator's own arithmetic, tested in `sim::ft300`).
+#[test]
+fn register_polls_over_the_pty_are_answered_at_the_wires_pace() {
+    let sim = SimFt300::spawn(quiet(false), |_t: Duration| still()).unwrap();
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let mut s = robotiq::modbus::Session::open(
+            sim.path(),
+            robotiq::codec::SLAVE,
+            Duration::from_secs(2),
+        )
+        .unwrap();
+        let id = s.identity().await.unwrap();
+        assert_eq!(id.serial_text(), "FTS-875704368");
+        let n = 40;
+        let t0 = Instant::now();
+        for _ in 0..n {
+            let c = s.wrench().await.unwrap();
+            assert_eq!(c.0[2], (FZ * 100.0).round() as i16);
+        }
+        let rate = f64::from(n) / t0.elapsed().as_secs_f64();
+        println!("FT 300 simulator: {n} wrench register polls at {rate:.1} Hz over the pty");
+    });
+    assert!(sim.stats().modbus_requests >= 43);
+}

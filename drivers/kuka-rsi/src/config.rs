@@ -135,6 +135,8 @@ impl EthernetConfig {
 
     /// Parse the XML text of a config. Tolerates comments, a declaration and any whitespace.
     pub fn parse(text: &str) -> Result<Self, ConfigError> {
+        // Windows editors (and WorkVisual exports) start the file with a UTF-8 byte-order mark.
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let mut ip = None;
         let mut port = None;
         let mut sentype = None;
@@ -208,16 +210,79 @@ impl EthernetConfig {
                     }
                     Indx::Internal => {}
                 }
-                if section == "RECEIVE" && e.indx == Indx::Internal {
-                    return Err(ConfigError(format!(
-                        "RECEIVE: {} must be a channel 1..64, not INTERNAL",
-                        e.tag
-                    )));
-                }
             }
         }
         self.rob_schema(4)?;
         self.sen_schema(4)?;
+        Ok(())
+    }
+
+    /// What force control needs of this configuration, checked when a run loads it, before anything
+    /// moves; the error is one line naming what is missing and how to add it.
+    ///
+    /// * `ONLYSEND` must be `FALSE`: a robot that takes no reply takes no correction.
+    /// * RECEIVE must carry the Cartesian correction `RKorr.X`, `RKorr.Y`, `RKorr.Z` (`A`, `B`, `C`
+    ///   optional). forcecell corrects the tool's position in Cartesian space; a configuration with
+    ///   axis corrections only (`AK`/`AKorr`) is refused rather than mapped through the robot's
+    ///   kinematics, which forcecell does not model.
+    /// * RECEIVE must carry `Stop` (BOOL): the end of every run is a clean `Stop`.
+    /// * SEND must carry `DEF_RIst` and `DEF_RSol` (the loop's position and path).
+    /// * With `process`, SEND must carry `FcCmd` and RECEIVE `FcState` (the process channels).
+    ///
+    /// `IPOC` is not in the file: RSI adds it to every message; a datagram without it is dropped.
+    pub fn check_for_control(&self, process: bool) -> Result<(), ConfigError> {
+        if self.onlysend {
+            return Err(ConfigError(
+                "ONLYSEND is TRUE: the robot takes no reply, so no correction can reach it (set ONLYSEND to FALSE)".into(),
+            ));
+        }
+        let has = |list: &[ConfigElement], tag: &str| list.iter().any(|e| e.tag == tag);
+        let missing: Vec<String> = ["X", "Y", "Z"]
+            .iter()
+            .map(|a| format!("RKorr.{a}"))
+            .filter(|t| !has(&self.receive, t))
+            .collect();
+        if !missing.is_empty() {
+            let axis = self
+                .receive
+                .iter()
+                .any(|e| e.tag.starts_with("AK") || e.tag.starts_with("AKorr"));
+            return Err(ConfigError(format!(
+                "RECEIVE has no Cartesian correction {} ({}forcecell corrects in Cartesian space and does not map corrections through the robot's kinematics; add RKorr.X..C DOUBLE channels wired to POSCORR)",
+                missing.join(", "),
+                if axis {
+                    "it has axis corrections only: "
+                } else {
+                    ""
+                }
+            )));
+        }
+        if !has(&self.receive, "Stop") {
+            return Err(ConfigError(
+                "RECEIVE has no Stop channel: forcecell could not end the robot's correction cleanly (add <ELEMENT TAG=\"Stop\" TYPE=\"BOOL\" INDX=\"n\" HOLDON=\"0\"/> wired to the STOP object)".into(),
+            ));
+        }
+        for t in ["DEF_RIst", "DEF_RSol"] {
+            if !has(&self.send, t) {
+                return Err(ConfigError(format!(
+                    "SEND has no {t}: forcecell needs the robot's actual and commanded positions (add <ELEMENT TAG=\"{t}\" TYPE=\"DOUBLE\" INDX=\"INTERNAL\"/>)"
+                )));
+            }
+        }
+        if process {
+            let cmd = self.send.iter().any(|e| e.tag.starts_with("FcCmd."));
+            let state = self.receive.iter().any(|e| e.tag.starts_with("FcState."));
+            if !cmd || !state {
+                let what = match (cmd, state) {
+                    (false, false) => "SEND has no FcCmd and RECEIVE no FcState",
+                    (false, true) => "SEND has no FcCmd",
+                    _ => "RECEIVE has no FcState",
+                };
+                return Err(ConfigError(format!(
+                    "process = true but {what}: the robot program cannot command the process (`forcecell rsi-config` writes them unless --no-process; or set process = false)"
+                )));
+            }
+        }
         Ok(())
     }
 
@@ -226,33 +291,9 @@ impl EthernetConfig {
     pub fn rob_schema(&self, precision: u8) -> Result<Schema, ConfigError> {
         let mut s = Schema::new(Direction::Rob, "KUKA", precision)?;
         for e in &self.send {
-            if let Some(internal) = e.tag.strip_prefix("DEF_") {
-                match internal {
-                    "RIst" | "RSol" => push6(&mut s, internal, POSE, e.ty)?,
-                    "AIPos" | "ASPos" | "MACur" => push6(&mut s, internal, AXES, e.ty)?,
-                    "EIPos" | "ESPos" | "MECur" => push6(&mut s, internal, EXT, e.ty)?,
-                    "Delay" => s.push_attr("Delay", "D", ValueType::Long, false)?,
-                    t if t.starts_with("Tech.C") => {
-                        let n: u8 = t["Tech.C".len()..]
-                            .parse()
-                            .ok()
-                            .filter(|n| (1..=10).contains(n))
-                            .ok_or_else(|| {
-                                ConfigError(format!("unknown internal tag {}", e.tag))
-                            })?;
-                        for k in 1..=10 {
-                            s.push_attr("Tech", &format!("C{n}{k}"), e.ty, false)?;
-                        }
-                    }
-                    _ => {
-                        return Err(ConfigError(format!(
-                            "unknown internal tag {} (known: DEF_RIst, DEF_RSol, DEF_AIPos, DEF_ASPos, DEF_EIPos, DEF_ESPos, DEF_MACur, DEF_MECur, DEF_Delay, DEF_Tech.C1..C10)",
-                            e.tag
-                        )));
-                    }
-                }
-            } else {
-                push_user(&mut s, e)?;
+            match e.tag.strip_prefix("DEF_") {
+                Some(internal) => push_internal(&mut s, "SEND", &e.tag, internal, e.ty, false)?,
+                _ => push_user(&mut s, e)?,
             }
         }
         Ok(s)
@@ -263,7 +304,17 @@ impl EthernetConfig {
         let mut s = Schema::new(Direction::Sen, &self.sentype, precision)
             .map_err(|e| ConfigError(format!("SENTYPE: {e}")))?;
         for e in &self.receive {
-            push_user(&mut s, e)?;
+            match e.tag.strip_prefix("DEF_") {
+                Some(internal) if e.indx == Indx::Internal => push_internal(
+                    &mut s,
+                    "RECEIVE",
+                    &e.tag,
+                    internal,
+                    e.ty,
+                    e.holdon.unwrap_or(false),
+                )?,
+                _ => push_user(&mut s, e)?,
+            }
         }
         Ok(s)
     }
@@ -307,6 +358,50 @@ impl EthernetConfig {
         let _ = writeln!(x, "</ROOT>");
         x
     }
+}
+
+/// The internal (`INDX="INTERNAL"`) values RSI documents, and the element each becomes on the wire.
+/// SEND (robot → PC): `DEF_RIst`, `DEF_RSol` (`X..C`), `DEF_AIPos`, `DEF_ASPos`, `DEF_MACur`
+/// (`A1..A6`), `DEF_EIPos`, `DEF_ESPos`, `DEF_MECur` (`E1..E6`), `DEF_Delay` (`<Delay D=…/>`),
+/// `DEF_EStr` (`<EStr>text</EStr>`), `DEF_Tech.Cn`/`DEF_Tech.Tn` (`<Tech Cn1..Cn10/>`, n = 1..10).
+/// RECEIVE (PC → robot): `DEF_EStr` (a message the robot shows; forcecell sends it empty) and
+/// `DEF_Tech.Tn`/`DEF_Tech.Cn` (`<Tech Tn1..Tn10/>`; forcecell sends zeros).
+pub const INTERNAL_TAGS: &str = "SEND: DEF_RIst, DEF_RSol, DEF_AIPos, DEF_ASPos, DEF_EIPos, DEF_ESPos, DEF_MACur, DEF_MECur, DEF_Delay, DEF_EStr, DEF_Tech.C1..C10, DEF_Tech.T1..T10; RECEIVE: DEF_EStr, DEF_Tech.T1..T10, DEF_Tech.C1..C10";
+
+fn push_internal(
+    s: &mut Schema,
+    section: &str,
+    tag: &str,
+    internal: &str,
+    ty: ValueType,
+    holdon: bool,
+) -> Result<(), ConfigError> {
+    let unknown = || {
+        ConfigError(format!(
+            "{section}: unknown internal tag {tag} (known: {INTERNAL_TAGS})"
+        ))
+    };
+    let send = section == "SEND";
+    match internal {
+        "RIst" | "RSol" if send => push6(s, internal, POSE, ty)?,
+        "AIPos" | "ASPos" | "MACur" if send => push6(s, internal, AXES, ty)?,
+        "EIPos" | "ESPos" | "MECur" if send => push6(s, internal, EXT, ty)?,
+        "Delay" if send => s.push_attr("Delay", "D", ValueType::Long, false)?,
+        "EStr" => s.push_text("EStr", ValueType::String, false)?,
+        t if t.starts_with("Tech.C") || t.starts_with("Tech.T") => {
+            let (prefix, n) = t["Tech.".len()..].split_at(1);
+            let n: u8 = n
+                .parse()
+                .ok()
+                .filter(|n| (1..=10).contains(n))
+                .ok_or_else(unknown)?;
+            for k in 1..=10 {
+                s.push_attr("Tech", &format!("{prefix}{n}{k}"), ty, holdon)?;
+            }
+        }
+        _ => return Err(unknown()),
+    }
+    Ok(())
 }
 
 fn push6(s: &mut Schema, tag: &str, attrs: [&str; 6], ty: ValueType) -> Result<(), ConfigError> {

@@ -62,4 +62,106 @@ pub struct Diagnostics {
     /// a virtual machine costs tens of µs there), and which includes any time the woken peer
     /// preempts the sender on a shared CPU.
     pub before_send: Latency,
+    /// What the first cycles of the session showed of the robot's data ([`Measured`]).
+    pub measured: Measured,
+}
+
+/// Cycles of a session the detectors watch before they judge.
+pub const PROBE_CYCLES: u32 = 50;
+
+/// What the first [`PROBE_CYCLES`] cycles of the latest session showed, for [`Diagnostics::advisories`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Measured {
+    /// The finest decimal step seen in `RIst` X, Y, Z, m (1e-4 mm written with 4 decimals: 1e-7 m);
+    /// `None` until the positions changed in [`PROBE_CYCLES`] cycles.
+    pub position_resolution: Option<f64>,
+    /// The smallest IPOC step between consecutive datagrams over the first cycles.
+    pub ipoc_step: Option<u64>,
+    /// Seconds per IPOC count in use: the configured `ipoc_unit`, or `period / ipoc_step` when the
+    /// step disagrees with the period (adopted; see `docs/wire-rsi.md`).
+    pub ipoc_unit: Option<f64>,
+}
+
+/// The decimals a wire value (mm) was written with, 0..=6 (6: six or more).
+pub fn decimals_of(mm: f64) -> u8 {
+    let mut scale = 1.0;
+    for d in 0..6u8 {
+        let x = mm * scale;
+        if (x - x.round()).abs() < 1e-6 * scale.max(1.0) {
+            return d;
+        }
+        scale *= 10.0;
+    }
+    6
+}
+
+impl Diagnostics {
+    /// Warnings about what degrades control, from [`Measured`]: positions too coarse for the force
+    /// control at contact stiffness `stiffness` (N/m), an IPOC step that disagreed with `period`
+    /// (s). Each is one line with the consequence and the fix.
+    pub fn advisories(&self, period: f64, stiffness: f64) -> Vec<String> {
+        let mut out = Vec::new();
+        let m = &self.measured;
+        if let Some(q) = m.position_resolution {
+            let err = stiffness * q / 2.0;
+            if err >= 0.1 {
+                out.push(format!(
+                    "warning: the robot sends positions at {:.4} mm resolution: at {:.0} kN/m contact stiffness that is a steady force error of up to k*q/2 = {err:.2} N; raise the ETHERNET object's Precision in the RSI context to 4 decimals",
+                    q * 1e3,
+                    stiffness * 1e-3
+                ));
+            }
+        }
+        if let (Some(step), Some(unit)) = (m.ipoc_step, m.ipoc_unit) {
+            let expected = (period * 1e3).round();
+            if (unit * step as f64 - period).abs() < 1e-9 && step as f64 != expected {
+                out.push(format!(
+                    "warning: the robot's IPOC steps by {step} per cycle, not {expected} (1 per ms at a {:.0} ms cycle): robot time was taken as {step} counts per {:.0} ms cycle; a real KUKA controller counts milliseconds, so check the robot side (a simulator?) or cycle_ms",
+                    period * 1e3,
+                    period * 1e3
+                ));
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn decimals_are_read_from_the_values() {
+        assert_eq!(decimals_of(450.0), 0);
+        assert_eq!(decimals_of(801.2), 1);
+        assert_eq!(decimals_of(-12.25), 2);
+        assert_eq!(decimals_of(801.2501), 4);
+    }
+
+    #[test]
+    fn coarse_positions_and_a_foreign_ipoc_step_are_warned_with_their_cost() {
+        let mut d = Diagnostics::default();
+        assert!(d.advisories(0.004, 70e3).is_empty());
+        // 0.1 mm at 70 kN/m: up to 3.5 N.
+        d.measured.position_resolution = Some(1e-4);
+        let a = d.advisories(0.004, 70e3);
+        assert_eq!(a.len(), 1);
+        assert!(
+            a[0].contains("0.1000 mm") && a[0].contains("3.50 N"),
+            "{}",
+            a[0]
+        );
+        // 1e-4 mm (4 decimals) costs 0.0035 N: no warning.
+        d.measured.position_resolution = Some(1e-7);
+        assert!(d.advisories(0.004, 70e3).is_empty());
+        // IPOC stepping 1 per 4 ms cycle, the unit adopted from the period.
+        d.measured.ipoc_step = Some(1);
+        d.measured.ipoc_unit = Some(0.004);
+        let a = d.advisories(0.004, 70e3);
+        assert!(a[0].contains("steps by 1 per cycle, not 4"), "{a:?}");
+        // Stepping 4 at 1 ms per count: as it should be.
+        d.measured.ipoc_step = Some(4);
+        d.measured.ipoc_unit = Some(0.001);
+        assert!(d.advisories(0.004, 70e3).is_empty());
+    }
 }

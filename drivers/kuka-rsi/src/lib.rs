@@ -29,11 +29,11 @@ mod xml;
 
 pub use codec::{Direction, Frame, Ipoc, Schema, ValueType, WriteError};
 pub use config::{ConfigElement, ConfigError, EthernetConfig, Indx};
-pub use diag::{Counters, Diagnostics, Latency};
+pub use diag::{Counters, Diagnostics, Latency, Measured};
 pub use krl::{ProcessIo, ProcessSetup, RobotSetup, Segment};
 pub use layout::Layout;
 pub use limits::{Limits, PoscorrLimits};
 pub use link::{CorrectionMode, LinkConfig, LinkError, RobotFilter, RsiLink};
 pub use process::{CommandSlots, ProcessChannels, ProcessError, StateSlots};
 pub use session::{Outgoing, Rejected, RsiSession};
-pub use xml::ParseError;
+pub use xml::{MAX_ATTRIBUTES, ParseError};

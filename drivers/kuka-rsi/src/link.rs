@@ -204,9 +204,9 @@ impl fmt::Display for LinkError {
             ),
             Self::Stopped => f.write_str("the link was stopped"),
             Self::NoCycle => f.write_str("reply without an unanswered cycle"),
-            Self::NoStopElement => {
-                f.write_str("cannot stop: the Ethernet config has no Stop RECEIVE element")
-            }
+            Self::NoStopElement => f.write_str(
+                "cannot stop: this configuration has no Stop channel (RECEIVE element Stop)",
+            ),
             Self::Encode(e) => write!(f, "cannot encode <Sen>: {e}"),
         }
     }

@@ -102,12 +102,23 @@ struct SenSlots {
 }
 
 struct Track {
-    ipoc0: u64,
     last_ipoc: u64,
     last_rx: Instant,
     peer: SocketAddr,
     /// The last plausible `RIst` and `RSol` positions (m) and their IPOC.
     plausible: Option<([hal::Vector3<f64>; 2], u64)>,
+    /// Cycles of this session so far.
+    n: u32,
+    /// Seconds per IPOC count, and the robot time and IPOC it counts from.
+    unit: f64,
+    t_base: f64,
+    v_base: u64,
+    /// Smallest IPOC step seen, most decimals seen in RIst X Y Z, the first RIst X Y Z (mm), and
+    /// whether they changed since.
+    min_step: u64,
+    decimals: u8,
+    first_xyz: [f64; 3],
+    moved: bool,
 }
 
 #[derive(Clone, Copy)]
@@ -371,12 +382,20 @@ impl RsiSession {
         if new_session {
             c.sessions += 1;
             self.track = Some(Track {
-                ipoc0: v,
                 last_ipoc: v,
                 last_rx: rx_at,
                 peer: from,
                 plausible: None,
+                n: 0,
+                unit: self.cfg.ipoc_unit,
+                t_base: 0.0,
+                v_base: v,
+                min_step: u64::MAX,
+                decimals: 0,
+                first_xyz: [0.0; 3],
+                moved: false,
             });
+            self.diag.measured = crate::diag::Measured::default();
             // A new RSI_ON starts the robot's relative total from zero; the rate limit starts from the
             // correction the robot reports in effect (set below, once the poses are decoded).
             self.last_wire = [0.0; 6];
@@ -384,6 +403,42 @@ impl RsiSession {
         let Some(s) = self.track.as_mut() else {
             unreachable!("a session was just found or started");
         };
+        // The first cycles: the IPOC step and the positions' decimals (sans-IO detectors; the
+        // application prints `Diagnostics::advisories`).
+        let f = &self.rx_frame;
+        if s.n < crate::diag::PROBE_CYCLES {
+            let xyz = [0, 1, 2].map(|k| f.get(self.rob_slots.rist[k]));
+            if s.n == 0 {
+                s.first_xyz = xyz;
+            } else {
+                s.min_step = s.min_step.min(v - s.last_ipoc);
+            }
+            s.moved |= xyz != s.first_xyz;
+            for x in xyz {
+                s.decimals = s.decimals.max(crate::diag::decimals_of(x));
+            }
+            s.n += 1;
+            if s.n == crate::diag::PROBE_CYCLES {
+                let m = &mut self.diag.measured;
+                if s.moved {
+                    m.position_resolution = Some(10f64.powi(-i32::from(s.decimals)) * 1e-3);
+                }
+                if s.min_step != u64::MAX {
+                    m.ipoc_step = Some(s.min_step);
+                    // A step that disagrees with the period by more than half: the robot side counts
+                    // in other units. Its step is adopted as one cycle, from here on (robot time
+                    // stays continuous).
+                    let period = self.cfg.period.as_secs_f64();
+                    let stepped = s.min_step as f64 * s.unit;
+                    if !(0.5 * period..=1.5 * period).contains(&stepped) {
+                        s.t_base += (s.last_ipoc - s.v_base) as f64 * s.unit;
+                        s.v_base = s.last_ipoc;
+                        s.unit = period / s.min_step as f64;
+                    }
+                    m.ipoc_unit = Some(s.unit);
+                }
+            }
+        }
         s.last_ipoc = v;
         s.last_rx = rx_at;
         s.peer = from;
@@ -398,7 +453,7 @@ impl RsiSession {
         }
         let mut cycle = Cycle {
             seq: v,
-            t: (v - s.ipoc0) as f64 * self.cfg.ipoc_unit,
+            t: s.t_base + (v - s.v_base) as f64 * s.unit,
             period: self.cfg.period.as_secs_f64(),
             actual: wire::pose_from_wire(f.get6(self.rob_slots.rist)),
             programmed: wire::pose_from_wire(f.get6(self.rob_slots.rsol)),
@@ -413,7 +468,7 @@ impl RsiSession {
         if now.iter().all(|p| p.iter().all(|v| v.is_finite())) {
             let plausible = match s.plausible {
                 Some((last, at)) => {
-                    let dt = v.saturating_sub(at) as f64 * self.cfg.ipoc_unit;
+                    let dt = v.saturating_sub(at) as f64 * s.unit;
                     // 0.1 mm slack: the wire's decimals and the robot's own jitter.
                     let reach = self.cfg.max_speed * dt + 1e-4;
                     now.iter().zip(&last).all(|(p, q)| (p - q).norm() <= reach)
@@ -602,6 +657,40 @@ mod tests {
 
     fn ms(n: u64) -> Duration {
         Duration::from_millis(n)
+    }
+
+    /// A robot side that steps the IPOC by 1 per 4 ms cycle and sends positions at 0.1 mm: both are
+    /// measured in the first cycles; the step is adopted as one cycle from then on, robot time
+    /// staying continuous.
+    #[test]
+    fn the_first_cycles_measure_the_ipoc_step_and_the_position_resolution() {
+        let mut s = session(false);
+        let t0 = Instant::now();
+        let mut ts = Vec::new();
+        for k in 0..60u64 {
+            let d = rob(&s, 7000 + k, 300.0 + 0.1 * k as f64, None);
+            ts.push(s.receive(&d, robot(), t0 + ms(4 * k)).unwrap().t);
+        }
+        let m = s.diagnostics().measured;
+        assert_eq!(m.ipoc_step, Some(1));
+        assert_eq!(m.ipoc_unit, Some(0.004));
+        let q = m.position_resolution.unwrap();
+        assert!((q - 1e-4).abs() < 1e-12, "{q}");
+        // Before the judgement 1 ms a cycle (the configured unit), after it 4 ms, never a jump back.
+        assert!((ts[1] - 0.001).abs() < 1e-12);
+        assert!(ts.windows(2).all(|w| w[1] > w[0]));
+        assert!((ts[59] - ts[58] - 0.004).abs() < 1e-12, "{ts:?}");
+        let a = s.diagnostics().advisories(0.004, 70e3);
+        assert_eq!(a.len(), 2, "{a:?}");
+        // A robot that counts milliseconds and sends 4 decimals: nothing measured is wrong.
+        let mut s = session(false);
+        for k in 0..60u64 {
+            let d = rob(&s, 9000 + 4 * k, 300.0 + 0.0123 * k as f64, None);
+            s.receive(&d, robot(), t0 + ms(4 * k)).unwrap();
+        }
+        let m = s.diagnostics().measured;
+        assert_eq!((m.ipoc_step, m.ipoc_unit), (Some(4), Some(0.001)));
+        assert!(s.diagnostics().advisories(0.004, 70e3).is_empty());
     }
 
     #[test]

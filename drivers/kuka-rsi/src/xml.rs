@@ -51,7 +51,7 @@ pub enum ParseError {
         /// Byte offset of the second one.
         at: usize,
     },
-    /// More attributes on one element than the scanner tracks (32).
+    /// More attributes on one element than [`MAX_ATTRIBUTES`].
     TooManyAttributes {
         /// Byte offset.
         at: usize,
@@ -95,7 +95,10 @@ impl fmt::Display for ParseError {
             Self::Syntax { at, expected } => write!(f, "expected {expected} at offset {at}"),
             Self::TooDeep { at } => write!(f, "element nested deeper than 2 levels at offset {at}"),
             Self::DuplicateAttribute { at } => write!(f, "duplicate attribute at offset {at}"),
-            Self::TooManyAttributes { at } => write!(f, "more than 32 attributes at offset {at}"),
+            Self::TooManyAttributes { at } => write!(
+                f,
+                "more than {MAX_ATTRIBUTES} attributes on one element at offset {at}"
+            ),
             Self::WrongRoot => f.write_str("unexpected root element"),
             Self::WrongType => f.write_str("Type attribute does not match the configured SENTYPE"),
             Self::DuplicateElement { element } => {
@@ -124,6 +127,13 @@ impl hal::Error for ParseError {
         hal::ErrorKind::Malformed
     }
 }
+
+/// The most attributes one element may carry. RSI's own bounds: an ETHERNET object carries at most
+/// 64 channels each way (all of which may be attributes of one element, `Out.o1` … `Out.o64`), and
+/// the internal `DEF_Tech.C`/`DEF_Tech.T` generators add 10 attributes each to `<Tech>` (six of
+/// each, 60 per prefix, on a KR C4). 64 channels plus 60 internal values is 124; the scanner keeps
+/// 128 on the stack (1 KiB), no allocation. See `docs/wire-rsi.md`.
+pub const MAX_ATTRIBUTES: usize = 128;
 
 /// Printable ASCII, tab, CR or LF.
 fn is_text_byte(c: u8) -> bool {
@@ -230,7 +240,7 @@ impl<'a> Cursor<'a> {
         &mut self,
         mut f: impl FnMut(&'a [u8], &'a [u8], usize) -> Result<(), ParseError>,
     ) -> Result<bool, ParseError> {
-        let mut seen: [(u32, u32); 32] = [(0, 0); 32];
+        let mut seen: [(u32, u32); MAX_ATTRIBUTES] = [(0, 0); MAX_ATTRIBUTES];
         let mut sigs = 0u64;
         let mut n = 0;
         loop {

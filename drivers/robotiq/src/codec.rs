@@ -426,14 +426,44 @@ impl Identity {
         format!("{name}-{}", version.join("."))
     }
 
-    /// The serial number: as ASCII when every non-zero byte is printable, else as hex.
+    /// The serial number as the vendor's own host driver decodes registers 510..=513: three
+    /// characters (the high and low bytes of 510, the high byte of 511), a dash, and the 32-bit
+    /// number whose bytes are 513 high, 513 low, 512 high, 512 low, written with at least four
+    /// digits; `UNKNOWN` when that number is 0. The low byte of 511 is not part of it.
+    /// Registers `0x4654 0x5333 0x3030 0x3432` read `FTS-875704368`.
     pub fn serial_text(&self) -> String {
-        let trimmed: Vec<u8> = self.serial.iter().copied().filter(|&b| b != 0).collect();
-        if !trimmed.is_empty() && trimmed.iter().all(|b| b.is_ascii_graphic()) {
-            trimmed.iter().map(|&b| char::from(b)).collect()
-        } else {
-            self.serial.iter().map(|b| format!("{b:02X}")).collect()
+        let n = self.serial_number();
+        if n == 0 {
+            return "UNKNOWN".into();
         }
+        let c = |b: u8| {
+            if b.is_ascii_graphic() {
+                char::from(b)
+            } else {
+                '?'
+            }
+        };
+        format!(
+            "{}{}{}-{n:04}",
+            c(self.serial[0]),
+            c(self.serial[1]),
+            c(self.serial[2])
+        )
+    }
+
+    /// The number part of the serial (see [`Identity::serial_text`]).
+    pub fn serial_number(&self) -> u32 {
+        let s = &self.serial;
+        u32::from_be_bytes([s[6], s[7], s[4], s[5]])
+    }
+
+    /// The serial registers' bytes for a three-character prefix and a number, as the vendor's
+    /// driver decodes them; `spare` is the low byte of register 511, which it does not read.
+    pub fn serial_bytes(prefix: [u8; 3], spare: u8, number: u32) -> [u8; 8] {
+        let n = number.to_be_bytes();
+        [
+            prefix[0], prefix[1], prefix[2], spare, n[2], n[3], n[0], n[1],
+        ]
     }
 }
 
@@ -529,7 +559,19 @@ mod tests {
         )
         .unwrap();
         assert_eq!(id.firmware_text(), "FTS-3.1.0");
-        assert_eq!(id.serial_text(), "FTS30042");
+        // The golden vector: what Robotiq's own host driver prints for these registers.
+        assert_eq!(id.serial_text(), "FTS-875704368");
+        assert_eq!(id.serial_number(), 875_704_368);
+        assert_eq!(
+            Identity::serial_bytes(*b"FTS", b'3', 875_704_368),
+            id.serial
+        );
+        assert_eq!(id.serial_registers(), [0x4654, 0x5333, 0x3030, 0x3432]);
+        let mut zero = id.clone();
+        zero.serial = Identity::serial_bytes(*b"FTS", 0, 0);
+        assert_eq!(zero.serial_text(), "UNKNOWN");
+        zero.serial = Identity::serial_bytes(*b"FTS", 0, 42);
+        assert_eq!(zero.serial_text(), "FTS-0042");
         assert_eq!(id.year, 2021);
         assert_eq!(id.firmware_registers(), [0x4654, 0x5303, 0x0100]);
         assert!(Identity::from_registers(&[1, 2], &[0; 4], &[1]).is_err());
