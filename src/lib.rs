@@ -19,6 +19,7 @@ pub mod robotiq;
 pub mod rsi;
 pub mod rt;
 pub mod runner;
+pub mod status;
 pub mod stop;
 pub mod tune;
 

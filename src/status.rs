@@ -1,0 +1,181 @@
+//! What `run` says while it runs: a status line a few times a second — the process phase (or the law's
+//! contact state), the force against the commanded force, `k̂_c`, the robot's late replies against its
+//! budget, and the cycles that met a condition. On a terminal the line is rewritten in place; elsewhere
+//! (a log, a pipe) a plain line is written every few seconds. Paced on the robot's own time, so a
+//! recording replayed or a test gets the same lines.
+
+use std::fmt::Write as _;
+
+use ::scenario::telemetry::{Coded, Condition};
+use controller::CycleReport;
+
+/// Lines a second on a terminal.
+pub const TERMINAL_HZ: f64 = 4.0;
+/// Seconds between plain lines when not on a terminal.
+pub const LOG_PERIOD: f64 = 5.0;
+
+/// The status line's state: when it last printed and what it has counted since the start.
+#[derive(Clone, Debug)]
+pub struct Status {
+    period: f64,
+    /// The robot's late-reply budget (RSI: the ETHERNET object's `Timeout`); `None` when unknown.
+    budget: Option<u32>,
+    next: f64,
+    cycles: u64,
+    conditions: u64,
+    warned_half: bool,
+}
+
+impl Status {
+    /// A status every `period` s of robot time, against a late-reply `budget`.
+    pub fn new(period: f64, budget: Option<u32>) -> Self {
+        Self {
+            period,
+            budget,
+            next: 0.0,
+            cycles: 0,
+            conditions: 0,
+            warned_half: false,
+        }
+    }
+
+    /// Take one answered cycle. Returns the line to show when one is due, and — once — a warning when
+    /// the robot's late replies pass half its budget.
+    pub fn observe(&mut self, r: &CycleReport) -> (Option<String>, Option<String>) {
+        self.cycles += 1;
+        if Condition::of(r.fault) != Condition::None {
+            self.conditions += 1;
+        }
+        let late = r.cycle.late_replies;
+        let warning = match self.budget {
+            Some(b) if !self.warned_half && 2 * late >= b && b > 0 => {
+                self.warned_half = true;
+                Some(format!(
+                    "warning: the robot counts {late} late replies of the {b} its Timeout allows \
+                     before it stops (half used): keep other load off the cycle's CPU, check the \
+                     real-time settings"
+                ))
+            }
+            _ => None,
+        };
+        let t = r.cycle.t;
+        if t + 1e-9 < self.next {
+            return (None, warning);
+        }
+        // On a grid of the period from the first line: a slow cycle does not shift the lines after it.
+        while self.next <= t + 1e-9 {
+            self.next += self.period;
+        }
+        (Some(self.line(r)), warning)
+    }
+
+    /// The line for the cycle `r`.
+    pub fn line(&self, r: &CycleReport) -> String {
+        let mut s = String::new();
+        let state = match r.command.process.phase {
+            hal::ProcessPhase::Off if r.cycle.process.is_none() => r.out.state.name(),
+            phase => phase.name(),
+        };
+        let _ = write!(s, "t {:7.2} s  {state:<9}", r.cycle.t);
+        match r.f {
+            Some(f) => {
+                let _ = write!(s, "  F {f:6.2} / {:6.2} N", r.set_point);
+            }
+            None => {
+                let _ = write!(s, "  F    —   / {:6.2} N", r.set_point);
+            }
+        }
+        if r.out.kc_hat.is_finite() {
+            let _ = write!(s, "  k̂_c {:6.1} kN/m", r.out.kc_hat * 1e-3);
+        }
+        let _ = write!(s, "  x {:6.2} mm", r.command.translation.z * 1e3);
+        match self.budget {
+            Some(b) => {
+                let _ = write!(s, "  late {} of {b}", r.cycle.late_replies);
+            }
+            None => {
+                let _ = write!(s, "  late {}", r.cycle.late_replies);
+            }
+        }
+        let _ = write!(s, "  conditions {} of {}", self.conditions, self.cycles);
+        if r.command.process.phase == hal::ProcessPhase::Fault {
+            let _ = write!(s, "  FAULT {}", r.command.process.fault.name());
+        }
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use controller::law::Output;
+    use hal::{Correction, Cycle, Pose};
+
+    fn report(t: f64, f: Option<f64>, late: u32) -> CycleReport {
+        CycleReport {
+            cycle: Cycle {
+                seq: (t * 250.0) as u64,
+                t,
+                period: 0.004,
+                actual: Pose::identity(),
+                programmed: Pose::identity(),
+                late_replies: late,
+                new_session: false,
+                process: None,
+            },
+            x: 0.0,
+            f,
+            sample: None,
+            wrench: None,
+            compensated: false,
+            out: Output {
+                kc_hat: 70e3,
+                state: Some(controller::ContactState::Contact),
+                ..Output::default()
+            },
+            command: Correction::along_z(0.0011),
+            set_point: 5.0,
+            fault: None,
+        }
+    }
+
+    #[test]
+    fn lines_come_at_their_pace_in_robot_time_and_say_what_the_cell_does() {
+        let mut s = Status::new(0.25, Some(100));
+        let mut lines = Vec::new();
+        for k in 0..=250 {
+            let t = f64::from(k) * 0.004;
+            if let (Some(l), _) = s.observe(&report(t, Some(5.01), 0)) {
+                lines.push(l);
+            }
+        }
+        assert_eq!(lines.len(), 5, "{lines:#?}"); // t = 0, 0.25, 0.5, 0.75, 1.0
+        let l = &lines[1];
+        for part in [
+            "t    0.25 s",
+            "contact",
+            "F   5.01 /   5.00 N",
+            "k̂_c   70.0 kN/m",
+            "x   1.10 mm",
+            "late 0 of 100",
+        ] {
+            assert!(l.contains(part), "{part:?} in {l:?}");
+        }
+        let held = s.line(&report(1.0, None, 0));
+        assert!(held.contains("F    —"), "{held}");
+    }
+
+    #[test]
+    fn half_the_late_budget_warns_once() {
+        let mut s = Status::new(0.25, Some(100));
+        assert_eq!(s.observe(&report(0.0, Some(5.0), 49)).1, None);
+        let w = s
+            .observe(&report(0.004, Some(5.0), 50))
+            .1
+            .expect("a warning");
+        assert!(w.contains("50 late replies of the 100"), "{w}");
+        assert_eq!(s.observe(&report(0.008, Some(5.0), 60)).1, None, "once");
+        let mut unknown = Status::new(0.25, None);
+        assert_eq!(unknown.observe(&report(0.0, Some(5.0), 90)).1, None);
+    }
+}
