@@ -11,6 +11,7 @@ pub mod check;
 pub mod egm;
 pub mod live;
 pub mod plot;
+pub mod provenance;
 pub mod readout;
 pub mod recorder;
 pub mod report;
