@@ -9,6 +9,7 @@ pub mod candump;
 pub mod cell;
 pub mod egm;
 pub mod live;
+pub mod output;
 pub mod plot;
 pub mod readout;
 pub mod recorder;
@@ -20,4 +21,4 @@ pub mod runner;
 pub mod stop;
 pub mod tune;
 
-pub use ::scenario::{metrics, record, scenario};
+pub use ::scenario::{input, metrics, record, scenario};

@@ -635,14 +635,16 @@ pub fn robot_setup(a: &RsiConfigArgs) -> Result<RobotSetup> {
 /// `$SEN_PINT`/`$SEN_PREA` mapping the integrator must build in RSI Visual.
 pub fn rsi_config(a: &RsiConfigArgs) -> Result<(Vec<PathBuf>, Vec<String>)> {
     let setup = robot_setup(a)?;
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("cannot create output directory {}", a.out.display()))?;
+    let dir = crate::output::OutDir::create(&a.out, "output directory (--out)")?;
     let mut written = Vec::new();
     for (name, text) in setup.files() {
         let path = a.out.join(name);
-        std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
+        crate::output::replace(&path, |tmp| {
+            std::fs::write(tmp, &text).with_context(|| format!("cannot write {}", path.display()))
+        })?;
         written.push(path);
     }
+    dir.keep();
     let mapping = setup
         .process
         .as_ref()
