@@ -16,6 +16,15 @@ use std::time::{Duration, Instant};
 /// A case that runs longer than this is taken for a hang (the binary is killed, the case fails).
 const HANG: Duration = Duration::from_secs(20);
 
+/// The binary under test: this build's, or `FORCECELL_HOSTILE_BIN` (to run the suite against another
+/// build, e.g. the one before a fix).
+fn bin() -> PathBuf {
+    std::env::var_os("FORCECELL_HOSTILE_BIN").map_or_else(
+        || PathBuf::from(env!("CARGO_BIN_EXE_forcecell")),
+        PathBuf::from,
+    )
+}
+
 fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
@@ -38,7 +47,7 @@ fn trace_fixture() -> &'static (Vec<u8>, Vec<u8>) {
             "name = \"short\"\nduration = 0.05\n[environment]\nk_c = 70000.0\nx_c = 0.01\n",
         )
         .unwrap();
-        let o = Command::new(env!("CARGO_BIN_EXE_forcecell"))
+        let o = Command::new(bin())
             .args([
                 "sim",
                 "--scenario",
@@ -155,7 +164,7 @@ fn check(c: &Case) -> Result<(), String> {
     let d = tempfile::tempdir().unwrap();
     prepare(d.path(), &c.setup);
     let before = snapshot(d.path());
-    let mut child = Command::new(env!("CARGO_BIN_EXE_forcecell"))
+    let mut child = Command::new(bin())
         .args(&c.args)
         .current_dir(d.path())
         .stdin(Stdio::null())
@@ -260,6 +269,12 @@ fn mutate(text: &str, key: &str, value: &str) -> String {
         })
         .collect::<Vec<_>>()
         .join("\n")
+}
+
+/// The cell file with `ethernet_config = "path"` in its `[robot]` section.
+fn with_ethernet_config(cell: &str, path: &str) -> String {
+    let line = cell.lines().find(|l| l.starts_with("robot_ip")).unwrap();
+    cell.replacen(line, &format!("{line}\nethernet_config = \"{path}\""), 1)
 }
 
 /// The keys `key = value` of a TOML text (one per line).
@@ -590,4 +605,384 @@ fn every_hostile_input_ends_in_one_error_line_status_2_and_leaves_every_file_as_
         cases.len(),
         f.join("\n---\n")
     );
+}
+
+// ---- One test per defect of issue 35 (each failed on the binary before it). ----
+
+struct Ran {
+    code: Option<i32>,
+    out: String,
+    err: String,
+}
+
+fn forcecell(args: &[&str], dir: &Path) -> Ran {
+    let o = Command::new(bin())
+        .args(args)
+        .current_dir(dir)
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    Ran {
+        code: o.status.code(),
+        out: String::from_utf8_lossy(&o.stdout).into_owned(),
+        err: String::from_utf8_lossy(&o.stderr).into_owned(),
+    }
+}
+
+#[track_caller]
+fn refused(r: &Ran, needles: &[&str]) {
+    assert_eq!(r.code, Some(2), "{}{}", r.out, r.err);
+    assert!(r.err.starts_with("error:"), "{}", r.err);
+    for n in needles {
+        assert!(r.err.contains(n), "{n:?} missing: {}", r.err);
+    }
+}
+
+fn names(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn defect1_a_tiny_poll_rate_is_refused_with_its_reason_not_a_panic() {
+    let d = tempfile::tempdir().unwrap();
+    for cmd in ["run", "calibrate"] {
+        std::fs::write(
+            d.path().join("c.toml"),
+            mutate(&base_cell(), "poll_hz", "1e-300"),
+        )
+        .unwrap();
+        let r = forcecell(&[cmd, "--config", "c.toml"], d.path());
+        refused(&r, &["sensor.poll_hz", "stale"]);
+        assert_eq!(names(d.path()), ["c.toml"], "no recordings/ left");
+    }
+}
+
+#[test]
+fn defect2_a_named_pipe_is_refused_at_once_wherever_a_file_is_read() {
+    let d = tempfile::tempdir().unwrap();
+    prepare(d.path(), &[Setup::Fifo("f")]);
+    std::fs::write(
+        d.path().join("c.toml"),
+        with_ethernet_config(&base_cell(), "f"),
+    )
+    .unwrap();
+    for args in [
+        &["run", "--config", "f"][..],
+        &["calibrate", "--config", "f"],
+        &["run", "--config", "c.toml"],
+        &["plot", "f"],
+        &["export", "f", "--csv", "--out", "x.csv"],
+    ] {
+        // A hang here would block the test: the suite above runs the same with a kill-timeout.
+        refused(&forcecell(args, d.path()), &["named pipe", "regular file"]);
+    }
+    assert_eq!(names(d.path()), ["c.toml", "f"]);
+}
+
+#[test]
+fn defect3_reads_are_bounded_a_device_and_a_300_mib_file_are_refused() {
+    let d = tempfile::tempdir().unwrap();
+    refused(
+        &forcecell(&["plot", "/dev/zero"], d.path()),
+        &["/dev/zero", "a device"],
+    );
+    prepare(d.path(), &[Setup::Sparse("big.toml", 300 << 20)]);
+    refused(
+        &forcecell(&["run", "--config", "big.toml"], d.path()),
+        &["big.toml", "314572800 bytes", "1048576"],
+    );
+}
+
+#[test]
+fn defect4_a_rejected_sim_leaves_the_previous_results_as_they_were() {
+    let d = tempfile::tempdir().unwrap();
+    let ok = forcecell(
+        &[
+            "sim", "--robot", "inproc", "--sensor", "inproc", "--out", "o",
+        ],
+        d.path(),
+    );
+    assert_eq!(ok.code, Some(0), "{}{}", ok.out, ok.err);
+    let before = snapshot(d.path());
+    let csv = std::fs::read(d.path().join("o/paper-fig9.csv")).unwrap();
+    assert!(csv.len() > 10_000, "a real trace: {} bytes", csv.len());
+    for args in [
+        &["sim", "--robot", "inproc", "--realtime", "--out", "o"][..],
+        &["sim", "--can", "nocan9", "--sensor", "inproc", "--out", "o"],
+        &["sim", "--can", "nocan9", "--out", "o"],
+        &["sim", "--external-robot", "[::1]:6008", "--out", "o"],
+        &["sim", "--external-robot", "192.0.2.1:6008", "--out", "o"],
+        &["sim", "--live", "192.0.2.1:8765", "--out", "o"],
+    ] {
+        let r = forcecell(args, d.path());
+        assert_eq!(r.code, Some(2), "{args:?}: {}{}", r.out, r.err);
+        assert_eq!(snapshot(d.path()), before, "{args:?} touched the results");
+    }
+}
+
+#[test]
+fn defect5_plot_and_export_never_write_over_an_input_or_in_a_format_their_name_does_not_say() {
+    let d = tempfile::tempdir().unwrap();
+    prepare(d.path(), &[Setup::Trace]);
+    // The same file by another name is the same file.
+    std::os::unix::fs::symlink("t.mcap", d.path().join("out/alias.csv")).unwrap();
+    let before = snapshot(d.path());
+    refused(
+        &forcecell(&["plot", "out/t.mcap", "--out", "keep.csv"], d.path()),
+        &["keep.csv", ".png"],
+    );
+    refused(
+        &forcecell(&["plot", "out/t.mcap", "--out", "out/t.mcap"], d.path()),
+        &["out/t.mcap"],
+    );
+    refused(
+        &forcecell(
+            &["export", "out/t.mcap", "--csv", "--out", "out/t.mcap"],
+            d.path(),
+        ),
+        &["out/t.mcap"],
+    );
+    refused(
+        &forcecell(
+            &["export", "out/t.mcap", "--csv", "--out", "out/alias.csv"],
+            d.path(),
+        ),
+        &["refusing to write over it"],
+    );
+    assert_eq!(snapshot(d.path()), before);
+    std::fs::remove_file(d.path().join("out/alias.csv")).unwrap();
+    // Replacing an existing output is `export`'s documented behaviour: whole, by rename, no temporary
+    // file left.
+    let ok = forcecell(
+        &["export", "out/t.mcap", "--csv", "--out", "keep.csv"],
+        d.path(),
+    );
+    assert_eq!(ok.code, Some(0), "{}{}", ok.out, ok.err);
+    assert_eq!(
+        std::fs::read(d.path().join("keep.csv")).unwrap(),
+        trace_fixture().1,
+        "the export of the recording is the run's own CSV"
+    );
+    assert_eq!(names(d.path()), ["keep.csv", "out"]);
+    assert_eq!(names(&d.path().join("out")), ["t.csv", "t.mcap"]);
+}
+
+#[test]
+fn defect6_cell_values_are_bounded_with_their_physical_reason() {
+    let d = tempfile::tempdir().unwrap();
+    for (key, value, needles) in [
+        (
+            "watchdog_cycles",
+            "4294967295",
+            &["watchdog_cycles", "1..=2500", "silent"][..],
+        ),
+        ("duration", "1e300", &["duration", "3600000 cycles"]),
+        ("poll_hz", "0.5", &["poll_hz", "stale"]),
+        ("poll_hz", "1e6", &["poll_hz", "10 kHz"]),
+        ("listen", "\"192.168.1.100:0\"", &["port 0", "real port"]),
+    ] {
+        std::fs::write(d.path().join("c.toml"), mutate(&base_cell(), key, value)).unwrap();
+        refused(
+            &forcecell(&["run", "--config", "c.toml"], d.path()),
+            needles,
+        );
+    }
+    assert_eq!(names(d.path()), ["c.toml"]);
+}
+
+#[test]
+fn defect7_the_simulated_robotiq_refuses_what_the_simulated_ati_refuses() {
+    let d = tempfile::tempdir().unwrap();
+    for (args, needle) in [
+        (&["--seconds", "1e300"][..], "week"),
+        (&["--fz", "nan"], "300 N"),
+        (&["--fz", "1e300"], "300 N"),
+        (&["--noise", "-1"], "standard deviation"),
+    ] {
+        let mut a = vec!["sim-sensor", "robotiq"];
+        a.extend_from_slice(args);
+        refused(&forcecell(&a, d.path()), &[needle]);
+    }
+}
+
+#[test]
+fn defect8_the_krl_wait_stays_within_a_32_bit_int() {
+    let d = tempfile::tempdir().unwrap();
+    refused(
+        &forcecell(
+            &["rsi-config", "--wait-timeout", "1e300", "--out", "o"],
+            d.path(),
+        ),
+        &["--wait-timeout", "32-bit"],
+    );
+    assert_eq!(names(d.path()), Vec::<String>::new());
+    let ok = forcecell(
+        &["rsi-config", "--wait-timeout", "2147483", "--out", "o"],
+        d.path(),
+    );
+    assert_eq!(ok.code, Some(0), "{}{}", ok.out, ok.err);
+    let src = std::fs::read_dir(d.path().join("o"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "src"))
+        .unwrap();
+    let krl = std::fs::read_to_string(src).unwrap();
+    assert!(krl.contains("2147483000"), "{krl}");
+    assert!(!krl.contains("18446744073709551615"), "{krl}");
+}
+
+#[test]
+fn defect10_a_sensor_filter_faster_than_the_sensor_is_refused_not_clamped() {
+    let d = tempfile::tempdir().unwrap();
+    std::fs::write(
+        d.path().join("s.toml"),
+        "name = \"s\"\nduration = 0.1\n[environment]\nk_c = 70000.0\nx_c = 0.01\n[sensor]\nbandwidth = 1e12\n",
+    )
+    .unwrap();
+    refused(
+        &forcecell(&["sim", "--scenario", "s.toml", "--out", "o"], d.path()),
+        &["bandwidth", "1800 Hz", "4 kHz"],
+    );
+    assert_eq!(names(d.path()), ["s.toml"]);
+}
+
+#[test]
+fn defect11_no_empty_directory_is_left_behind() {
+    let d = tempfile::tempdir().unwrap();
+    // The shipped cell on a machine without its CAN interface: the recording directory was created,
+    // the sensor could not be opened, the directory goes again.
+    std::fs::write(d.path().join("c.toml"), base_cell()).unwrap();
+    refused(
+        &forcecell(&["run", "--config", "c.toml"], d.path()),
+        &["nocan9"],
+    );
+    for args in [
+        &["bench-scenarios", "zzz", "--out", "b"][..],
+        &["bench-scenarios", "b01", "--tuning", "nope", "--out", "b"],
+        &["sim", "--robot", "inproc", "--realtime", "--out", "a/b/c"],
+        &["rsi-config", "--port", "0", "--out", "r"],
+    ] {
+        refused(&forcecell(args, d.path()), &[]);
+    }
+    assert_eq!(names(d.path()), ["c.toml"]);
+}
+
+/// The table of bounds in docs/cli.md, each row tried against the binary: its largest value is taken
+/// (or refused only for another reason), the next one above is refused naming the key.
+#[test]
+fn the_documented_bounds_are_the_code_s_bounds() {
+    let doc = std::fs::read_to_string(root().join("docs/cli.md")).unwrap();
+    let table = doc
+        .split("<!-- bounds:begin -->")
+        .nth(1)
+        .and_then(|t| t.split("<!-- bounds:end -->").next())
+        .expect("docs/cli.md has the bounds table");
+    let rows: Vec<Vec<String>> = table
+        .lines()
+        .filter(|l| l.starts_with("| `"))
+        .map(|l| l.split('|').map(|c| c.trim().to_string()).collect())
+        .collect();
+    assert!(rows.len() >= 9, "{rows:?}");
+    let d = tempfile::tempdir().unwrap();
+    for row in rows {
+        let (key, max) = (
+            row[1].trim_matches('`'),
+            row[3].replace(['\u{a0}', ' '], ""),
+        );
+        let above = if max.contains('.') || max.contains('e') {
+            format!("{}", max.parse::<f64>().unwrap() * 1.001)
+        } else {
+            (max.parse::<u64>().unwrap() + 1).to_string()
+        };
+        let cell = |v: &str, k: &str| {
+            std::fs::write(d.path().join("c.toml"), mutate(&base_cell(), k, v)).unwrap();
+            forcecell(&["run", "--config", "c.toml"], d.path())
+        };
+        let scenario = |v: &str| {
+            std::fs::write(
+                d.path().join("s.toml"),
+                format!("name = \"s\"\nduration = 0.1\n[environment]\nk_c = 70000.0\nx_c = 0.01\n[sensor]\nbandwidth = {v}\n"),
+            )
+            .unwrap();
+            forcecell(
+                &[
+                    "sim",
+                    "--scenario",
+                    "s.toml",
+                    "--robot",
+                    "inproc",
+                    "--realtime",
+                ],
+                d.path(),
+            )
+        };
+        let try_value = |v: &str| -> Ran {
+            match key {
+                "sensor.poll_hz" => cell(v, "poll_hz"),
+                "robot.watchdog_cycles" => cell(v, "watchdog_cycles"),
+                "duration" => cell(v, "duration"),
+                "robot.listen" => cell(&format!("\"192.168.1.100:{v}\""), "listen"),
+                "[sensor] bandwidth" => scenario(v),
+                "rsi-config --wait-timeout" => {
+                    forcecell(&["rsi-config", "--wait-timeout", v, "--out", "o"], d.path())
+                }
+                "sim-sensor robotiq --fz" => forcecell(
+                    &["sim-sensor", "robotiq", "--fz", v, "--seconds", "0.05"],
+                    d.path(),
+                ),
+                "sim-sensor robotiq --noise" => forcecell(
+                    &["sim-sensor", "robotiq", "--noise", v, "--seconds", "0.05"],
+                    d.path(),
+                ),
+                "sim-sensor --seconds" => forcecell(
+                    &["sim-sensor", "ati", "--can", "nocan9", "--seconds", v],
+                    d.path(),
+                ),
+                "sensor ati read --rate" => forcecell(
+                    &["sensor", "ati", "--can", "nocan9", "read", "--rate", v],
+                    d.path(),
+                ),
+                other => panic!("docs/cli.md bounds a key this test does not know: {other}"),
+            }
+        };
+        let word = key
+            .rsplit(['.', ' '])
+            .next()
+            .unwrap()
+            .trim_start_matches('-');
+        let at = try_value(&max);
+        assert!(
+            !at.err.contains("invalid value") && !at.err.contains(word),
+            "{key} = {max} (the documented largest) refused: {}",
+            at.err
+        );
+        let min = row[2].replace(['\u{a0}', ' '], "");
+        let below = match min.strip_prefix('>') {
+            Some(m) => m.to_string(),
+            None if min.contains('.') => {
+                let m: f64 = min.parse().unwrap();
+                format!("{}", m - (m.abs() * 1e-3).max(1e-3))
+            }
+            None => (min.parse::<i64>().unwrap() - 1).to_string(),
+        };
+        let r = try_value(&below);
+        assert_eq!(r.code, Some(2), "{key} = {below}: {}{}", r.out, r.err);
+        assert!(
+            r.err.contains(word) || r.err.contains("port 0"),
+            "{key} = {below}: {}",
+            r.err
+        );
+        let r = try_value(&above);
+        assert_eq!(r.code, Some(2), "{key} = {above}: {}{}", r.out, r.err);
+        assert!(
+            r.err.contains(word) || key == "robot.listen",
+            "{key} = {above}: {}",
+            r.err
+        );
+    }
 }

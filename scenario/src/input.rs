@@ -40,7 +40,7 @@ fn what(t: std::fs::FileType) -> &'static str {
     } else if t.is_socket() {
         "a socket"
     } else {
-        "not a regular file"
+        "of another kind"
     }
 }
 
@@ -57,14 +57,14 @@ pub fn open(path: &Path, kind: &str, max: u64) -> Result<File> {
         .map_err(|e| anyhow!("cannot read {kind} {}: {}", path.display(), os_error(&e)))?;
     if !meta.is_file() {
         bail!(
-            "{} is no {kind}: it is {}, and a {kind} must be a regular file",
+            "{} is no {kind}: it is {}, not a regular file",
             path.display(),
             what(meta.file_type())
         );
     }
     if meta.len() > max {
         bail!(
-            "{} is no {kind}: {} bytes, more than the {max} bytes a {kind} may have",
+            "{} is no {kind}: {} bytes, more than its limit of {max} bytes",
             path.display(),
             meta.len()
         );
@@ -82,7 +82,7 @@ pub fn read(path: &Path, kind: &str, max: u64) -> Result<Vec<u8>> {
         .map_err(|e| anyhow!("cannot read {kind} {}: {}", path.display(), os_error(&e)))?;
     if bytes.len() as u64 > max {
         bail!(
-            "{} is no {kind}: more than the {max} bytes a {kind} may have",
+            "{} is no {kind}: more than its limit of {max} bytes",
             path.display()
         );
     }
@@ -107,7 +107,7 @@ mod tests {
         std::fs::write(&ok, "a = 1\n").unwrap();
         assert_eq!(read_text(&ok, "cell file", 100).unwrap(), "a = 1\n");
         let e = read(&ok, "cell file", 3).unwrap_err().to_string();
-        assert!(e.contains("more than the 3 bytes"), "{e}");
+        assert!(e.contains("limit of 3 bytes"), "{e}");
         let e = read(Path::new("/dev/zero"), "trace", 10)
             .unwrap_err()
             .to_string();
