@@ -524,6 +524,19 @@ impl RobotLink for ExternalRobot<'_> {
         let x = c.tool_offset().z;
         let at = x.is_finite().then(|| self.world_position(&c, x));
         let mut w = sim::world::lock(&self.world);
+        // The world keeps the robot's time: the cycles it sent that never arrived pass in the world
+        // too (holding the last command), so the truth of cycle `t` is the world at `t`. At most a
+        // second is caught up at once (a clock jump is no reason to stall).
+        let period = w.period();
+        let due = (c.t / period).round();
+        if due.is_finite() && due > 0.0 {
+            let behind = (due as u64)
+                .saturating_sub(w.cycle_index())
+                .min((1.0 / period) as u64);
+            for _ in 0..behind {
+                w.advance(None);
+            }
+        }
         if let Some(at) = at {
             w.advance(Some(&Correction::along_z(at)));
         }
