@@ -647,7 +647,28 @@ where
         ),
         End::Stopped(None) => ("stopped by the operator".to_string(), CellEnd::Stopped),
         End::Stopped(Some(e)) => (format!("stopped by the operator: {e}"), CellEnd::Stopped),
-        End::RobotEnded(e) => (format!("the loop ended: {e}"), CellEnd::Done),
+        // The robot owns the session (no duration): whether it ended RSI or fell silent is told by
+        // what its program last commanded over the process channels.
+        End::RobotEnded(e) => match sink.last_phase {
+            Some(hal::ProcessPhase::Off) => (
+                format!(
+                    "the robot ended RSI: the process was off when its program stopped sending ({e})"
+                ),
+                CellEnd::Done,
+            ),
+            Some(phase) => (
+                format!(
+                    "the robot fell silent with the process still in {phase:?} (no orderly RSI end): {e}"
+                ),
+                CellEnd::EndedEarly,
+            ),
+            None => (
+                format!(
+                    "the robot stopped sending: its RSI_OFF, or a lost link — without process channels the two look alike ({e})"
+                ),
+                CellEnd::Done,
+            ),
+        },
         End::Fault(e) | End::LinkLost(e) => (format!("the loop ended: {e}"), CellEnd::EndedEarly),
         End::Program(Some(why)) => (why.clone(), CellEnd::EndedEarly),
     };
@@ -666,6 +687,8 @@ struct RecordSink {
     recorder: Option<Recorder>,
     rows: Vec<Row>,
     last_t: f64,
+    /// The process phase last reported to the robot program (`None`: no process channels).
+    last_phase: Option<hal::ProcessPhase>,
 }
 
 impl RecordSink {
@@ -674,6 +697,7 @@ impl RecordSink {
             recorder,
             rows: Vec::new(),
             last_t: 0.0,
+            last_phase: None,
         }
     }
 }
@@ -681,6 +705,9 @@ impl RecordSink {
 impl Sink for RecordSink {
     fn record(&mut self, r: &controller::CycleReport) -> bool {
         self.last_t = r.cycle.t;
+        if r.cycle.process.is_some() {
+            self.last_phase = Some(r.command.process.phase);
+        }
         match &mut self.recorder {
             Some(tx) => {
                 tx.push(Record::from_report(r, r.set_point));

@@ -63,6 +63,8 @@ pub fn temp_path(path: &Path) -> PathBuf {
 /// file replaces `path` (rename), on failure it is removed and `path` is untouched.
 pub fn replace<T>(path: &Path, write: impl FnOnce(&Path) -> Result<T>) -> Result<T> {
     let tmp = temp_path(path);
+    // An unwritable place is reported by the destination's name, before anything is produced.
+    File::create(&tmp).map_err(|e| anyhow!("cannot write {}: {}", path.display(), os_error(&e)))?;
     let done = write(&tmp).and_then(|v| {
         // The data on disk before the name points at it.
         if let Ok(f) = File::open(&tmp) {

@@ -98,12 +98,13 @@ pub fn print_link(d: &Diagnostics) {
     let c = d.counters;
     let l = &d.latency;
     println!(
-        "RSI link: {} received, {} answered, {} late, {} skipped, {} stale, {} foreign, {} malformed, {} oversized, {} implausible",
+        "RSI link: {} received, {} answered, {} late, {} skipped, {} stale, {} missed, {} foreign, {} malformed, {} oversized, {} implausible",
         c.received,
         c.answered,
         c.late,
         c.skipped,
         c.stale,
+        c.missed,
         c.foreign,
         c.malformed,
         c.oversized,

@@ -185,7 +185,7 @@ where
         cycles: (!spec.external).then_some(steps),
         duration: spec
             .external
-            .then(|| spec.scenario.duration - 0.5 * spec.plant.period),
+            .then_some(spec.scenario.duration - 0.5 * spec.plant.period),
         stop: Some(crate::stop::flag()),
         // An outside robot that sends `FcCmd` runs its own program: the session is its to end.
         robot_session: if spec.external && spec.scenario.program.is_none() {
@@ -193,7 +193,6 @@ where
         } else {
             RobotSession::Run
         },
-        ..RunLimits::default()
     };
     let outcome = controller::run::run(&mut lp, limits, &mut sink);
     let (ended_early, interrupted) = sim_end(&outcome);

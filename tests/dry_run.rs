@@ -286,6 +286,14 @@ fn lost_cycles_are_robot_time_the_run_ends_on_time_with_every_row_s_truth() {
     assert!(!out.contains("NaN"), "{out}");
     // 2 s of 4 ms cycles is 500 robot cycles, a tenth of them lost (and the Stop cycle answered).
     assert!((440..=460).contains(&answered), "{answered} answered");
+    // Each lost datagram is a robot cycle missed, counted from the IPOC gaps.
+    let missed: u32 = out
+        .split(" missed")
+        .next()
+        .and_then(|s| s.rsplit(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no missed counter: {out}"));
+    assert!((45..=55).contains(&missed), "{missed} missed: {out}");
     let csv = std::fs::read_dir(dir.path().join("dry"))
         .unwrap()
         .map(|e| e.unwrap().path())

@@ -46,7 +46,9 @@ fn run_with(
     sensor: SensorParams,
     recorder: Option<forcecell::recorder::Recorder>,
 ) -> (CellOutcome, KrcReport, SharedWorld) {
-    let cfg = CellConfig::from_toml(CELL, "cell.toml").unwrap();
+    let mut cfg = CellConfig::from_toml(CELL, "cell.toml").unwrap();
+    // Port 0 is refused in a cell file (the robot needs the real port); here the OS picks one.
+    cfg.robot.listen.set_port(0);
     let tuning = cfg.tuning().unwrap();
     let lc = cfg.link_config(&tuning).unwrap();
     // The driver's envelope lies inside the robot's POSCORR (5 mm default), whatever the tuning allows.
@@ -295,7 +297,9 @@ fn a_stop_ends_the_wait_for_a_robot_that_never_sends() {
     use forcecell::cell::CellEnd;
     use forcecell::stop::Interruptible;
     use std::sync::atomic::Ordering;
-    let cfg = CellConfig::from_toml(CELL, "cell.toml").unwrap();
+    let mut cfg = CellConfig::from_toml(CELL, "cell.toml").unwrap();
+    // Port 0 is refused in a cell file (the robot needs the real port); here the OS picks one.
+    cfg.robot.listen.set_port(0);
     let tuning = cfg.tuning().unwrap();
     let lc = cfg.link_config(&tuning).unwrap();
     assert!(
