@@ -317,6 +317,6 @@ fn lost_cycles_are_robot_time_the_run_ends_on_time_with_every_row_s_truth() {
     assert!(rows > 400, "{rows} rows");
     assert!(
         last_t <= 2.0 + 1e-9 && last_t > 1.98,
-        "the run ends on robot time (the first cycle at or past 2 s less half a cycle): last row at t = {last_t} s"
+        "the run ends on robot time (the first cycle at or past 2 s less a cycle): last row at t = {last_t} s"
     );
 }
