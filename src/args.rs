@@ -107,7 +107,7 @@ pub struct RsiConfigArgs {
     #[arg(long, default_value_t = 0.5)]
     pub ramp: f64,
     /// How long the program waits for PRESSING and for OFF before it ends the pass cleanly, s.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true, value_parser = wait_timeout_s)]
     pub wait_timeout: f64,
     /// $SEN_PINT index the program writes FcCmd.Mode to.
     #[arg(long, default_value_t = 1)]
@@ -264,6 +264,47 @@ pub fn set_point_n(s: &str) -> Result<f64, String> {
     } else {
         Err("0 N: the set-point must press on the surface".into())
     }
+}
+
+/// The longest KRL wait of `rsi-config --wait-timeout`, s: `$TIMER` counts ms in a 32-bit INT.
+pub const MAX_WAIT_TIMEOUT_S: f64 = 2_147_483.0;
+
+/// How long the robot program waits for a process state, s.
+pub fn wait_timeout_s(s: &str) -> Result<f64, String> {
+    let v = bounded(
+        s,
+        0.0,
+        MAX_WAIT_TIMEOUT_S,
+        "s",
+        "the robot program compares it with $TIMER, which counts ms in KRL's 32-bit INT",
+    )?;
+    if v > 0.0 {
+        Ok(v)
+    } else {
+        Err("0 s: the program must wait a positive time".into())
+    }
+}
+
+/// A force a simulated Robotiq FT 300 reports, N.
+pub fn ft300_force_n(s: &str) -> Result<f64, String> {
+    bounded(
+        s,
+        -300.0,
+        300.0,
+        "N",
+        "the FT 300 measures ±300 N (its stream's 16-bit counts saturate at ±327.67 N)",
+    )
+}
+
+/// A Robotiq simulated sensor's force noise, N (standard deviation).
+pub fn noise_n(s: &str) -> Result<f64, String> {
+    bounded(
+        s,
+        0.0,
+        1_000.0,
+        "N",
+        "a standard deviation is not negative, and 1000 N is noise beyond an FT 300's 300 N range",
+    )
 }
 
 /// A UDP port the robot sends to (0 would let the OS choose one the robot cannot know).

@@ -10,11 +10,10 @@
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 
 use crate::args::RsiArgs;
 use crate::plot;
-use crate::record;
 use crate::rsi::RobotSide;
 use crate::runner::RunSpec;
 use crate::scenario::{PlantSpec, Scenario, builtin_names};
@@ -99,10 +98,16 @@ pub fn run(
     out: &Path,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Vec<BenchRow>> {
-    std::fs::create_dir_all(out)
-        .with_context(|| format!("cannot create output directory {}", out.display()))?;
+    // Every filter and tuning checked before the output directory is created.
+    let scenarios = scenarios(opts)?;
+    for s in &scenarios {
+        for tuning in &opts.tunings {
+            RunSpec::new(s.clone(), None, Some(tuning))?;
+        }
+    }
+    let dir = crate::output::OutDir::create(out, "output directory (--out)")?;
     let mut rows = Vec::new();
-    for s in scenarios(opts)? {
+    for s in scenarios {
         let plants: Vec<Option<&str>> = match s.plant {
             PlantSpec::Model(_) => vec![None],
             PlantSpec::Name(_) => opts.plants.iter().map(|p| Some(p.as_str())).collect(),
@@ -114,7 +119,7 @@ pub fn run(
                 progress(&label);
                 let robot = RobotSide::start(&spec, &RsiArgs::default())?;
                 let (run, _) = crate::ati::run_sim_with(robot, None, &mut |_| {})?;
-                record::write_csv_file(&out.join(format!("{label}.csv")), &run.rows)?;
+                crate::output::write_csv(&out.join(format!("{label}.csv")), &run.rows)?;
                 plot::write_png(
                     &out.join(format!("{label}.png")),
                     &format!(
@@ -148,6 +153,7 @@ pub fn run(
             }
         }
     }
+    dir.keep();
     Ok(rows)
 }
 

@@ -156,8 +156,9 @@ impl<T: CanTransport> CanTransport for CanLog<T> {
 /// Read a candump `-L` log: every frame with its time in µs since the Unix epoch and its interface.
 /// Errors name the line.
 pub fn read_log(path: &Path) -> Result<Vec<(u64, String, Frame)>> {
-    let reader = socketcan::dump::Reader::from_file(path)
-        .with_context(|| format!("cannot read {}", path.display()))?;
+    let file = crate::input::open(path, "CAN log", crate::input::MAX_CAN_LOG)?;
+    let reader =
+        socketcan::dump::Reader::from_reader(std::io::Read::take(file, crate::input::MAX_CAN_LOG));
     let mut out = Vec::new();
     for (n, rec) in reader.enumerate() {
         let rec = rec.with_context(|| format!("{}: line {}", path.display(), n + 1))?;

@@ -179,8 +179,11 @@ impl SensorConfig {
                 if *slot > 15 {
                     bail!("sensor.slot must be 0..=15, got {slot}");
                 }
-                if !(poll_hz.is_finite() && *poll_hz > 0.0) {
-                    bail!("sensor.poll_hz must be > 0, got {poll_hz}");
+                let (lo, hi) = POLL_HZ;
+                if !(poll_hz.is_finite() && (lo..=hi).contains(poll_hz)) {
+                    bail!(
+                        "sensor.poll_hz must be {lo}..={hi} Hz, got {poll_hz}: the driver polls at most 10 kHz, and below 1 Hz every sample is stale before the next"
+                    );
                 }
             }
             Self::Robotiq { port, slave, .. } => {
@@ -325,6 +328,11 @@ impl ForceSensor for CellSensor {
     }
 }
 
+/// The poll rates a cell's ATI sensor accepts, Hz (as `sensor ati read --rate`).
+pub const POLL_HZ: (f64, f64) = (1.0, 10_000.0);
+/// The longest a robot may stay silent before a run ends, s (`watchdog_cycles` × the cycle).
+pub const MAX_WATCHDOG_S: f64 = 10.0;
+
 fn default_base() -> u8 {
     0x20
 }
@@ -392,8 +400,7 @@ fn default_record() -> PathBuf {
 impl CellConfig {
     /// Parse and validate a cell file.
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read cell config {}", path.display()))?;
+        let text = crate::input::read_text(path, "cell config", crate::input::MAX_CONFIG)?;
         Self::from_toml(&text, &path.display().to_string())
     }
 
@@ -407,17 +414,36 @@ impl CellConfig {
     }
 
     fn validate(&self) -> Result<()> {
-        if let Some(d) = self.duration
-            && !(d.is_finite() && d > 0.0)
-        {
-            bail!("duration must be > 0 s, got {d}");
-        }
         let r = &self.robot;
         if r.cycle_ms != 4 && r.cycle_ms != 12 {
             bail!("robot.cycle_ms must be 4 or 12, got {}", r.cycle_ms);
         }
-        if r.watchdog_cycles == 0 {
-            bail!("robot.watchdog_cycles must be > 0");
+        let cycle = f64::from(r.cycle_ms) * 1e-3;
+        if let Some(d) = self.duration {
+            if !(d.is_finite() && d > 0.0) {
+                bail!("duration must be > 0 s, got {d}");
+            }
+            let max = crate::scenario::MAX_STEPS as f64 * cycle;
+            if d > max {
+                bail!(
+                    "duration {d} s is more than {max} s: at most {} cycles of {} ms are recorded in a run (omit duration to run until the robot ends RSI)",
+                    crate::scenario::MAX_STEPS,
+                    r.cycle_ms
+                );
+            }
+        }
+        let max_watchdog = (MAX_WATCHDOG_S / cycle).round() as u32;
+        if !(1..=max_watchdog).contains(&r.watchdog_cycles) {
+            bail!(
+                "robot.watchdog_cycles must be 1..={max_watchdog} at a {} ms cycle, got {}: a robot silent for more than {MAX_WATCHDOG_S} s has stopped sending, and the run must end",
+                r.cycle_ms,
+                r.watchdog_cycles
+            );
+        }
+        if r.listen.port() == 0 {
+            bail!(
+                "robot.listen port 0 lets the OS choose one at random; the robot's Ethernet config needs the real port (1..=65535)"
+            );
         }
         for (n, v) in [
             ("poscorr_mm", r.poscorr_mm),
@@ -480,8 +506,7 @@ impl CellConfig {
         let relative = r.mode == ModeName::Relative;
         let ethernet = match &r.ethernet_config {
             Some(p) => {
-                let text = std::fs::read_to_string(p)
-                    .with_context(|| format!("cannot read Ethernet config {}", p.display()))?;
+                let text = crate::input::read_text(p, "Ethernet config", crate::input::MAX_CONFIG)?;
                 EthernetConfig::parse(&text).map_err(|e| anyhow!("{}: {e}", p.display()))?
             }
             None => {
@@ -633,7 +658,28 @@ where
         ),
         End::Stopped(None) => ("stopped by the operator".to_string(), CellEnd::Stopped),
         End::Stopped(Some(e)) => (format!("stopped by the operator: {e}"), CellEnd::Stopped),
-        End::RobotEnded(e) => (format!("the loop ended: {e}"), CellEnd::Done),
+        // The robot owns the session (no duration): whether it ended RSI or fell silent is told by
+        // what its program last commanded over the process channels.
+        End::RobotEnded(e) => match sink.last_phase {
+            Some(hal::ProcessPhase::Off) => (
+                format!(
+                    "the robot ended RSI: the process was off when its program stopped sending ({e})"
+                ),
+                CellEnd::Done,
+            ),
+            Some(phase) => (
+                format!(
+                    "the robot fell silent with the process still in {phase:?} (no orderly RSI end): {e}"
+                ),
+                CellEnd::EndedEarly,
+            ),
+            None => (
+                format!(
+                    "the robot stopped sending: its RSI_OFF, or a lost link — without process channels the two look alike ({e})"
+                ),
+                CellEnd::Done,
+            ),
+        },
         End::Fault(e) | End::LinkLost(e) => (format!("the loop ended: {e}"), CellEnd::EndedEarly),
         End::Program(Some(why)) => (why.clone(), CellEnd::EndedEarly),
     };
@@ -656,6 +702,8 @@ struct RecordSink {
     last_t: f64,
     /// The law's last finite contact-stiffness estimate, N/m.
     kc_hat: Option<f64>,
+    /// The process phase last reported to the robot program (`None`: no process channels).
+    last_phase: Option<hal::ProcessPhase>,
 }
 
 impl RecordSink {
@@ -665,6 +713,7 @@ impl RecordSink {
             rows: Vec::new(),
             last_t: 0.0,
             kc_hat: None,
+            last_phase: None,
         }
     }
 }
@@ -674,6 +723,9 @@ impl Sink for RecordSink {
         self.last_t = r.cycle.t;
         if r.out.kc_hat.is_finite() && r.out.kc_hat > 0.0 {
             self.kc_hat = Some(r.out.kc_hat);
+        }
+        if r.cycle.process.is_some() {
+            self.last_phase = Some(r.command.process.phase);
         }
         match &mut self.recorder {
             Some(tx) => {
@@ -706,9 +758,18 @@ fn open_devices(
 pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
     let cfg = CellConfig::load(path)?;
     let tuning = cfg.tuning()?;
-    // Before anything moves: the robot's configuration is one the force control can work through.
+    // Every value checked (the Ethernet config read) before the recording directory is created.
     cfg.link_config(&tuning)?;
+    let live = match live {
+        Some(addr) => {
+            let server = crate::live::LiveServer::bind(addr)?;
+            println!("live view: ws://{}", server.local_addr());
+            Some(server)
+        }
+        None => None,
+    };
     // Before anything moves: a recording that cannot be written is found now, not after the run.
+    let dir = crate::output::OutDir::create(&cfg.record, "recording directory")?;
     let csv = reserve_recording(&cfg.record)?;
     let stem = csv.with_extension("");
     crate::stop::install()?;
@@ -724,6 +785,9 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
         Ok(d) => d,
         Err(e) => {
             let _ = std::fs::remove_file(&csv);
+            if let Some(log) = &can_log {
+                let _ = std::fs::remove_file(log);
+            }
             return Err(e);
         }
     };
@@ -735,14 +799,6 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
         tuning.name
     );
     let mcap = stem.with_extension("mcap");
-    let live = match live {
-        Some(addr) => {
-            let server = crate::live::LiveServer::bind(addr)?;
-            println!("live view: ws://{}", server.local_addr());
-            Some(server)
-        }
-        None => None,
-    };
     let (tx, recording) = crate::recorder::start(
         &mcap,
         recording_options(path, &tuning),
@@ -750,6 +806,7 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
     )?;
     let stop = crate::stop::flag();
     let robot = crate::stop::Interruptible::new(&mut link, stop);
+    dir.keep();
     let out = run_cell_recorded(&cfg, &tuning, robot, sensor, stop, Some(tx))?;
     println!(
         "{}; {} cycles, {} sensor faults, {} limited; Stop {}",
@@ -776,7 +833,7 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
 /// A cell run's recording: the cell file and the tuning attached.
 fn recording_options(cell_file: &Path, tuning: &Tuning) -> RecorderOptions {
     let mut attachments = Vec::new();
-    if let Ok(text) = std::fs::read(cell_file) {
+    if let Ok(text) = crate::input::read(cell_file, "cell config", crate::input::MAX_CONFIG) {
         attachments.push(("cell.toml".to_string(), "application/toml".into(), text));
     }
     if let Ok(text) = toml::to_string(tuning) {
@@ -806,7 +863,7 @@ fn export_recording(mcap: &Path) -> Result<()> {
         return Ok(());
     }
     let png = mcap.with_extension("png");
-    crate::record::write_csv_file(&csv, &rows)?;
+    crate::output::write_csv(&csv, &rows)?;
     let title = mcap
         .file_stem()
         .map_or("run".into(), |s| s.to_string_lossy().into_owned());
@@ -825,13 +882,13 @@ pub fn calibrate(path: &Path, poses: usize) -> Result<()> {
     let cfg = CellConfig::load(path)?;
     let tuning = cfg.tuning()?;
     let (link, sensor) = open_devices(&cfg, &tuning, false, None)?;
-    std::fs::create_dir_all(&cfg.record)
-        .with_context(|| format!("cannot create {}", cfg.record.display()))?;
+    let dir = crate::output::OutDir::create(&cfg.record, "recording directory")?;
     let stamp = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_secs());
     let mcap = cfg.record.join(format!("calibrate-{stamp}.mcap"));
     let (tx, recording) = crate::recorder::start(&mcap, recording_options(path, &tuning), None)?;
+    dir.keep();
     let mount = cfg
         .gravity
         .as_ref()

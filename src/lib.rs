@@ -10,6 +10,7 @@ pub mod cell;
 pub mod check;
 pub mod egm;
 pub mod live;
+pub mod output;
 pub mod plot;
 pub mod provenance;
 pub mod readout;
@@ -24,4 +25,4 @@ pub mod status;
 pub mod stop;
 pub mod tune;
 
-pub use ::scenario::{metrics, record, scenario};
+pub use ::scenario::{input, metrics, record, scenario};

@@ -4,11 +4,11 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::{Args, Parser, Subcommand};
+use forcecell::plot;
 use forcecell::runner::RunSpec;
 use forcecell::scenario::Scenario;
-use forcecell::{plot, record};
 use indicatif::{ProgressBar, ProgressStyle};
 
 #[derive(Parser)]
@@ -75,17 +75,17 @@ struct RobotiqSimArgs {
     /// Also make PATH a symbolic link to the device (removed at exit).
     #[arg(long)]
     link: Option<PathBuf>,
-    /// Constant Fz the sensor reports, N.
-    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
+    /// Constant Fz the sensor reports, N (within the FT 300's ±300 N range).
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true, value_parser = forcecell::args::ft300_force_n)]
     fz: f64,
     /// Force noise, N (standard deviation; torque noise is a hundredth of it in N·m).
-    #[arg(long, default_value_t = 0.02)]
+    #[arg(long, default_value_t = 0.02, allow_negative_numbers = true, value_parser = forcecell::args::noise_n)]
     noise: f64,
     /// Stream from the start, like a sensor left streaming at power-up.
     #[arg(long)]
     streaming: bool,
     /// Stop after this many seconds (default: run until interrupted).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = forcecell::args::serve_seconds)]
     seconds: Option<f64>,
 }
 
@@ -412,6 +412,13 @@ fn sim(mut a: SimArgs) -> Result<ExitCode> {
         (None, None) => None,
     };
     let spec = RunSpec::new(scenario, a.plant.as_deref(), tuning)?;
+    if a.sensor != "ati" && a.can.is_some() {
+        anyhow::bail!("--can needs --sensor ati");
+    }
+    if let Some(iface) = &a.can {
+        // The interface is a device: checked with the options, before anything is written.
+        drop(ati_can::SocketCanTransport::open(iface)?);
+    }
     // SIGINT/SIGTERM end the run early, not the process: the trace, plot and summary are written.
     forcecell::stop::install()?;
     println!(
@@ -440,20 +447,7 @@ fn sim(mut a: SimArgs) -> Result<ExitCode> {
             sensor.delay() * 1e3
         );
     }
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("cannot create output directory {}", a.out.display()))?;
-    // An unwritable output directory is found before the run, not after it.
-    let csv = a.out.join(format!("{}.csv", spec.file_stem()));
-    std::fs::File::create(&csv).with_context(|| {
-        format!(
-            "output directory {} is not writable (--out)",
-            a.out.display()
-        )
-    })?;
     let mut bar = DelayedBar::new(Duration::from_millis(300));
-    if a.sensor != "ati" && a.can.is_some() {
-        anyhow::bail!("--can needs --sensor ati");
-    }
     println!(
         "sensor: {}",
         match (a.sensor.as_str(), a.can.as_deref()) {
@@ -481,6 +475,10 @@ fn sim(mut a: SimArgs) -> Result<ExitCode> {
         None => None,
     };
     let mut robot = forcecell::rsi::RobotSide::start(&spec, &a.robot)?;
+    // Every option, device and address checked: only now is the output directory created (and
+    // removed again if still empty when the run fails); each output is written under a temporary
+    // name and renamed when complete, so an earlier run's files survive a failed one.
+    let out_dir = forcecell::output::OutDir::create(&a.out, "output directory (--out)")?;
     let mcap = a.out.join(format!("{}.mcap", spec.file_stem()));
     let (tx, recording) = forcecell::runner::start_recording(
         &spec,
@@ -499,6 +497,7 @@ fn sim(mut a: SimArgs) -> Result<ExitCode> {
         w.print();
     }
     let recorded = recording.finish(run.rows.clone())?;
+    out_dir.keep();
     let code = ExitCode::from(forcecell::report::sim(&spec, &run, &a.out, a.check)?);
     println!("recorded {recorded}");
     Ok(code)
@@ -565,6 +564,13 @@ fn sensor(a: SensorArgs) -> Result<ExitCode> {
 }
 
 fn export(a: ExportArgs) -> Result<ExitCode> {
+    // The output is checked before anything is read or written: a CSV by its name, never the input.
+    let csv = a
+        .out
+        .clone()
+        .unwrap_or_else(|| a.mcap.with_extension("csv"));
+    forcecell::output::require_extension(&csv, &["csv"], "a CSV export")?;
+    forcecell::output::refuse_input(&csv, &a.mcap)?;
     let (rows, truncated) = forcecell::recorder::load_trace(&a.mcap)?;
     if let Some(why) = truncated {
         eprintln!(
@@ -572,13 +578,16 @@ fn export(a: ExportArgs) -> Result<ExitCode> {
             a.mcap.display()
         );
     }
-    let csv = a.out.unwrap_or_else(|| a.mcap.with_extension("csv"));
-    record::write_csv_file(&csv, &rows)?;
+    forcecell::output::write_csv(&csv, &rows)?;
     println!("wrote {} ({} rows)", csv.display(), rows.len());
     Ok(ExitCode::SUCCESS)
 }
 
 fn plot_trace(a: PlotArgs) -> Result<ExitCode> {
+    // The output is checked before anything is read or written: a PNG by its name, never the input.
+    let png = a.out.clone().unwrap_or_else(|| a.csv.with_extension("png"));
+    forcecell::output::require_extension(&png, &["png"], "a plot")?;
+    forcecell::output::refuse_input(&png, &a.csv)?;
     let (rows, truncated) = forcecell::recorder::load_trace(&a.csv)?;
     if let Some(why) = truncated {
         eprintln!(
@@ -600,7 +609,6 @@ fn plot_trace(a: PlotArgs) -> Result<ExitCode> {
         m.rms_error,
         m.contact_losses
     );
-    let png = a.out.unwrap_or_else(|| a.csv.with_extension("png"));
     let title = a
         .csv
         .file_stem()

@@ -143,8 +143,14 @@ const RED_: RGBColor = RGBColor(214, 39, 40);
 const GREY_: RGBColor = RGBColor(150, 150, 150);
 const PURPLE_: RGBColor = RGBColor(148, 103, 189);
 
-/// Write a three-panel PNG: force, positions (mm), stiffness estimate (kN/m).
+/// Write a three-panel PNG: force, positions (mm), stiffness estimate (kN/m). The file is drawn under
+/// a temporary name and renamed over `path` when complete ([`crate::output::replace`]).
 pub fn write_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
+    crate::output::require_extension(path, &["png"], "a plot")?;
+    crate::output::replace(path, |tmp| draw_png(tmp, title, rows))
+}
+
+fn draw_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
     fonts();
     check_writable(path)?;
     let root = BitMapBackend::new(path, (1200, 1050)).into_drawing_area();
@@ -244,7 +250,13 @@ pub fn write_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
 
 /// Write the plot of a programmed pass: force against the program's `F` and the set-point in effect,
 /// the process state the program saw, its segment and the tool's position along the path, over time.
+/// Written like [`write_png`].
 pub fn write_pass_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
+    crate::output::require_extension(path, &["png"], "a plot")?;
+    crate::output::replace(path, |tmp| draw_pass_png(tmp, title, rows))
+}
+
+fn draw_pass_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
     fonts();
     check_writable(path)?;
     let rows: Vec<Row> = rows

@@ -228,6 +228,12 @@ pub fn start(
     opts: RecorderOptions,
     live: Option<LiveSink>,
 ) -> Result<(Recorder, Recording)> {
+    // Streamed to NAME.partial, renamed to NAME by `finish`: an existing recording of that name is
+    // replaced only by a finished one, and a killed run leaves NAME.partial (readable up to its last
+    // flush).
+    let final_path = path;
+    let partial = partial_path(path);
+    let path = partial.as_path();
     let file = File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
     let mut w = mcap::WriteOptions::new()
         // zstd on this thread (no compression threads of its own beside the control loop): the cycles
@@ -274,7 +280,7 @@ pub fn start(
         ids,
         path: path.to_path_buf(),
         summary: RecordingSummary {
-            path: path.to_path_buf(),
+            path: final_path.to_path_buf(),
             ..RecordingSummary::default()
         },
         live,
@@ -300,7 +306,7 @@ pub fn start(
     Ok((
         recorder,
         Recording {
-            path: path.to_path_buf(),
+            path: final_path.to_path_buf(),
             thread: Some(thread),
             truth: Some(truth_tx),
             dropped,
@@ -330,14 +336,38 @@ impl Recording {
             .ok_or_else(|| anyhow!("the recording was already finished"))?
             .join()
             .map_err(|_| anyhow!("the recorder thread panicked"))
+            .and_then(|s| {
+                let partial = partial_path(&self.path);
+                std::fs::rename(&partial, &self.path).with_context(|| {
+                    format!(
+                        "cannot rename {} to {}",
+                        partial.display(),
+                        self.path.display()
+                    )
+                })?;
+                Ok(s)
+            })
     }
+}
+
+/// Where a recording to `path` is streamed until it is finished: `path` with `.partial` appended.
+pub fn partial_path(path: &Path) -> PathBuf {
+    let mut p = path.as_os_str().to_owned();
+    p.push(".partial");
+    PathBuf::from(p)
 }
 
 impl Drop for Recording {
     fn drop(&mut self) {
         self.truth.take();
         if let Some(t) = self.thread.take() {
-            let _ = t.join();
+            // Not finished (the command failed): a recording that holds no cycle is removed; one
+            // that does stays as NAME.partial beside any earlier NAME.
+            if let Ok(s) = t.join()
+                && s.flushed_until.is_none()
+            {
+                let _ = std::fs::remove_file(partial_path(&self.path));
+            }
         }
     }
 }
@@ -637,7 +667,7 @@ pub fn read_mcap(bytes: &[u8]) -> Result<ReadBack> {
 /// Read a trace from a file: an MCAP recording (by its magic) or a CSV. Returns the rows and, for an
 /// MCAP file that ends early, why.
 pub fn load_trace(path: &Path) -> Result<(Vec<Row>, Option<String>)> {
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let bytes = crate::input::read(path, "trace", crate::input::MAX_TRACE)?;
     if bytes.starts_with(mcap::MAGIC) {
         let back = read_mcap(&bytes).with_context(|| format!("{}", path.display()))?;
         Ok((back.rows, back.truncated))

@@ -5,8 +5,8 @@ use std::path::Path;
 
 use anyhow::Result;
 
+use crate::plot;
 use crate::runner::{RunResult, RunSpec};
-use crate::{plot, record};
 
 /// Print the summary of a simulated run (speed, how it ended, the metrics, every target's verdict),
 /// write its CSV and plots into `out`, and return the exit status ([`crate::stop`]): an interrupted or
@@ -141,7 +141,7 @@ pub fn sim(spec: &RunSpec, run: &RunResult, out: &Path, check: bool) -> Result<u
     let stem = spec.file_stem();
     let csv = out.join(format!("{stem}.csv"));
     let png = out.join(format!("{stem}.png"));
-    record::write_csv_file(&csv, &run.rows)?;
+    crate::output::write_csv(&csv, &run.rows)?;
     plot::write_png(
         &png,
         &format!(

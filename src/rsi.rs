@@ -98,12 +98,13 @@ pub fn print_link(d: &Diagnostics) {
     let c = d.counters;
     let l = &d.latency;
     println!(
-        "RSI link: {} received, {} answered, {} late, {} skipped, {} stale, {} foreign, {} malformed, {} oversized, {} implausible",
+        "RSI link: {} received, {} answered, {} late, {} skipped, {} stale, {} missed, {} foreign, {} malformed, {} oversized, {} implausible",
         c.received,
         c.answered,
         c.late,
         c.skipped,
         c.stale,
+        c.missed,
         c.foreign,
         c.malformed,
         c.oversized,
@@ -565,6 +566,19 @@ impl RobotLink for ExternalRobot<'_> {
         let x = c.tool_offset().z;
         let at = x.is_finite().then(|| self.world_position(&c, x));
         let mut w = sim::world::lock(&self.world);
+        // The world keeps the robot's time: the cycles it sent that never arrived pass in the world
+        // too (holding the last command), so the truth of cycle `t` is the world at `t`. At most a
+        // second is caught up at once (a clock jump is no reason to stall).
+        let period = w.period();
+        let due = (c.t / period).round();
+        if due.is_finite() && due > 0.0 {
+            let behind = (due as u64)
+                .saturating_sub(w.cycle_index())
+                .min((1.0 / period) as u64);
+            for _ in 0..behind {
+                w.advance(None);
+            }
+        }
         if let Some(at) = at {
             w.advance(Some(&Correction::along_z(at)));
         }
@@ -676,14 +690,16 @@ pub fn robot_setup(a: &RsiConfigArgs) -> Result<RobotSetup> {
 /// `$SEN_PINT`/`$SEN_PREA` mapping the integrator must build in RSI Visual.
 pub fn rsi_config(a: &RsiConfigArgs) -> Result<(Vec<PathBuf>, Vec<String>)> {
     let setup = robot_setup(a)?;
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("cannot create output directory {}", a.out.display()))?;
+    let dir = crate::output::OutDir::create(&a.out, "output directory (--out)")?;
     let mut written = Vec::new();
     for (name, text) in setup.files() {
         let path = a.out.join(name);
-        std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
+        crate::output::replace(&path, |tmp| {
+            std::fs::write(tmp, &text).with_context(|| format!("cannot write {}", path.display()))
+        })?;
         written.push(path);
     }
+    dir.keep();
     let mapping = setup
         .process
         .as_ref()

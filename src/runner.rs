@@ -189,7 +189,14 @@ where
     };
     let mut sink = WorldSink::new(world, steps as usize, &mut also);
     let limits = RunLimits {
-        cycles: Some(steps),
+        // An outside robot is the clock: the run lasts the scenario's duration of its time (cycles it
+        // sent that never arrived count), ending after the first cycle at or past `duration − period`
+        // (a simulated run's last row; the half period more absorbs rounding); the simulated robots
+        // are counted in cycles.
+        cycles: (!spec.external).then_some(steps),
+        duration: spec
+            .external
+            .then_some(spec.scenario.duration - 1.5 * spec.plant.period),
         stop: Some(crate::stop::flag()),
         // An outside robot that sends `FcCmd` runs its own program: the session is its to end.
         robot_session: if spec.external && spec.scenario.program.is_none() {
@@ -197,7 +204,6 @@ where
         } else {
             RobotSession::Run
         },
-        ..RunLimits::default()
     };
     let outcome = controller::run::run(&mut lp, limits, &mut sink);
     let (ended_early, interrupted) = sim_end(&outcome);

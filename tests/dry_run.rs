@@ -371,3 +371,63 @@ fn coarse_positions_and_an_ipoc_step_of_one_are_warned() {
     );
     assert!(out.contains("IPOC steps by 1 per cycle, not 4"), "{out}");
 }
+
+/// Issue 35, defect 9: a client whose every tenth datagram never arrives (an IPOC gap of one cycle).
+/// The run lasts the scenario's robot time, not a count of answered cycles: it ends by t = 2 s, every
+/// row has its truth (the world followed the robot's time through the gaps), and the summary has no NaN.
+#[test]
+fn lost_cycles_are_robot_time_the_run_ends_on_time_with_every_row_s_truth() {
+    let dir = tempfile::tempdir().unwrap();
+    let (child, listen) = start(dir.path(), &["--scenario", "paper-fig9"]);
+    let mut robot = Robot::connect(&listen);
+    let mut answered = 0u32;
+    for i in 0..10_000 {
+        if i % 10 == 9 {
+            robot.ipoc += 4; // a datagram the robot sent that never arrived
+        }
+        let Some(sen) = robot.cycle(None) else { break };
+        answered += 1;
+        if sen.contains("<Stop>1</Stop>") {
+            break;
+        }
+    }
+    let o = finish(child);
+    let out = text(&o.stdout);
+    assert!(o.status.success(), "{out}\n{}", text(&o.stderr));
+    assert!(!out.contains("NaN"), "{out}");
+    // 2 s of 4 ms cycles is 500 robot cycles, a tenth of them lost (and the Stop cycle answered).
+    assert!((440..=460).contains(&answered), "{answered} answered");
+    // Each lost datagram is a robot cycle missed, counted from the IPOC gaps.
+    let missed: u32 = out
+        .split(" missed")
+        .next()
+        .and_then(|s| s.rsplit(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no missed counter: {out}"));
+    assert!((45..=55).contains(&missed), "{missed} missed: {out}");
+    let csv = std::fs::read_dir(dir.path().join("dry"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "csv"))
+        .expect("the trace");
+    let csv = std::fs::read_to_string(csv).unwrap();
+    let mut lines = csv.lines();
+    let head: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |n: &str| head.iter().position(|h| *h == n).unwrap();
+    let (t, f_true, k_c, x_c) = (col("t"), col("f_true"), col("k_c"), col("x_c"));
+    let mut last_t = 0.0;
+    let mut rows = 0;
+    for l in lines {
+        let v: Vec<&str> = l.split(',').collect();
+        for c in [f_true, k_c, x_c] {
+            assert!(!v[c].is_empty(), "row without truth: {l}");
+        }
+        last_t = v[t].parse::<f64>().unwrap();
+        rows += 1;
+    }
+    assert!(rows > 400, "{rows} rows");
+    assert!(
+        last_t <= 2.0 + 1e-9 && last_t > 1.98,
+        "the run ends on robot time (the first cycle at or past 2 s less a cycle): last row at t = {last_t} s"
+    );
+}

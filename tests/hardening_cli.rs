@@ -253,7 +253,7 @@ duration = 1.0
 record = "RECORD"
 
 [robot]
-listen = "127.0.0.1:0"
+listen = "127.0.0.1:49152"
 robot_ip = "127.0.0.1"
 
 [sensor]

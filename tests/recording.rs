@@ -506,7 +506,8 @@ fn killed_recording(dir: &Path) -> std::path::PathBuf {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let path = dir.join("res/long-p2-robust.mcap");
+    // Streamed under .partial until finished: a killed run leaves that name.
+    let path = dir.join("res/long-p2-robust.mcap.partial");
     let len = || path.metadata().map_or(0, |m| m.len());
     // The header and attachments are flushed at once; wait for two flushes of messages.
     wait_for("the recording to start", Duration::from_secs(30), || {

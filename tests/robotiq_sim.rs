@@ -61,7 +61,7 @@ fn cell_file(port: &str, extra: &str) -> String {
 tuning = "robust-100hz"
 
 [robot]
-listen = "127.0.0.1:0"
+listen = "127.0.0.1:49152"
 robot_ip = "127.0.0.1"
 
 [sensor]

@@ -16,7 +16,7 @@ tuning = "robust"
 duration = 1.5
 
 [robot]
-listen = "127.0.0.1:0"
+listen = "127.0.0.1:49152"
 robot_ip = "127.0.0.1"
 
 [sensor]
@@ -46,7 +46,9 @@ fn run_with(
     sensor: SensorParams,
     recorder: Option<forcecell::recorder::Recorder>,
 ) -> (CellOutcome, KrcReport, SharedWorld) {
-    let cfg = CellConfig::from_toml(CELL, "cell.toml").unwrap();
+    let mut cfg = CellConfig::from_toml(CELL, "cell.toml").unwrap();
+    // Port 0 is refused in a cell file (the robot needs the real port); here the OS picks one.
+    cfg.robot.listen.set_port(0);
     let tuning = cfg.tuning().unwrap();
     let lc = cfg.link_config(&tuning).unwrap();
     // The driver's envelope lies inside the robot's POSCORR (5 mm default), whatever the tuning allows.
@@ -295,7 +297,9 @@ fn a_stop_ends_the_wait_for_a_robot_that_never_sends() {
     use forcecell::cell::CellEnd;
     use forcecell::stop::Interruptible;
     use std::sync::atomic::Ordering;
-    let cfg = CellConfig::from_toml(CELL, "cell.toml").unwrap();
+    let mut cfg = CellConfig::from_toml(CELL, "cell.toml").unwrap();
+    // Port 0 is refused in a cell file (the robot needs the real port); here the OS picks one.
+    cfg.robot.listen.set_port(0);
     let tuning = cfg.tuning().unwrap();
     let lc = cfg.link_config(&tuning).unwrap();
     assert!(
@@ -336,7 +340,9 @@ fn a_stop_ends_the_wait_for_a_robot_that_never_sends() {
 #[test]
 fn a_lost_link_ends_the_run_early_with_status_3() {
     use forcecell::cell::CellEnd;
-    let cfg = CellConfig::from_toml(CELL, "cell.toml").unwrap();
+    let mut cfg = CellConfig::from_toml(CELL, "cell.toml").unwrap();
+    // Port 0 is refused in a cell file (the robot needs the real port); here the OS picks one.
+    cfg.robot.listen.set_port(0);
     let tuning = cfg.tuning().unwrap();
     let link = RsiLink::bind(cfg.link_config(&tuning).unwrap()).unwrap();
     let addr = link.local_addr().unwrap();
@@ -379,7 +385,7 @@ fn a_cell_with_process_channels_follows_the_robot_program() {
 tuning = "robust"
 
 [robot]
-listen = "127.0.0.1:0"
+listen = "127.0.0.1:49152"
 robot_ip = "127.0.0.1"
 process = true
 
@@ -387,7 +393,9 @@ process = true
 kind = "ati"
 can = "vcan0"
 "#;
-    let cfg = CellConfig::from_toml(PROCESS_CELL, "cell.toml").unwrap();
+    let mut cfg = CellConfig::from_toml(PROCESS_CELL, "cell.toml").unwrap();
+    // Port 0 is refused in a cell file (the robot needs the real port); here the OS picks one.
+    cfg.robot.listen.set_port(0);
     let tuning = cfg.tuning().unwrap();
     let link = RsiLink::bind(cfg.link_config(&tuning).unwrap()).unwrap();
     let addr = link.local_addr().unwrap();

@@ -278,7 +278,8 @@ pub fn run<C: Cycler>(
                     robot_owns = r.cycle.process.is_some();
                 }
                 let more = sink.record(&r);
-                if !more || cycler.done() || limits.duration.is_some_and(|d| r.cycle.t >= d) {
+                let long_enough = limits.duration.is_some_and(|d| r.cycle.t >= d) && !robot_owns;
+                if !more || cycler.done() || long_enough {
                     break End::Done;
                 }
             }

@@ -3,6 +3,7 @@
 //! `bench-scenarios`) and the controller's closed-loop tests.
 #![cfg_attr(not(test), warn(missing_docs))]
 
+pub mod input;
 pub mod metrics;
 pub mod record;
 pub mod run;

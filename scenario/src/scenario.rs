@@ -349,25 +349,17 @@ impl Scenario {
 }
 
 /// The largest scenario or tuning file read, bytes (a device or a wrong path is an error, not a hang).
-pub const MAX_FILE: u64 = 1 << 20;
+pub const MAX_FILE: u64 = crate::input::MAX_CONFIG;
 
 /// Whether `spec` names a file (it ends in `.toml` or holds a path separator), not a built-in.
 pub(crate) fn names_a_file(spec: &str) -> bool {
     spec.ends_with(".toml") || spec.contains('/')
 }
 
-/// A `kind` ("scenario", "tuning") file's text: a regular file of at most [`MAX_FILE`] bytes.
+/// A `kind` ("scenario", "tuning") file's text, read under the one input rule ([`crate::input`]):
+/// a regular file of at most [`MAX_FILE`] bytes, a FIFO never waited on.
 pub(crate) fn read_toml_file(path: &Path, kind: &str) -> Result<String> {
-    let meta = std::fs::metadata(path)
-        .with_context(|| format!("cannot read {kind} file {}", path.display()))?;
-    if !meta.is_file() || meta.len() > MAX_FILE {
-        bail!(
-            "{} is no {kind} file (a regular file of at most {MAX_FILE} bytes)",
-            path.display()
-        );
-    }
-    std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read {kind} file {}", path.display()))
+    crate::input::read_text(path, &format!("{kind} file"), MAX_FILE)
 }
 
 /// The text of the built-in `kind` named `spec` in `table`, or an error that lists the names.

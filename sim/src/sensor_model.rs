@@ -68,6 +68,12 @@ impl SensorParams {
                 return Err(format!("sensor {n} must be >= 0, got {v}"));
             }
         }
+        if self.bandwidth > MAX_BANDWIDTH {
+            return Err(format!(
+                "sensor bandwidth must be at most {MAX_BANDWIDTH} Hz, got {}: the sensor's filter ticks at 4 kHz and cannot cut off above 0.45 of that",
+                self.bandwidth
+            ));
+        }
         for (n, v) in [("bias", self.bias), ("drift_per_min", self.drift_per_min)] {
             if !v.is_finite() {
                 return Err(format!("sensor {n} must be finite, got {v}"));
@@ -104,9 +110,13 @@ struct LowPass {
 /// The sensor's own filter period, s (4 kHz).
 const SENSOR_PERIOD: f64 = 2.5e-4;
 
+/// The highest filter cut-off a sensor model takes, Hz: 0.45 of its 4 kHz tick (a digital filter
+/// cannot cut off at or above half its own rate).
+pub const MAX_BANDWIDTH: f64 = 0.45 / SENSOR_PERIOD;
+
 impl LowPass {
     fn new(cutoff: f64) -> Self {
-        let w = (core::f64::consts::PI * cutoff.min(0.45 / SENSOR_PERIOD) * SENSOR_PERIOD).tan();
+        let w = (core::f64::consts::PI * cutoff.min(MAX_BANDWIDTH) * SENSOR_PERIOD).tan();
         let q = core::f64::consts::FRAC_1_SQRT_2;
         let norm = 1.0 / (1.0 + w / q + w * w);
         Self {

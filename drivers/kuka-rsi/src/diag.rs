@@ -23,6 +23,9 @@ pub struct Counters {
     pub oversized: u64,
     /// Duplicated or reordered (older) `<Rob>` datagrams: dropped, not answered.
     pub stale: u64,
+    /// Robot cycles that never arrived: the IPOC gaps within a session, in whole configured cycles
+    /// (a datagram the robot sent and the network lost, or one the robot never sent).
+    pub missed: u64,
     /// Cycles the application never replied to before asking for the next one.
     pub unanswered: u64,
     /// Replies where a non-finite command was replaced by the last one sent.

@@ -194,6 +194,14 @@ impl ProcessSetup {
                 self.wait_timeout
             ));
         }
+        // The program compares $TIMER (ms) with it: a KRL INT is 32-bit.
+        if self.wait_timeout * 1000.0 > f64::from(i32::MAX) {
+            return Err(format!(
+                "wait timeout must be at most {} s (KRL's $TIMER counts ms in a 32-bit INT), got {}",
+                i32::MAX / 1000,
+                self.wait_timeout
+            ));
+        }
         if !(1..=32).contains(&self.timer) {
             return Err(format!("$TIMER index must be 1..=32, got {}", self.timer));
         }

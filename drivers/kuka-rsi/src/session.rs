@@ -403,6 +403,13 @@ impl RsiSession {
         let Some(s) = self.track.as_mut() else {
             unreachable!("a session was just found or started");
         };
+        if !new_session {
+            // Robot cycles between this IPOC and the last one that never arrived, in whole cycles of
+            // the IPOC unit in effect (the measured one, once the first cycles adopted it).
+            let ticks = (self.cfg.period.as_secs_f64() / s.unit).round();
+            let ticks = if ticks >= 1.0 { ticks as u64 } else { 1 };
+            c.missed += ((v - s.last_ipoc) / ticks).saturating_sub(1);
+        }
         // The first cycles: the IPOC step and the positions' decimals (sans-IO detectors; the
         // application prints `Diagnostics::advisories`).
         let f = &self.rx_frame;
@@ -767,6 +774,11 @@ mod tests {
             Err(Rejected::Stale { .. })
         ));
         assert_eq!(s.diagnostics().counters.stale, 2);
+        assert_eq!(s.diagnostics().counters.missed, 0, "none lost so far");
+        // 1008 and 1012 never arrived: two robot cycles missed (4 ms each, IPOC in ms).
+        s.receive(&rob(&s, 1016, 300.0, cmd), robot(), t0 + ms(16))
+            .unwrap();
+        assert_eq!(s.diagnostics().counters.missed, 2);
         use hal::Error as _;
         assert_eq!(
             Rejected::Stale { ipoc: 1, last: 2 }.kind(),
