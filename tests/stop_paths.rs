@@ -72,8 +72,10 @@ fn external_signalled(
 }
 
 /// Wait (at most 60 s) until the recording at `path` has grown past its header and attachments: the
-/// recorder flushes those at once and messages at least every second.
+/// recorder flushes those at once and messages at least every second (to `path.partial` until the run
+/// finishes it).
 fn wait_for_messages(path: &Path) {
+    let path = forcecell::recorder::partial_path(path);
     let len = || path.metadata().map_or(0, |m| m.len());
     let start = std::time::Instant::now();
     let mut header = 0;
