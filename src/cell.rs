@@ -50,6 +50,7 @@ use hal::{ForceSensor, RobotLink, UnitQuaternion, Vector3};
 use kuka_rsi::{CorrectionMode, EthernetConfig, Limits, LinkConfig, PoscorrLimits, RobotFilter};
 use serde::Deserialize;
 
+use crate::provenance::Provenance;
 use crate::record::Row;
 use crate::recorder::{Record, Recorder, RecorderOptions};
 use crate::scenario::load_tuning;
@@ -90,7 +91,20 @@ pub struct RobotConfig {
     /// control from the first cycle at the tuning's set-point.
     #[serde(default)]
     pub process: bool,
+    /// The robot's late-reply budget: the RSI ETHERNET object's `Timeout` (late replies tolerated
+    /// before RSI stops the robot; RSI's default 100, as `rsi-config` writes it). The status line and
+    /// the summary count the robot's late replies against it and warn at half.
+    #[serde(default = "default_timeout")]
+    pub timeout: u32,
 }
+
+fn default_timeout() -> u32 {
+    100
+}
+
+/// The largest late-reply budget accepted (`robot.timeout`): more than a minute of late replies at
+/// 4 ms is no budget.
+pub const MAX_TIMEOUT: u32 = 10_000;
 
 /// Correction mode by name.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
@@ -288,6 +302,16 @@ pub enum CellSensor {
     Robotiq(Box<robotiq::Ft300>),
 }
 
+impl CellSensor {
+    /// The sensor's background reader thread (to give it its real-time priority), while it runs.
+    pub fn reader_thread(&self) -> Option<std::os::unix::thread::RawPthread> {
+        match self {
+            Self::Ati(s) => s.reader_thread(),
+            Self::Robotiq(s) => s.reader_thread(),
+        }
+    }
+}
+
 /// The error of a [`CellSensor`].
 #[derive(Debug)]
 pub enum CellSensorError {
@@ -391,6 +415,9 @@ pub struct CellConfig {
     /// The tool model; without it nothing is subtracted.
     #[serde(default)]
     pub gravity: Option<GravityConfig>,
+    /// Real-time settings of the cycle (on by default: `SCHED_FIFO`, memory locked).
+    #[serde(default)]
+    pub realtime: crate::rt::Realtime,
 }
 
 fn default_record() -> PathBuf {
@@ -414,7 +441,16 @@ impl CellConfig {
     }
 
     fn validate(&self) -> Result<()> {
+        self.realtime.validate().map_err(|e| anyhow!(e))?;
         let r = &self.robot;
+        if !(1..=crate::cell::MAX_TIMEOUT).contains(&r.timeout) {
+            bail!(
+                "robot.timeout is the RSI ETHERNET object's Timeout, 1..={} late replies (RSI's \
+                 default 100), got {}",
+                crate::cell::MAX_TIMEOUT,
+                r.timeout
+            );
+        }
         if r.cycle_ms != 4 && r.cycle_ms != 12 {
             bail!("robot.cycle_ms must be 4 or 12, got {}", r.cycle_ms);
         }
@@ -573,6 +609,8 @@ pub struct CellOutcome {
     pub stop_note: String,
     /// The law's last contact-stiffness estimate, N/m (for the link's advisories).
     pub kc_hat: Option<f64>,
+    /// The robot's own late-reply count at the end (RSI: `Delay`).
+    pub late: u32,
     /// Which way it ended.
     pub end: CellEnd,
 }
@@ -638,7 +676,7 @@ where
     let law = tuning.law.build().map_err(|e| anyhow!(e))?;
     let mut lp =
         ControlLoop::new(robot, sensor, law, tuning.loop_config()).with_gravity(cfg.compensator());
-    let mut sink = RecordSink::new(recorder);
+    let mut sink = RecordSink::new(recorder).with_status(cfg.robot.timeout);
     let limits = RunLimits {
         duration: cfg.duration,
         stop: Some(stop),
@@ -651,6 +689,7 @@ where
         ..RunLimits::default()
     };
     let o = controller::run::run(&mut lp, limits, &mut sink);
+    sink.end_status();
     let (ended, end) = match &o.end {
         End::Done | End::Program(None) => (
             format!("{} s of robot time done", sink.last_t),
@@ -690,6 +729,7 @@ where
         stopped: o.stopped(),
         stop_note: o.stop_note(),
         kc_hat: sink.kc_hat,
+        late: sink.late,
         end,
     })
 }
@@ -704,6 +744,10 @@ struct RecordSink {
     kc_hat: Option<f64>,
     /// The process phase last reported to the robot program (`None`: no process channels).
     last_phase: Option<hal::ProcessPhase>,
+    /// The status line while the cell runs, and whether it rewrites a terminal line.
+    status: Option<(crate::status::Status, bool)>,
+    /// The robot's own late-reply count last seen.
+    late: u32,
 }
 
 impl RecordSink {
@@ -714,6 +758,52 @@ impl RecordSink {
             last_t: 0.0,
             kc_hat: None,
             last_phase: None,
+            status: None,
+            late: 0,
+        }
+    }
+
+    /// Say what the cell does while it runs: a line rewritten a few times a second on a terminal,
+    /// a plain line every few seconds elsewhere; late replies counted against `budget`.
+    fn with_status(mut self, budget: u32) -> Self {
+        use std::io::IsTerminal;
+        let terminal = std::io::stdout().is_terminal();
+        let period = if terminal {
+            1.0 / crate::status::TERMINAL_HZ
+        } else {
+            crate::status::LOG_PERIOD
+        };
+        self.status = Some((crate::status::Status::new(period, Some(budget)), terminal));
+        self
+    }
+
+    fn show(&mut self, r: &controller::CycleReport) {
+        use std::io::Write;
+        self.late = r.cycle.late_replies;
+        let Some((status, terminal)) = &mut self.status else {
+            return;
+        };
+        let (line, warning) = status.observe(r);
+        if let Some(w) = warning {
+            if *terminal {
+                println!();
+            }
+            eprintln!("{w}");
+        }
+        if let Some(line) = line {
+            if *terminal {
+                print!("\r{line}\x1b[K");
+                let _ = std::io::stdout().flush();
+            } else {
+                println!("{line}");
+            }
+        }
+    }
+
+    /// End the status line (a terminal's is left on its own line).
+    fn end_status(&mut self) {
+        if let Some((_, true)) = self.status {
+            println!();
         }
     }
 }
@@ -721,6 +811,7 @@ impl RecordSink {
 impl Sink for RecordSink {
     fn record(&mut self, r: &controller::CycleReport) -> bool {
         self.last_t = r.cycle.t;
+        self.show(r);
         if r.out.kc_hat.is_finite() && r.out.kc_hat > 0.0 {
             self.kc_hat = Some(r.out.kc_hat);
         }
@@ -799,18 +890,34 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
         tuning.name
     );
     let mcap = stem.with_extension("mcap");
+    let mut prov = provenance("run", &cfg, path, &tuning);
     let (tx, recording) = crate::recorder::start(
         &mcap,
-        recording_options(path, &tuning),
+        recording_options(path, &tuning, &prov),
         live.as_ref().map(crate::live::LiveServer::sink),
     )?;
     let stop = crate::stop::flag();
     let robot = crate::stop::Interruptible::new(&mut link, stop);
     dir.keep();
+    // The cycle runs on this thread: its real-time settings now, before the first cycle.
+    let mut applied = cfg.realtime.apply_to_cycle_thread();
+    if let Some(reader) = sensor.reader_thread() {
+        applied.sensor_priority = cfg.realtime.apply_to_sensor_thread(reader);
+    }
+    println!("{applied}");
+    for r in applied.refusals() {
+        eprintln!("warning: {r}");
+    }
     let out = run_cell_recorded(&cfg, &tuning, robot, sensor, stop, Some(tx))?;
     println!(
-        "{}; {} cycles, {} sensor faults, {} limited; Stop {}",
-        out.ended, out.stats.cycles, out.stats.sensor_faults, out.stats.limited, out.stop_note
+        "{}; {} cycles, {} sensor faults, {} limited; robot late replies {} of {}; Stop {}",
+        out.ended,
+        out.stats.cycles,
+        out.stats.sensor_faults,
+        out.stats.limited,
+        out.late,
+        cfg.robot.timeout,
+        out.stop_note
     );
     crate::rsi::print_link(link.diagnostics());
     // What the first cycles showed that degrades control, at the stiffness the law estimated (the
@@ -823,6 +930,14 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
     }
     let recorded = recording.finish(Vec::new())?;
     println!("recorded {recorded}");
+    prov.finish(&out.ended, out.stopped, out.stats.cycles);
+    let summary = stem.with_extension("json");
+    crate::output::replace(&summary, |tmp| {
+        let text = serde_json::to_string_pretty(&prov)?;
+        std::fs::write(tmp, text + "\n")?;
+        Ok(())
+    })?;
+    println!("summary {}", summary.display());
     if let Some(log) = &can_log {
         println!("CAN traffic logged to {} (candump -L)", log.display());
     }
@@ -830,8 +945,31 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
     Ok(out.end.exit_status())
 }
 
-/// A cell run's recording: the cell file and the tuning attached.
-fn recording_options(cell_file: &Path, tuning: &Tuning) -> RecorderOptions {
+/// A cell run's provenance: where it came from (the cell file and its hash, the tuning, the robot and
+/// the sensor), started now.
+fn provenance(command: &str, cfg: &CellConfig, cell_file: &Path, tuning: &Tuning) -> Provenance {
+    let mut p = Provenance::start(command, &cell_file.display().to_string());
+    p.tuning = tuning.name.clone();
+    p.robot = format!(
+        "KUKA RSI, listening on {} for {}",
+        cfg.robot.listen, cfg.robot.robot_ip
+    );
+    p.sensor = match &cfg.sensor {
+        SensorConfig::Ati { can, base, .. } => format!("ATI NETCANOEM at base {base:#x} on {can}"),
+        SensorConfig::Robotiq { port, slave, .. } => {
+            format!("Robotiq FT 300 on {} (slave {slave})", port.display())
+        }
+    };
+    p
+}
+
+/// A cell run's recording: the cell file and the tuning attached, its provenance as metadata
+/// (`forcecell.run`).
+fn recording_options(
+    cell_file: &Path,
+    tuning: &Tuning,
+    provenance: &Provenance,
+) -> RecorderOptions {
     let mut attachments = Vec::new();
     if let Ok(text) = crate::input::read(cell_file, "cell config", crate::input::MAX_CONFIG) {
         attachments.push(("cell.toml".to_string(), "application/toml".into(), text));
@@ -845,6 +983,7 @@ fn recording_options(cell_file: &Path, tuning: &Tuning) -> RecorderOptions {
     }
     RecorderOptions {
         attachments,
+        metadata: vec![("forcecell.run".into(), provenance.metadata())],
         ..RecorderOptions::default()
     }
 }
@@ -883,11 +1022,11 @@ pub fn calibrate(path: &Path, poses: usize) -> Result<()> {
     let tuning = cfg.tuning()?;
     let (link, sensor) = open_devices(&cfg, &tuning, false, None)?;
     let dir = crate::output::OutDir::create(&cfg.record, "recording directory")?;
-    let stamp = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs());
+    let stamp = crate::provenance::file_stamp(std::time::SystemTime::now());
     let mcap = cfg.record.join(format!("calibrate-{stamp}.mcap"));
-    let (tx, recording) = crate::recorder::start(&mcap, recording_options(path, &tuning), None)?;
+    let prov = provenance("calibrate", &cfg, path, &tuning);
+    let (tx, recording) =
+        crate::recorder::start(&mcap, recording_options(path, &tuning, &prov), None)?;
     dir.keep();
     let mount = cfg
         .gravity
@@ -954,9 +1093,7 @@ pub fn reserve_recording(dir: &Path) -> Result<PathBuf> {
     use std::io::Write;
     std::fs::create_dir_all(dir)
         .with_context(|| format!("recording directory {}: cannot create it", dir.display()))?;
-    let stamp = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs());
+    let stamp = crate::provenance::file_stamp(std::time::SystemTime::now());
     for n in 0..1000 {
         let name = if n == 0 {
             format!("run-{stamp}.csv")

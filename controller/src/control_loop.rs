@@ -499,7 +499,7 @@ impl<R: RobotLink, S: ForceSensor, L: CellLaw> ControlLoop<R, S, L> {
     /// still cycles: answer one cycle with the correction stepped back towards the programmed path —
     /// the normal command towards zero at `retract_speed` (within `max_step`), but never towards the
     /// part (a command already backed off behind the path stays), the tangential translation
-    /// likewise, the rotation in step with them ([`LoopConfig::return_cycles`]). `Ok(None)` once the
+    /// likewise, the rotation in step with them (`LoopConfig::return_cycles`). `Ok(None)` once the
     /// correction is there (no cycle answered): `Stop` follows. The law is not stepped.
     pub fn unwind(&mut self) -> Result<Option<CycleReport>, LoopError<R::Error, S::Error>> {
         let home = self.last_cmd <= 0.0

@@ -113,6 +113,12 @@ impl AtiSensor {
         *lock(&self.shared.snapshot)
     }
 
+    /// The background thread's pthread (to give it a real-time priority), while it runs.
+    pub fn reader_thread(&self) -> Option<std::os::unix::thread::RawPthread> {
+        use std::os::unix::thread::JoinHandleExt;
+        self.thread.as_ref().map(JoinHandleExt::as_pthread_t)
+    }
+
     /// Health now.
     pub fn health(&self) -> Health {
         self.snapshot().view.health_at(self.clock.now())

@@ -214,6 +214,12 @@ impl Ft300 {
         &self.startup
     }
 
+    /// The background thread's pthread (to give it a real-time priority), while it runs.
+    pub fn reader_thread(&self) -> Option<std::os::unix::thread::RawPthread> {
+        use std::os::unix::thread::JoinHandleExt;
+        self.thread.as_ref().map(JoinHandleExt::as_pthread_t)
+    }
+
     /// The identity, when the start-up read it.
     pub fn identity(&self) -> Option<&Identity> {
         self.startup.identity.as_ref()

@@ -1,0 +1,61 @@
+//! `forcecell run` as an integrator starts it, without CAN: the cell file names a simulated FT 300 on
+//! a pseudo-terminal (another process) and the robot is the simulated KUKA controller on loopback in
+//! this process. The run says what it does: the real-time settings it got (read back by the kernel:
+//! `SCHED_FIFO` and locked memory, or the refusal with its fix), a status line while it runs, the
+//! robot's late replies against its budget at the end, and a recording traceable to its cell file.
+
+mod common;
+
+use common::{arm, client, finish, free_port, read_until, spawn};
+
+#[test]
+fn run_says_what_it_got_and_what_it_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let _sensor = common::ft300(&dir.path().join("ft300"), "0.0");
+    let port = free_port();
+    let cell = format!(
+        r#"tuning = "robust-100hz"
+duration = 1.0
+record = "rec"
+
+[robot]
+listen = "127.0.0.1:{port}"
+robot_ip = "127.0.0.1"
+poscorr_mm = 55.0
+poscorrmon_mm = 60.0
+timeout = 80
+
+[sensor]
+kind = "robotiq"
+port = "ft300"
+
+[realtime]
+priority = 20
+sensor_priority = 10
+"#
+    );
+    std::fs::write(dir.path().join("cell.toml"), cell).unwrap();
+    let mut child = spawn(&["run", "--config", "cell.toml"], dir.path());
+    let (seen, r) = read_until(&mut child, "listening on");
+    let mut krc = client(port, 400, |_| {});
+    let report = krc.run(&mut arm());
+    let (code, text) = finish(child, seen, r);
+    assert_eq!(code, 0, "{text}");
+    assert!(report.cycles >= 250, "{report:?}");
+
+    // The real-time settings: granted and said (as root, or with an rtprio limit), or refused with
+    // the fix and the run going on.
+    let granted =
+        text.contains("real-time: cycle thread SCHED_FIFO 20, sensor reader SCHED_FIFO 10");
+    let refused = text.contains("warning: SCHED_FIFO 20 refused") && text.contains("rtprio");
+    assert!(granted || refused, "{text}");
+    assert!(
+        text.contains("memory locked (") || text.contains("warning: locking memory refused"),
+        "{text}"
+    );
+    // A status line (plain, not on a terminal) with the state, the force, the late budget.
+    assert!(text.contains("t    0.00 s"), "{text}");
+    assert!(text.contains("late 0 of 80"), "{text}");
+    // The end: the robot's late replies against its budget.
+    assert!(text.contains("robot late replies 0 of 80"), "{text}");
+}
