@@ -104,7 +104,7 @@ pub fn check(path: &Path) -> Result<Vec<Finding>> {
         )),
     }
     out.push(sensor(&cell));
-    out.extend(realtime());
+    out.extend(realtime(cell.realtime));
     Ok(out)
 }
 
@@ -302,9 +302,8 @@ fn sensor(cell: &CellConfig) -> Finding {
     }
 }
 
-/// The real-time settings, tried on a scratch thread.
-fn realtime() -> Vec<Finding> {
-    let want = crate::rt::Realtime::default();
+/// The cell file's real-time settings, tried on a scratch thread.
+fn realtime(want: crate::rt::Realtime) -> Vec<Finding> {
     let applied = std::thread::spawn(move || want.apply_to_cycle_thread())
         .join()
         .unwrap_or_default();

@@ -58,4 +58,44 @@ sensor_priority = 10
     assert!(text.contains("late 0 of 80"), "{text}");
     // The end: the robot's late replies against its budget.
     assert!(text.contains("robot late replies 0 of 80"), "{text}");
+
+    // Traceable: an ISO-dated name, the provenance in a JSON summary beside the recording (and as
+    // the recording's metadata).
+    let names: Vec<String> = std::fs::read_dir(dir.path().join("rec"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    let json = names
+        .iter()
+        .find(|n| n.ends_with(".json"))
+        .unwrap_or_else(|| panic!("a summary: {names:?}"));
+    let stem = json.trim_end_matches(".json");
+    assert!(
+        stem.len() == "run-2026-12-04T20-25-00Z".len()
+            && stem.starts_with("run-20")
+            && stem.ends_with('Z'),
+        "{stem}"
+    );
+    for ext in ["mcap", "csv", "png"] {
+        assert!(names.contains(&format!("{stem}.{ext}")), "{names:?}");
+    }
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("rec").join(json)).unwrap())
+            .unwrap();
+    let cell_bytes = std::fs::read(dir.path().join("cell.toml")).unwrap();
+    assert_eq!(
+        summary["source_sha256"],
+        forcecell::provenance::sha256_hex(&cell_bytes).as_str()
+    );
+    assert_eq!(summary["end_reason"], "1 s of robot time done");
+    assert_eq!(summary["stop_sent"], true);
+    assert_eq!(summary["tuning"], "robust-100hz");
+    assert!(
+        summary["sensor"]
+            .as_str()
+            .unwrap()
+            .contains("Robotiq FT 300")
+    );
+    assert!(summary["started"].as_str().unwrap().ends_with('Z'));
+    assert!(summary["ended"].as_str().unwrap() >= summary["started"].as_str().unwrap());
 }
