@@ -6,6 +6,7 @@
 //! cargo build --release --example cell_latency
 //! target/release/examples/cell_latency --cell run --sensor robotiq --cycles 50000 --loop-cpu 0 --other-cpu 1
 //! target/release/examples/cell_latency --cell external --cycles 50000 --loop-cpu 0 --other-cpu 1
+//! target/release/examples/cell_latency --cell egm --cycles 50000 --loop-cpu 0 --other-cpu 1 --standin-cpu 0
 //! target/release/examples/cell_latency --cell run --cycles 50000 --loop-cpu 0 --other-cpu 0   # all on one CPU
 //! ```
 //!
@@ -13,6 +14,10 @@
 //!   bound from a cell file (tuning `robust-100hz`), the sensor, the MCAP recorder thread.
 //! * `--cell external`: `forcecell sim --external-robot` — [`forcecell::rsi::RobotSide`] on
 //!   `paper-fig9` with tuning `robust`, recorded, the world following the pose the stand-in reports.
+//! * `--cell egm`: the same loop as `--cell run` (tuning `robust-100hz`, the recorder) with the ABB EGM
+//!   driver ([`abb_egm::EgmLink`]) in place of RSI; the stand-in is then the simulated IRC5's sans-IO
+//!   core ([`sim::irc5::Irc5Core`]): it writes `EgmRobot`, judges the `EgmSensorPathCorr` and moves
+//!   the spring world, each cycle sending the same `EgmRobot` to the echo and to forcecell.
 //! * `--cell none`: the echo alone.
 //! * `--sensor inproc` (the world's sensor model read in the cycle), `robotiq` (the FT 300 driver
 //!   reading a simulated FT 300 that streams at 100 Hz on a pseudo-terminal, as on a cell) or, with
@@ -313,6 +318,68 @@ fn cell_round(
     Ok(stop)
 }
 
+/// The robot stand-in of `--cell egm`: the simulated IRC5's core on a lockstep socket, timing each
+/// send → reply to the echo (first, as [`stand_in`] does in lockstep) and to the cell.
+fn stand_in_egm(
+    o: &Opts,
+    echo: Option<SocketAddr>,
+    cell: SocketAddr,
+    mut world: SharedWorld,
+) -> Result<Times> {
+    let sock = UdpSocket::bind("127.0.0.1:0")?;
+    sock.set_read_timeout(Some(Duration::from_secs(2)))?;
+    let mut cfg = sim::irc5::Irc5Config::new(cell);
+    cfg.range = abb_egm::CorrectionRange { translation: 0.01 };
+    let mut core = sim::irc5::Irc5Core::new(cfg, sim::irc5::RapidVariables::default())
+        .map_err(|e| anyhow!(e))?;
+    let mut inp = [0u8; 4096];
+    let mut times = Times {
+        echo: Vec::with_capacity(o.cycles),
+        cell: Vec::with_capacity(o.cycles),
+    };
+    let mut next = Instant::now();
+    for k in 0..o.warmup + o.cycles {
+        if !o.period.is_zero() {
+            next += o.period;
+            while Instant::now() < next {
+                thread::sleep(next - Instant::now());
+            }
+        }
+        let timed = k >= o.warmup;
+        let out = core
+            .next_cycle(&mut world)
+            .map_err(|e| anyhow!("the simulated IRC5 ended: {e:?}"))?;
+        if let Some(addr) = echo {
+            let t0 = Instant::now();
+            sock.send_to(out, addr)?;
+            sock.recv_from(&mut inp)?;
+            if timed {
+                times
+                    .echo
+                    .push(u32::try_from(t0.elapsed().as_nanos()).unwrap_or(u32::MAX));
+            }
+        }
+        let t0 = Instant::now();
+        sock.send_to(out, cell)?;
+        let (m, from) = sock
+            .recv_from(&mut inp)
+            .context("no answer from the cell")?;
+        let dt = t0.elapsed();
+        if timed {
+            times
+                .cell
+                .push(u32::try_from(dt.as_nanos()).unwrap_or(u32::MAX));
+        }
+        let verdict = core.on_reply(&inp[..m], from);
+        if verdict != sim::irc5::Verdict::Good {
+            bail!("cycle {k}: the cell's answer is {verdict:?}");
+        }
+        core.end_cycle(&mut world)
+            .map_err(|e| anyhow!("the simulated IRC5 ended: {e:?}"))?;
+    }
+    Ok(times)
+}
+
 fn echo_server(sock: UdpSocket, done: Arc<AtomicBool>) {
     let mut buf = vec![0u8; 65536];
     sock.set_read_timeout(Some(Duration::from_millis(200))).ok();
@@ -417,6 +484,9 @@ impl RunSensor {
     }
 }
 
+/// The driver's receive→send distribution and, where it keeps one, the part before the send call.
+type DriverLatency = (Latency, Option<Latency>);
+
 /// The cell's own receive→send distribution, µs.
 fn driver_line(l: &Latency) -> String {
     let us = |d: Duration| d.as_secs_f64() * 1e6;
@@ -449,7 +519,7 @@ fn main() -> Result<()> {
     } else {
         None
     };
-    let driver: Arc<Mutex<Option<(Latency, Latency)>>> = Arc::default();
+    let driver: Arc<Mutex<Option<DriverLatency>>> = Arc::default();
     let (cell_addr, world, looping) =
         match o.cell.as_str() {
             "none" => (None, None, None),
@@ -483,7 +553,8 @@ fn main() -> Result<()> {
                             &cfg, &tuning, &mut link, sensor, &stop, tx,
                         )?;
                         let d = link.diagnostics();
-                        *driver.lock().unwrap() = Some((d.latency.clone(), d.before_send.clone()));
+                        *driver.lock().unwrap() =
+                            Some((d.latency.clone(), Some(d.before_send.clone())));
                         let recorded = rec.map(|r| r.finish(Vec::new())).transpose()?;
                         Ok(format!(
                             "{}; {} cycles, {} sensor faults, {} limited; recorded {}",
@@ -538,7 +609,7 @@ fn main() -> Result<()> {
                         if let Some(forcecell::rsi::WireSummary::Rsi { diagnostics: d, .. }) = &wire
                         {
                             *driver.lock().unwrap() =
-                                Some((d.latency.clone(), d.before_send.clone()));
+                                Some((d.latency.clone(), Some(d.before_send.clone())));
                         }
                         let recorded = recording.map(|r| r.finish(run.rows.clone())).transpose()?;
                         Ok(format!(
@@ -553,7 +624,56 @@ fn main() -> Result<()> {
                 thread::sleep(Duration::from_millis(300));
                 (Some(addr), None, Some(h))
             }
-            c => bail!("--cell {c}: run, external or none"),
+            "egm" => {
+                let cfg = forcecell::cell::CellConfig::from_toml(CELL, "cell.toml")?;
+                let tuning = cfg.tuning()?;
+                let (limits, range) = forcecell::egm::cell_limits(&tuning.loop_cfg);
+                let mut lc = abb_egm::LinkConfig::new(
+                    SocketAddr::from((Ipv4Addr::LOCALHOST, 0)),
+                    abb_egm::RobotFilter::Ip(Ipv4Addr::LOCALHOST.into()),
+                );
+                lc.limits = limits;
+                lc.range = range;
+                // As for `run`: a 1 s watchdog, the stand-in may pause between warm-up and timing.
+                lc.watchdog_cycles = 250;
+                lc.session_jump = 250;
+                let mut link = abb_egm::EgmLink::bind(lc)?;
+                let addr = link.local_addr()?;
+                let world = spring_world();
+                let sensor = RunSensor::open(&o.sensor, &world)?;
+                let recorder = if o.record {
+                    Some(forcecell::recorder::start(
+                        &dir.join("egm.mcap"),
+                        forcecell::recorder::RecorderOptions::default(),
+                        None,
+                    )?)
+                } else {
+                    None
+                };
+                let (cpu, driver) = (o.loop_cpu, driver.clone());
+                let h = thread::Builder::new().name("loop".into()).spawn(
+                    move || -> Result<String> {
+                        pin(cpu)?;
+                        let stop = AtomicBool::new(false);
+                        let (tx, rec) = recorder.map_or((None, None), |(t, r)| (Some(t), Some(r)));
+                        let out = forcecell::cell::run_cell_recorded(
+                            &cfg, &tuning, &mut link, sensor, &stop, tx,
+                        )?;
+                        *driver.lock().unwrap() = Some((link.diagnostics().latency.clone(), None));
+                        let recorded = rec.map(|r| r.finish(Vec::new())).transpose()?;
+                        Ok(format!(
+                            "{}; {} cycles, {} sensor faults, {} limited; recorded {}",
+                            out.ended,
+                            out.stats.cycles,
+                            out.stats.sensor_faults,
+                            out.stats.limited,
+                            recorded.map_or("nothing".into(), |r| r.to_string())
+                        ))
+                    },
+                )?;
+                (Some(addr), Some(world), Some(h))
+            }
+            c => bail!("--cell {c}: run, egm, external or none"),
         };
     if let Some(how) = &o.recorder_sched {
         // The writer thread exists once the cell started.
@@ -561,7 +681,12 @@ fn main() -> Result<()> {
         resched_recorder(how)?;
     }
     pin(o.standin_cpu)?;
-    let mut times = stand_in(&o, echo, cell_addr, world)?;
+    let mut times = if o.cell == "egm" {
+        let (cell, world) = cell_addr.zip(world).context("the EGM cell")?;
+        stand_in_egm(&o, echo, cell, world)?
+    } else {
+        stand_in(&o, echo, cell_addr, world)?
+    };
     done.store(true, Ordering::Relaxed);
     if let Some(h) = looping {
         let ended = h.join().map_err(|_| anyhow!("the loop panicked"))??;
@@ -614,7 +739,9 @@ fn main() -> Result<()> {
     }
     if let Some((l, b)) = driver.lock().unwrap().as_ref() {
         println!("forcecell's own receive→send, µs: {}", driver_line(l));
-        println!("  of which before the send call, µs: {}", driver_line(b));
+        if let Some(b) = b {
+            println!("  of which before the send call, µs: {}", driver_line(b));
+        }
     }
     Ok(())
 }

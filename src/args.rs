@@ -307,6 +307,41 @@ pub fn noise_n(s: &str) -> Result<f64, String> {
     )
 }
 
+/// `forcecell egm-config`: the ABB controller's side of EGM path correction.
+#[derive(Args, Debug, Clone)]
+pub struct EgmConfigArgs {
+    /// forcecell's address as the robot reaches it (the UDPUC device's -RemoteAddress).
+    #[arg(long)]
+    pub host: Ipv4Addr,
+    /// forcecell's EGM port (-RemotePortNumber; the port the EGM link binds).
+    #[arg(long, default_value_t = 6510, value_parser = robot_port)]
+    pub port: u16,
+    /// The UDPUC device's name (transmission protocol -Name, EGMSetupUC's device).
+    #[arg(long, default_value = "FcEgmDevice")]
+    pub device: String,
+    /// The External Motion Interface Data instance (EGMSetupUC's configuration).
+    #[arg(long, default_value = "FcPathCorr")]
+    pub ext_motion: String,
+    /// The RAPID module's name (file NAME.mod and NAME-settings.txt).
+    #[arg(long, default_value = "FcEgm")]
+    pub module: String,
+    /// The tool (tooldata) of the pass; its tframe is EGM's sensor frame.
+    #[arg(long, default_value = "tool0")]
+    pub tool: String,
+    /// The work object (wobjdata) of the pass's targets.
+    #[arg(long, default_value = "wobj0")]
+    pub wobj: String,
+    /// The longest wait of the handshake (PRESSING, OFF), s.
+    #[arg(long, default_value_t = 5.0)]
+    pub max_wait: f64,
+    /// Output directory.
+    #[arg(long, default_value = "out/egm")]
+    pub out: PathBuf,
+    /// Replace files of the same names in the output directory.
+    #[arg(long)]
+    pub force: bool,
+}
+
 /// A UDP port the robot sends to (0 would let the OS choose one the robot cannot know).
 pub fn robot_port(s: &str) -> Result<u16, String> {
     let v: u16 = s

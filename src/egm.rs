@@ -137,3 +137,62 @@ pub fn print_irc5(r: &Irc5Report) {
         r.cycles, r.good, r.late, r.bad, r.clamped, r.max_age, r.end
     );
 }
+
+/// The controller settings and RAPID module of `forcecell egm-config`, from its arguments.
+pub fn egm_cell_config(a: &crate::args::EgmConfigArgs) -> abb_egm::rapid::EgmCellConfig {
+    let mut c = abb_egm::rapid::EgmCellConfig::new(a.host);
+    c.port = a.port;
+    c.device = a.device.clone();
+    c.ext_motion = a.ext_motion.clone();
+    c.module = a.module.clone();
+    c.tool = a.tool.clone();
+    c.wobj = a.wobj.clone();
+    c.max_wait = a.max_wait;
+    c
+}
+
+/// `forcecell egm-config`: everything is validated and rendered first; an existing file of the same
+/// name is refused (all of them named) unless `--force`; each file goes to a temporary file in the
+/// output directory and is renamed over its name only when every one was written.
+pub fn egm_config(a: &crate::args::EgmConfigArgs) -> Result<Vec<std::path::PathBuf>> {
+    let files = egm_cell_config(a)
+        .render()
+        .map_err(|e| anyhow::anyhow!("egm-config: {e}"))?;
+    let paths: Vec<_> = files.iter().map(|(n, _)| a.out.join(n)).collect();
+    if !a.force {
+        let existing: Vec<String> = paths
+            .iter()
+            .filter(|p| p.exists())
+            .map(|p| p.display().to_string())
+            .collect();
+        if !existing.is_empty() {
+            anyhow::bail!(
+                "egm-config: {} already exist(s); nothing was written (--force replaces them)",
+                existing.join(", ")
+            );
+        }
+    }
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("cannot create output directory {}", a.out.display()))?;
+    let mut temps = Vec::new();
+    let cleanup = |temps: &[std::path::PathBuf]| {
+        for t in temps {
+            let _ = std::fs::remove_file(t);
+        }
+    };
+    for ((name, text), path) in files.iter().zip(&paths) {
+        let tmp = a.out.join(format!(".{name}.tmp-{}", std::process::id()));
+        temps.push(tmp.clone());
+        if let Err(e) = std::fs::write(&tmp, text) {
+            cleanup(&temps);
+            return Err(e).with_context(|| format!("cannot write {}", path.display()));
+        }
+    }
+    for (tmp, path) in temps.iter().zip(&paths) {
+        std::fs::rename(tmp, path).with_context(|| {
+            cleanup(&temps);
+            format!("cannot rename {} to {}", tmp.display(), path.display())
+        })?;
+    }
+    Ok(paths)
+}

@@ -36,6 +36,9 @@ enum Command {
     Sim(SimArgs),
     /// Write the robot-side KUKA RSI files (Ethernet config XML, KRL template) for this configuration.
     RsiConfig(forcecell::args::RsiConfigArgs),
+    /// Write the ABB controller's side of EGM path correction: the UDPUC entry, the external-motion
+    /// settings and a RAPID module (none of it has met a real IRC5).
+    EgmConfig(forcecell::args::EgmConfigArgs),
     /// Plot a recorded trace (MCAP or CSV written by `sim` or `run`) to PNG and print its metrics.
     Plot(PlotArgs),
     /// Export an MCAP recording as a CSV trace (the columns `sim` and `run` write).
@@ -327,6 +330,12 @@ fn main() -> ExitCode {
             }
             for line in mapping {
                 println!("{line}");
+            }
+            ExitCode::SUCCESS
+        }),
+        Command::EgmConfig(a) => forcecell::egm::egm_config(&a).map(|files| {
+            for f in files {
+                println!("wrote {}", f.display());
             }
             ExitCode::SUCCESS
         }),

@@ -7,6 +7,7 @@
 //!   per cycle.
 //! * [`process`] — the force process's command in `RAPIDfromRobot`, and the state's way back.
 //! * [`limits`] — the envelope and rate limit inside the robot's configured range.
+//! * [`rapid`] — the robot controller's side as text: UDPUC entry, settings, the RAPID module.
 //! * [`wire`] — the one place SI becomes mm and ms and the tool frame becomes the sensor frame.
 //!
 //! The simulated IRC5 in `forcecell-sim` uses the same codec for the opposite direction. None of it
@@ -18,6 +19,7 @@ pub mod limits;
 pub mod link;
 pub mod msg;
 pub mod process;
+pub mod rapid;
 pub mod session;
 pub mod wire;
 
