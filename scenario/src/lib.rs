@@ -5,6 +5,7 @@
 
 pub mod metrics;
 pub mod record;
+pub mod removal;
 pub mod run;
 pub mod scenario;
 pub mod telemetry;
