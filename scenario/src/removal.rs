@@ -28,7 +28,7 @@ pub enum PadModel {
 impl PadModel {
     /// Contact patch radius (m) at normal force `force` (N); 0 for no contact (`force <= 0`).
     pub fn patch_radius(&self, force: f64) -> f64 {
-        if !(force > 0.0) {
+        if force.is_nan() || force <= 0.0 {
             return 0.0;
         }
         match *self {
