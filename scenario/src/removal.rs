@@ -200,6 +200,27 @@ impl RemovalMap {
         }
     }
 
+    /// Adds a recorded path: samples `(t, x, y, force)` (s, m, m, N) in time order. Each interval between two
+    /// samples is one step at the earlier sample's position and force, its feed the distance to the next
+    /// sample over the time between them. A step back in time or a non-finite value skips that interval.
+    pub fn add_path(&mut self, model: &RemovalModel, samples: &[(f64, f64, f64, f64)]) {
+        for w in samples.windows(2) {
+            let ((t0, x0, y0, f0), (t1, x1, y1, _)) = (w[0], w[1]);
+            let dt = t1 - t0;
+            if !(dt.is_finite()
+                && dt > 0.0
+                && x0.is_finite()
+                && y0.is_finite()
+                && x1.is_finite()
+                && y1.is_finite())
+            {
+                continue;
+            }
+            let feed = ((x1 - x0).powi(2) + (y1 - y0).powi(2)).sqrt() / dt;
+            self.add(model, x0, y0, f0, feed, dt);
+        }
+    }
+
     /// Mean, standard deviation, min and max of the depth over the cells whose centres lie in
     /// `[x_min, x_max] × [y_min, y_max]` (m), and the share of those cells with any removal (coverage).
     pub fn stats(&self, x_min: f64, x_max: f64, y_min: f64, y_max: f64) -> Option<MapStats> {
@@ -367,5 +388,39 @@ mod tests {
             "along the middle of the pass the depth is even: {s:?}"
         );
         assert_eq!(s.coverage, 1.0);
+    }
+    #[test]
+    fn recorded_path_matches_the_stepped_pass() {
+        // The same straight pass as above given as recorded samples: the feed comes from the positions.
+        let m = RemovalModel {
+            pad: PadModel::Uniform { radius: 0.01 },
+            tool: ToolMotion::Still,
+            preston: 1e-13,
+        };
+        let samples: Vec<_> = (0..=9000)
+            .map(|k| {
+                let t = k as f64 * 0.001;
+                (t, -0.045 + 0.01 * t, 0.00025, 10.0)
+            })
+            .collect();
+        let mut map = RemovalMap::new(-0.05, 0.05, -0.02, 0.02, 0.0005);
+        map.add_path(&m, &samples);
+        let (i, j) = map.cell_at(0.0, 0.00025).unwrap();
+        assert!(
+            close(map.depth_at(i, j), 6.3662e-11, 2e-3),
+            "{}",
+            map.depth_at(i, j)
+        );
+        // A sample with a NaN position removes nothing for its interval; time going back neither.
+        let mut bad = RemovalMap::new(-0.05, 0.05, -0.02, 0.02, 0.0005);
+        bad.add_path(
+            &m,
+            &[
+                (0.0, f64::NAN, 0.0, 10.0),
+                (1.0, 0.0, 0.0, 10.0),
+                (0.5, 0.0, 0.0, 10.0),
+            ],
+        );
+        assert!(bad.depth.iter().all(|d| *d == 0.0));
     }
 }
