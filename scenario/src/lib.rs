@@ -6,6 +6,7 @@
 pub mod input;
 pub mod metrics;
 pub mod record;
+pub mod removal;
 pub mod run;
 pub mod scenario;
 pub mod telemetry;

@@ -1,0 +1,426 @@
+//! Material removal by Preston's law: a pad model (contact patch and pressure from the normal force), the
+//! relative speed of the abrasive, Preston's coefficient, and a 2-D removal map accumulated along a path.
+//!
+//! Everything is SI: metres, newtons, pascals, seconds; Preston's coefficient in m²/N (so that
+//! `k_p · p · v` is a removal rate in m/s). The assumptions are stated in `docs/removal.md`.
+
+use std::f64::consts::PI;
+
+/// How the normal force spreads over the contact patch.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PadModel {
+    /// A flat, rigid-backed pad of `radius` (m) in full contact: uniform pressure `F / (π R²)` over the disc.
+    Uniform {
+        /// Pad radius, m.
+        radius: f64,
+    },
+    /// A compliant spherical pad of curvature `radius` (m) and effective contact modulus `modulus` (Pa)
+    /// on a flat part: Hertz contact, patch radius `a = (3 F R / (4 E*))^(1/3)`, pressure
+    /// `p(r) = p0 · sqrt(1 − r²/a²)` with `p0 = 3 F / (2 π a²)`.
+    Hertz {
+        /// Pad radius of curvature, m.
+        radius: f64,
+        /// Effective contact modulus E* of pad against part, Pa.
+        modulus: f64,
+    },
+}
+
+impl PadModel {
+    /// Contact patch radius (m) at normal force `force` (N); 0 for no contact (`force <= 0`).
+    pub fn patch_radius(&self, force: f64) -> f64 {
+        if force.is_nan() || force <= 0.0 {
+            return 0.0;
+        }
+        match *self {
+            PadModel::Uniform { radius } => radius,
+            PadModel::Hertz { radius, modulus } => (3.0 * force * radius / (4.0 * modulus)).cbrt(),
+        }
+    }
+
+    /// Contact pressure (Pa) at distance `r` (m) from the patch centre under normal force `force` (N).
+    /// Zero outside the patch and for no contact.
+    pub fn pressure(&self, force: f64, r: f64) -> f64 {
+        let a = self.patch_radius(force);
+        if a <= 0.0 || r.abs() > a {
+            return 0.0;
+        }
+        match *self {
+            PadModel::Uniform { .. } => force / (PI * a * a),
+            PadModel::Hertz { .. } => {
+                let p0 = 3.0 * force / (2.0 * PI * a * a);
+                p0 * (1.0 - (r * r) / (a * a)).max(0.0).sqrt()
+            }
+        }
+    }
+}
+
+/// The abrasive's own motion, independent of the feed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ToolMotion {
+    /// No own motion (a pad only dragged along the path): the relative speed is the feed alone.
+    Still,
+    /// A rotating disc at `rpm` (rev/min), its speed taken at `effective_radius` (m): `v = 2π·rpm/60 · r_eff`.
+    Disc {
+        /// Spindle speed, rev/min.
+        rpm: f64,
+        /// Radius at which the disc's surface speed is taken, m.
+        effective_radius: f64,
+    },
+    /// A belt at surface speed `speed` (m/s).
+    Belt {
+        /// Belt surface speed, m/s.
+        speed: f64,
+    },
+}
+
+impl ToolMotion {
+    /// The tool's own surface speed, m/s.
+    pub fn speed(&self) -> f64 {
+        match *self {
+            ToolMotion::Still => 0.0,
+            ToolMotion::Disc {
+                rpm,
+                effective_radius,
+            } => rpm * 2.0 * PI / 60.0 * effective_radius,
+            ToolMotion::Belt { speed } => speed,
+        }
+    }
+}
+
+/// The whole removal model: pad, tool motion and Preston's coefficient.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RemovalModel {
+    /// How force becomes pressure.
+    pub pad: PadModel,
+    /// The tool's own motion.
+    pub tool: ToolMotion,
+    /// Preston's coefficient k_p, m²/N (a property of part material, abrasive and slurry).
+    pub preston: f64,
+}
+
+impl RemovalModel {
+    /// Relative speed of the abrasive (m/s): the tool's own speed plus the feed speed `feed` (m/s).
+    /// Assumption: the two add as magnitudes (the tool speed dominates, or the two are aligned).
+    pub fn relative_speed(&self, feed: f64) -> f64 {
+        self.tool.speed() + feed.abs()
+    }
+
+    /// Removal rate (m/s) at distance `r` (m) from the patch centre: `k_p · p(r) · v`.
+    pub fn rate(&self, force: f64, feed: f64, r: f64) -> f64 {
+        self.preston * self.pad.pressure(force, r) * self.relative_speed(feed)
+    }
+}
+
+/// A removal depth map over a rectangle of the part, on a regular grid of square cells.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RemovalMap {
+    /// x of the first cell's centre, m.
+    pub x0: f64,
+    /// y of the first cell's centre, m.
+    pub y0: f64,
+    /// Cell size, m.
+    pub cell: f64,
+    /// Cells along x.
+    pub nx: usize,
+    /// Cells along y.
+    pub ny: usize,
+    /// Removal depth per cell (row-major, y outer), m.
+    pub depth: Vec<f64>,
+    /// Contact time per cell (time the cell lay inside the patch), s.
+    pub dwell: Vec<f64>,
+}
+
+impl RemovalMap {
+    /// An empty map covering `[x_min, x_max] × [y_min, y_max]` (m) with cells of `cell` (m).
+    pub fn new(x_min: f64, x_max: f64, y_min: f64, y_max: f64, cell: f64) -> Self {
+        assert!(
+            cell > 0.0 && x_max >= x_min && y_max >= y_min,
+            "invalid map extent"
+        );
+        let nx = ((x_max - x_min) / cell).ceil().max(1.0) as usize;
+        let ny = ((y_max - y_min) / cell).ceil().max(1.0) as usize;
+        RemovalMap {
+            x0: x_min + cell / 2.0,
+            y0: y_min + cell / 2.0,
+            cell,
+            nx,
+            ny,
+            depth: vec![0.0; nx * ny],
+            dwell: vec![0.0; nx * ny],
+        }
+    }
+
+    /// Centre (x, y) of cell (i, j), m.
+    pub fn centre(&self, i: usize, j: usize) -> (f64, f64) {
+        (
+            self.x0 + i as f64 * self.cell,
+            self.y0 + j as f64 * self.cell,
+        )
+    }
+
+    /// The cell holding point (x, y), if it lies in the map.
+    pub fn cell_at(&self, x: f64, y: f64) -> Option<(usize, usize)> {
+        let i = ((x - self.x0) / self.cell + 0.5).floor();
+        let j = ((y - self.y0) / self.cell + 0.5).floor();
+        if i < 0.0 || j < 0.0 || i as usize >= self.nx || j as usize >= self.ny {
+            return None;
+        }
+        Some((i as usize, j as usize))
+    }
+
+    /// Depth at cell (i, j), m.
+    pub fn depth_at(&self, i: usize, j: usize) -> f64 {
+        self.depth[j * self.nx + i]
+    }
+
+    /// Adds one sample: the patch centred at (x, y) (m) under normal force `force` (N), moving at feed
+    /// speed `feed` (m/s), for `dt` (s). Each cell whose centre lies in the patch gets `k_p · p(r) · v · dt`.
+    pub fn add(&mut self, model: &RemovalModel, x: f64, y: f64, force: f64, feed: f64, dt: f64) {
+        let a = model.pad.patch_radius(force);
+        if a <= 0.0 || dt <= 0.0 {
+            return;
+        }
+        let span = (a / self.cell).ceil() as i64 + 1;
+        let ci = ((x - self.x0) / self.cell).round() as i64;
+        let cj = ((y - self.y0) / self.cell).round() as i64;
+        for j in (cj - span)..=(cj + span) {
+            for i in (ci - span)..=(ci + span) {
+                if i < 0 || j < 0 || i as usize >= self.nx || j as usize >= self.ny {
+                    continue;
+                }
+                let (cx, cy) = self.centre(i as usize, j as usize);
+                let r = ((cx - x).powi(2) + (cy - y).powi(2)).sqrt();
+                if r > a {
+                    continue;
+                }
+                let k = j as usize * self.nx + i as usize;
+                self.depth[k] += model.rate(force, feed, r) * dt;
+                self.dwell[k] += dt;
+            }
+        }
+    }
+
+    /// Adds a recorded path: samples `(t, x, y, force)` (s, m, m, N) in time order. Each interval between two
+    /// samples is one step at the earlier sample's position and force, its feed the distance to the next
+    /// sample over the time between them. A step back in time or a non-finite value skips that interval.
+    pub fn add_path(&mut self, model: &RemovalModel, samples: &[(f64, f64, f64, f64)]) {
+        for w in samples.windows(2) {
+            let ((t0, x0, y0, f0), (t1, x1, y1, _)) = (w[0], w[1]);
+            let dt = t1 - t0;
+            if !(dt.is_finite()
+                && dt > 0.0
+                && x0.is_finite()
+                && y0.is_finite()
+                && x1.is_finite()
+                && y1.is_finite())
+            {
+                continue;
+            }
+            let feed = ((x1 - x0).powi(2) + (y1 - y0).powi(2)).sqrt() / dt;
+            self.add(model, x0, y0, f0, feed, dt);
+        }
+    }
+
+    /// Mean, standard deviation, min and max of the depth over the cells whose centres lie in
+    /// `[x_min, x_max] × [y_min, y_max]` (m), and the share of those cells with any removal (coverage).
+    pub fn stats(&self, x_min: f64, x_max: f64, y_min: f64, y_max: f64) -> Option<MapStats> {
+        let mut v = Vec::new();
+        for j in 0..self.ny {
+            for i in 0..self.nx {
+                let (cx, cy) = self.centre(i, j);
+                if cx >= x_min && cx <= x_max && cy >= y_min && cy <= y_max {
+                    v.push(self.depth_at(i, j));
+                }
+            }
+        }
+        if v.is_empty() {
+            return None;
+        }
+        let n = v.len() as f64;
+        let mean = v.iter().sum::<f64>() / n;
+        let std = (v.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / n).sqrt();
+        Some(MapStats {
+            mean,
+            std,
+            min: v.iter().cloned().fold(f64::INFINITY, f64::min),
+            max: v.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
+            coverage: v.iter().filter(|d| **d > 0.0).count() as f64 / n,
+        })
+    }
+}
+
+/// Removal statistics over a target area.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapStats {
+    /// Mean depth, m.
+    pub mean: f64,
+    /// Standard deviation of depth, m.
+    pub std: f64,
+    /// Least depth, m.
+    pub min: f64,
+    /// Greatest depth, m.
+    pub max: f64,
+    /// Share of cells with any removal, 0..=1.
+    pub coverage: f64,
+}
+
+impl MapStats {
+    /// Uniformity as standard deviation over mean (dimensionless); infinite when nothing was removed.
+    pub fn uniformity(&self) -> f64 {
+        if self.mean > 0.0 {
+            self.std / self.mean
+        } else {
+            f64::INFINITY
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: f64, b: f64, rel: f64) -> bool {
+        (a - b).abs() <= rel * b.abs()
+    }
+
+    #[test]
+    fn hertz_patch_and_pressure_by_hand() {
+        // F = 20 N, R = 0.05 m, E* = 1 MPa: a³ = 3·20·0.05/(4·1e6) = 7.5e-7 m³, a = 9.0856e-3 m.
+        let pad = PadModel::Hertz {
+            radius: 0.05,
+            modulus: 1.0e6,
+        };
+        let a = pad.patch_radius(20.0);
+        assert!(close(a, 9.0856e-3, 1e-4), "a = {a}");
+        // p0 = 3F/(2πa²) = 60/(2π·8.2548e-5) = 1.1568e5 Pa.
+        assert!(close(pad.pressure(20.0, 0.0), 1.1568e5, 1e-3));
+        assert_eq!(pad.pressure(20.0, a * 1.01), 0.0);
+        assert_eq!(pad.patch_radius(0.0), 0.0);
+        assert_eq!(pad.patch_radius(-3.0), 0.0);
+        // The pressure integrates back to the force: ∫ p 2πr dr = F.
+        let n = 20_000;
+        let f: f64 = (0..n)
+            .map(|k| {
+                let r = (k as f64 + 0.5) * a / n as f64;
+                pad.pressure(20.0, r) * 2.0 * PI * r * a / n as f64
+            })
+            .sum();
+        assert!(close(f, 20.0, 1e-3), "integrated force {f}");
+    }
+
+    #[test]
+    fn disc_speed_by_hand() {
+        // 3000 rpm at 0.02 m: 3000·2π/60·0.02 = 6.2832 m/s; plus 0.01 m/s feed.
+        let m = RemovalModel {
+            pad: PadModel::Uniform { radius: 0.01 },
+            tool: ToolMotion::Disc {
+                rpm: 3000.0,
+                effective_radius: 0.02,
+            },
+            preston: 1e-13,
+        };
+        assert!(close(m.relative_speed(0.01), 6.2932, 1e-4));
+        assert!(close(m.relative_speed(-0.01), 6.2932, 1e-4));
+    }
+
+    #[test]
+    fn dwell_depth_is_kp_p_v_t() {
+        // Uniform pad R = 10 mm, F = 10 N: p = 10/(π·1e-4) = 31831 Pa. Belt 5 m/s, k_p = 1e-13 m²/N,
+        // 2 s still: depth = 1e-13 · 31831 · 5 · 2 = 3.1831e-8 m (31.8 nm) everywhere under the pad.
+        let m = RemovalModel {
+            pad: PadModel::Uniform { radius: 0.01 },
+            tool: ToolMotion::Belt { speed: 5.0 },
+            preston: 1e-13,
+        };
+        let mut map = RemovalMap::new(-0.02, 0.02, -0.02, 0.02, 0.001);
+        for _ in 0..500 {
+            map.add(&m, 0.0005, 0.0005, 10.0, 0.0, 0.004);
+        }
+        let (i, j) = map.cell_at(0.0005, 0.0005).unwrap();
+        assert!(
+            close(map.depth_at(i, j), 3.1831e-8, 1e-4),
+            "{}",
+            map.depth_at(i, j)
+        );
+        assert!(close(map.dwell[j * map.nx + i], 2.0, 1e-9));
+        // Outside the pad nothing.
+        let (i, j) = map.cell_at(0.0185, 0.0005).unwrap();
+        assert_eq!(map.depth_at(i, j), 0.0);
+    }
+
+    #[test]
+    fn straight_pass_depth_on_centreline() {
+        // Uniform pad R = 10 mm at 10 N, feed u = 10 mm/s, pad dragged (no own motion): v = u, and a
+        // point on the centreline lies under the patch for 2R/u = 2 s, so depth = k_p · p · u · 2R/u
+        // = 1e-13 · 31831 · 0.01 · 2 = 6.3662e-11 m.
+        let m = RemovalModel {
+            pad: PadModel::Uniform { radius: 0.01 },
+            tool: ToolMotion::Still,
+            preston: 1e-13,
+        };
+        let mut map = RemovalMap::new(-0.05, 0.05, -0.02, 0.02, 0.0005);
+        let dt = 0.001;
+        let u = 0.01;
+        let mut x = -0.045;
+        while x < 0.045 {
+            map.add(&m, x, 0.00025, 10.0, u, dt);
+            x += u * dt;
+        }
+        let (i, j) = map.cell_at(0.0, 0.00025).unwrap();
+        assert!(
+            close(map.depth_at(i, j), 6.3662e-11, 2e-3),
+            "{}",
+            map.depth_at(i, j)
+        );
+        // Beside the path, at 8 mm off the line, the chord is shorter: 2·sqrt(R² − y²) = 12 mm → 1.2 s.
+        let (i8, j8) = map.cell_at(0.0, 0.00825).unwrap();
+        let (_, cy) = map.centre(i8, j8);
+        let chord = 2.0 * (0.01f64.powi(2) - (cy - 0.00025).powi(2)).sqrt();
+        let expect = 1e-13 * 10.0 / (PI * 1e-4) * u * chord / u;
+        assert!(
+            close(map.depth_at(i8, j8), expect, 2e-2),
+            "{} vs {expect}",
+            map.depth_at(i8, j8)
+        );
+        let s = map.stats(-0.01, 0.01, -0.001, 0.001).unwrap();
+        assert!(
+            s.uniformity() < 0.01,
+            "along the middle of the pass the depth is even: {s:?}"
+        );
+        assert_eq!(s.coverage, 1.0);
+    }
+    #[test]
+    fn recorded_path_matches_the_stepped_pass() {
+        // The same straight pass as above given as recorded samples: the feed comes from the positions.
+        let m = RemovalModel {
+            pad: PadModel::Uniform { radius: 0.01 },
+            tool: ToolMotion::Still,
+            preston: 1e-13,
+        };
+        let samples: Vec<_> = (0..=9000)
+            .map(|k| {
+                let t = k as f64 * 0.001;
+                (t, -0.045 + 0.01 * t, 0.00025, 10.0)
+            })
+            .collect();
+        let mut map = RemovalMap::new(-0.05, 0.05, -0.02, 0.02, 0.0005);
+        map.add_path(&m, &samples);
+        let (i, j) = map.cell_at(0.0, 0.00025).unwrap();
+        assert!(
+            close(map.depth_at(i, j), 6.3662e-11, 2e-3),
+            "{}",
+            map.depth_at(i, j)
+        );
+        // A sample with a NaN position removes nothing for its interval; time going back neither.
+        let mut bad = RemovalMap::new(-0.05, 0.05, -0.02, 0.02, 0.0005);
+        bad.add_path(
+            &m,
+            &[
+                (0.0, f64::NAN, 0.0, 10.0),
+                (1.0, 0.0, 0.0, 10.0),
+                (0.5, 0.0, 0.0, 10.0),
+            ],
+        );
+        assert!(bad.depth.iter().all(|d| *d == 0.0));
+    }
+}
