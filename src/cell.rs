@@ -622,8 +622,12 @@ pub enum CellEnd {
     Done,
     /// The operator's stop flag (SIGINT, SIGTERM).
     Stopped,
-    /// A link failed before the end: the robot fell silent past its watchdog, the sensor bus went off.
+    /// The robot ended it before the end: its link failed (it fell silent past its watchdog, or with
+    /// the process still on), or its program aborted.
     EndedEarly,
+    /// A fault of the loop's guard ended it (force limit, correction limit, contact lost, a hold too
+    /// long, a failed sensor): backed off, returned to the path.
+    Fault,
 }
 
 impl CellEnd {
@@ -633,6 +637,7 @@ impl CellEnd {
             Self::Done => crate::stop::OK,
             Self::Stopped => crate::stop::INTERRUPTED,
             Self::EndedEarly => crate::stop::ENDED_EARLY,
+            Self::Fault => crate::stop::FAULT,
         }
     }
 }
@@ -719,7 +724,8 @@ where
                 CellEnd::Done,
             ),
         },
-        End::Fault(e) | End::LinkLost(e) => (format!("the loop ended: {e}"), CellEnd::EndedEarly),
+        End::Fault(e) => (format!("the loop ended: {e}"), CellEnd::Fault),
+        End::LinkLost(e) => (format!("the loop ended: {e}"), CellEnd::EndedEarly),
         End::Program(Some(why)) => (why.clone(), CellEnd::EndedEarly),
     };
     Ok(CellOutcome {

@@ -166,6 +166,8 @@ pub fn sim(spec: &RunSpec, run: &RunResult, out: &Path, check: bool) -> Result<u
     let failed = verdicts.iter().any(|v| !v.pass);
     Ok(if run.interrupted.is_some() {
         crate::stop::INTERRUPTED
+    } else if run.ended_early.is_some() && run.fault {
+        crate::stop::FAULT
     } else if run.ended_early.is_some() {
         crate::stop::ENDED_EARLY
     } else if check && failed {

@@ -108,6 +108,8 @@ pub struct RunResult {
     pub wall: Duration,
     /// Why the loop ended early, if it did (not counting an operator's stop).
     pub ended_early: Option<String>,
+    /// The early end was a fault of the loop's guard (exit status 4), not the robot's doing (3).
+    pub fault: bool,
     /// Stopped by SIGINT/SIGTERM ([`crate::stop::requested`]) before the end; `Some(true)` when the
     /// robot then got `Stop`, `Some(false)` when it could not (no cycle came).
     pub interrupted: Option<bool>,
@@ -207,6 +209,7 @@ where
     };
     let outcome = controller::run::run(&mut lp, limits, &mut sink);
     let (ended_early, interrupted) = sim_end(&outcome);
+    let fault = matches!(outcome.end, End::Fault(_));
     let (rows, control) = sink.finish(spec.plant.period);
     progress(1.0);
     let wall = started.elapsed();
@@ -223,6 +226,7 @@ where
         metrics,
         wall,
         ended_early,
+        fault,
         interrupted,
         stop_note: outcome.stop_note(),
     })

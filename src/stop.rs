@@ -3,7 +3,7 @@
 //! datagram ends when a stop is asked for or the robot's process is gone.
 //!
 //! Exit statuses (docs/cli.md, "Exit statuses", lists them for users):
-//! [`OK`], [`CHECK_FAILED`], [`ERROR`], [`ENDED_EARLY`], [`INTERRUPTED`].
+//! [`OK`], [`CHECK_FAILED`], [`ERROR`], [`ENDED_EARLY`], [`FAULT`], [`INTERRUPTED`].
 
 use std::fmt;
 use std::sync::Once;
@@ -17,9 +17,13 @@ pub const OK: u8 = 0;
 pub const CHECK_FAILED: u8 = 1;
 /// Bad input or a device that could not be used: one `error:` line says why; nothing was run.
 pub const ERROR: u8 = 2;
-/// The run ended before its end because a link was lost (the robot fell silent past its watchdog,
-/// the sensor bus went off); what ran is recorded.
+/// The run ended before its end because the robot ended it: its link was lost (it fell silent past
+/// its watchdog, or with the process still on), or its program aborted; what ran is recorded.
 pub const ENDED_EARLY: u8 = 3;
+/// The run ended on a fault of forcecell's own guard (force limit, correction limit, contact lost, a
+/// hold too long, a failed sensor): the tool was backed off and returned to the path, the robot got
+/// `Stop` where the link stood; what ran is recorded.
+pub const FAULT: u8 = 4;
 /// Stopped by SIGINT (Ctrl-C), SIGTERM or SIGHUP: the robot got `Stop` if it was sending, what ran is
 /// recorded (128 + SIGINT, as shells report an interrupted command).
 pub const INTERRUPTED: u8 = 130;

@@ -252,7 +252,7 @@ fn a_client_without_fc_cmd_sees_a_lost_contact_end_in_a_retract_and_stop() {
     let o = finish(child);
     let out = text(&o.stdout);
     assert!(stopped, "the session ends with Stop: {out}");
-    assert_eq!(o.status.code(), Some(3), "ended early: {out}");
+    assert_eq!(o.status.code(), Some(4), "a fault ended it: {out}");
     assert!(
         out.contains("fault 5 (contact lost): contact lost: the search reached 5.0 mm beyond"),
         "{out}"

@@ -121,6 +121,9 @@ fn a_sensor_silent_in_contact_ends_the_run_backed_off_with_stop() {
     let (out, report, world) = run_with(2_000, false, silent, None);
     assert!(out.ended.contains("held the last command"), "{}", out.ended);
     assert!(out.stopped, "{}", out.ended);
+    // A fault of the loop's own guard has its own exit status, not a lost link's.
+    assert_eq!(out.end, forcecell::cell::CellEnd::Fault, "{out:?}");
+    assert_eq!(out.end.exit_status(), 4);
     assert_eq!(report.end, KrcEnd::Stopped, "{report:?}");
     let held = out.rows.iter().filter(|r| r.condition == 1).count();
     assert!(held > 0 && held <= 26, "held {held} cycles of 4 ms");
