@@ -750,8 +750,8 @@ struct RecordSink {
     kc_hat: Option<f64>,
     /// The process phase last reported to the robot program (`None`: no process channels).
     last_phase: Option<hal::ProcessPhase>,
-    /// The status line while the cell runs, and whether it rewrites a terminal line.
-    status: Option<(crate::status::Status, bool)>,
+    /// The status line while the cell runs (printed on its own thread).
+    status: Option<crate::status::Printer>,
     /// The robot's own late-reply count last seen.
     late: u32,
 }
@@ -769,47 +769,24 @@ impl RecordSink {
         }
     }
 
-    /// Say what the cell does while it runs: a line rewritten a few times a second on a terminal,
-    /// a plain line every few seconds elsewhere; late replies counted against `budget`.
+    /// Say what the cell does while it runs ([`crate::status::Printer`]); late replies counted
+    /// against `budget`. Without a thread for it, the run goes on silent.
     fn with_status(mut self, budget: u32) -> Self {
-        use std::io::IsTerminal;
-        let terminal = std::io::stdout().is_terminal();
-        let period = if terminal {
-            1.0 / crate::status::TERMINAL_HZ
-        } else {
-            crate::status::LOG_PERIOD
-        };
-        self.status = Some((crate::status::Status::new(period, Some(budget)), terminal));
+        self.status = crate::status::Printer::spawn(Some(budget)).ok();
         self
     }
 
     fn show(&mut self, r: &controller::CycleReport) {
-        use std::io::Write;
         self.late = r.cycle.late_replies;
-        let Some((status, terminal)) = &mut self.status else {
-            return;
-        };
-        let (line, warning) = status.observe(r);
-        if let Some(w) = warning {
-            if *terminal {
-                println!();
-            }
-            eprintln!("{w}");
-        }
-        if let Some(line) = line {
-            if *terminal {
-                print!("\r{line}\x1b[K");
-                let _ = std::io::stdout().flush();
-            } else {
-                println!("{line}");
-            }
+        if let Some(p) = &self.status {
+            p.offer(r);
         }
     }
 
-    /// End the status line (a terminal's is left on its own line).
+    /// Print what the status line has queued and end it.
     fn end_status(&mut self) {
-        if let Some((_, true)) = self.status {
-            println!();
+        if let Some(p) = &mut self.status {
+            p.finish();
         }
     }
 }
@@ -896,10 +873,12 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
         tuning.name
     );
     let mcap = stem.with_extension("mcap");
-    let mut prov = provenance("run", &cfg, path, &tuning);
+    // The cell file as the input rule reads it (a regular file, capped), once: hashed and attached.
+    let cell = crate::input::read(path, "cell config", crate::input::MAX_CONFIG).ok();
+    let mut prov = provenance("run", &cfg, path, cell.as_deref(), &tuning);
     let (tx, recording) = crate::recorder::start(
         &mcap,
-        recording_options(path, &tuning, &prov),
+        recording_options(cell, &tuning, &prov),
         live.as_ref().map(crate::live::LiveServer::sink),
     )?;
     let stop = crate::stop::flag();
@@ -953,8 +932,14 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
 
 /// A cell run's provenance: where it came from (the cell file and its hash, the tuning, the robot and
 /// the sensor), started now.
-fn provenance(command: &str, cfg: &CellConfig, cell_file: &Path, tuning: &Tuning) -> Provenance {
-    let mut p = Provenance::start(command, &cell_file.display().to_string());
+fn provenance(
+    command: &str,
+    cfg: &CellConfig,
+    cell_file: &Path,
+    cell: Option<&[u8]>,
+    tuning: &Tuning,
+) -> Provenance {
+    let mut p = Provenance::start(command, &cell_file.display().to_string(), cell);
     p.tuning = tuning.name.clone();
     p.robot = format!(
         "KUKA RSI, listening on {} for {}",
@@ -972,12 +957,12 @@ fn provenance(command: &str, cfg: &CellConfig, cell_file: &Path, tuning: &Tuning
 /// A cell run's recording: the cell file and the tuning attached, its provenance as metadata
 /// (`forcecell.run`).
 fn recording_options(
-    cell_file: &Path,
+    cell: Option<Vec<u8>>,
     tuning: &Tuning,
     provenance: &Provenance,
 ) -> RecorderOptions {
     let mut attachments = Vec::new();
-    if let Ok(text) = crate::input::read(cell_file, "cell config", crate::input::MAX_CONFIG) {
+    if let Some(text) = cell {
         attachments.push(("cell.toml".to_string(), "application/toml".into(), text));
     }
     if let Ok(text) = toml::to_string(tuning) {
@@ -1030,9 +1015,10 @@ pub fn calibrate(path: &Path, poses: usize) -> Result<()> {
     let dir = crate::output::OutDir::create(&cfg.record, "recording directory")?;
     let stamp = crate::provenance::file_stamp(std::time::SystemTime::now());
     let mcap = cfg.record.join(format!("calibrate-{stamp}.mcap"));
-    let prov = provenance("calibrate", &cfg, path, &tuning);
+    let cell = crate::input::read(path, "cell config", crate::input::MAX_CONFIG).ok();
+    let prov = provenance("calibrate", &cfg, path, cell.as_deref(), &tuning);
     let (tx, recording) =
-        crate::recorder::start(&mcap, recording_options(path, &tuning, &prov), None)?;
+        crate::recorder::start(&mcap, recording_options(cell, &tuning, &prov), None)?;
     dir.keep();
     let mount = cfg
         .gravity

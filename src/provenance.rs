@@ -84,12 +84,10 @@ pub struct Provenance {
 }
 
 impl Provenance {
-    /// A record for `command` started now, reading `source` (a file whose hash is taken, when it
-    /// is one).
-    pub fn start(command: &str, source: &str) -> Self {
-        let source_sha256 = std::fs::read(source)
-            .map(|b| sha256_hex(&b))
-            .unwrap_or_default();
+    /// A record for `command` started now from `source`, whose `bytes` (a file's, as the command
+    /// read it; `None` for a built-in name) are hashed.
+    pub fn start(command: &str, source: &str, bytes: Option<&[u8]>) -> Self {
+        let source_sha256 = bytes.map(sha256_hex).unwrap_or_default();
         Self {
             command: command.into(),
             forcecell: env!("CARGO_PKG_VERSION").into(),
@@ -158,7 +156,8 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let cell = dir.path().join("cell.toml");
         std::fs::write(&cell, "abc").unwrap();
-        let mut p = Provenance::start("run", cell.to_str().unwrap());
+        let bytes = std::fs::read(&cell).unwrap();
+        let mut p = Provenance::start("run", cell.to_str().unwrap(), Some(&bytes));
         assert_eq!(
             p.source_sha256,
             "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
@@ -170,7 +169,7 @@ mod tests {
         assert_eq!(m["stop_sent"], "true");
         assert_eq!(m["cycles"], "3001");
         assert_eq!(m["forcecell"], env!("CARGO_PKG_VERSION"));
-        let built_in = Provenance::start("sim", "paper-fig9");
+        let built_in = Provenance::start("sim", "paper-fig9", None);
         assert_eq!(built_in.source_sha256, "", "a built-in name is no file");
     }
 }

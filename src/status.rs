@@ -1,4 +1,4 @@
-//! What `run` says while it runs: a status line a few times a second — the process phase (or the law's
+//! What `run` says while it runs ([`Printer`], on its own thread): a status line a few times a second — the process phase (or the law's
 //! contact state), the force against the commanded force, `k̂_c`, the robot's late replies against its
 //! budget, and the cycles that met a condition. On a terminal the line is rewritten in place; elsewhere
 //! (a log, a pipe) a plain line is written every few seconds. Paced on the robot's own time, so a
@@ -102,6 +102,84 @@ impl Status {
             let _ = write!(s, "  FAULT {}", r.command.process.fault.name());
         }
         s
+    }
+}
+
+/// Reports the queue to the status line's thread holds: a second of 4 ms cycles.
+pub const QUEUE: usize = 256;
+
+/// The status line's own thread. The cycle hands it each report without waiting — a full queue drops
+/// the report (the line's counts then miss it), so a slow terminal or a full pipe never holds a cycle —
+/// and the thread paces, formats and prints: nothing is formatted or written on the cycle's thread.
+pub struct Printer {
+    tx: Option<std::sync::mpsc::SyncSender<CycleReport>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Printer {
+    /// Start the thread: a line rewritten [`TERMINAL_HZ`] times a second when stdout is a terminal,
+    /// else a plain line every [`LOG_PERIOD`] s; late replies counted against `budget`.
+    pub fn spawn(budget: Option<u32>) -> std::io::Result<Self> {
+        use std::io::{IsTerminal, Write};
+        let terminal = std::io::stdout().is_terminal();
+        let period = if terminal {
+            1.0 / TERMINAL_HZ
+        } else {
+            LOG_PERIOD
+        };
+        let (tx, rx) = std::sync::mpsc::sync_channel::<CycleReport>(QUEUE);
+        let thread = std::thread::Builder::new()
+            .name("status".into())
+            .spawn(move || {
+                let mut status = Status::new(period, budget);
+                let mut shown = false;
+                for r in rx {
+                    let (line, warning) = status.observe(&r);
+                    if let Some(w) = warning {
+                        if terminal && shown {
+                            println!();
+                        }
+                        eprintln!("{w}");
+                    }
+                    if let Some(line) = line {
+                        if terminal {
+                            print!("\r{line}\x1b[K");
+                            let _ = std::io::stdout().flush();
+                        } else {
+                            println!("{line}");
+                        }
+                        shown = true;
+                    }
+                }
+                if terminal && shown {
+                    println!();
+                }
+            })?;
+        Ok(Self {
+            tx: Some(tx),
+            thread: Some(thread),
+        })
+    }
+
+    /// Hand over one answered cycle; never waits (no allocation: the queue is preallocated).
+    pub fn offer(&self, r: &CycleReport) {
+        if let Some(tx) = &self.tx {
+            let _ = tx.try_send(*r);
+        }
+    }
+
+    /// Print what is queued and end the line.
+    pub fn finish(&mut self) {
+        self.tx = None;
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+impl Drop for Printer {
+    fn drop(&mut self) {
+        self.finish();
     }
 }
 

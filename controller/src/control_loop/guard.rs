@@ -107,8 +107,8 @@ impl Guard {
         if self.had_contact {
             // The search is a contact state machine's (the paper's law has none: its envelope and
             // the contact-loss time bound it, and its reproduction stays exact).
-            let depth = out.x_cmd - self.contact_cmd;
-            if out.state.is_some() && depth > cfg.search_depth {
+            if out.x_cmd > self.search_limit(cfg, out) {
+                let depth = out.x_cmd - self.contact_cmd;
                 return Err((
                     ProcessFault::ContactLost,
                     format!(
