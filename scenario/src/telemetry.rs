@@ -310,6 +310,9 @@ pub struct Record {
     pub late_replies: u64,
     /// Robot cycles lost so far (gaps in the robot's cycle stamps).
     pub missed: u64,
+    /// Replies sent later than the link's late bound after the robot's datagram arrived (the kernel's
+    /// receive stamp), so far (to the reply before this cycle's).
+    pub replied_late: u64,
     /// The robot's measured tool pose (RSI `RIst`), base frame: position x, y, z (m) and orientation as
     /// a rotation vector (rad); NaN where unknown.
     pub pose: [f64; 6],
@@ -355,6 +358,7 @@ impl Record {
             period: r.cycle.period,
             late_replies: u64::from(r.cycle.late_replies),
             missed: r.cycle.missed,
+            replied_late: r.cycle.replied_late,
             pose: pose6(&r.cycle.actual),
             correction: [
                 r.command.translation.x,
@@ -381,6 +385,7 @@ impl Record {
             period: f64::NAN,
             late_replies: 0,
             missed: 0,
+            replied_late: 0,
             pose: NAN6,
             correction: NAN6,
             state: NO_STATE,
@@ -836,6 +841,18 @@ pub const ROBOT: MessageType = MessageType {
             "the measured tool pose (absent: unknown)",
             |r| r.pose.iter().all(|v| v.is_finite())
         ),
+        Field {
+            name: "replied_late",
+            number: 6,
+            ty: Type::Uint64,
+            optional: false,
+            unit: "",
+            description: "replies sent later than the link's late bound (RSI: late_after, 2 ms) after \
+                          the robot's datagram arrived, from the kernel's receive stamp, so far",
+            label: "replied late",
+            get: |r| Value::U64(r.replied_late),
+            set: |r, v| r.replied_late = v.u64(),
+        },
     ],
 };
 
@@ -1741,13 +1758,14 @@ mod tests {
     fn the_pose_the_correction_and_the_missed_cycles_round_trip() {
         let mut rec = sample();
         rec.missed = 7;
+        rec.replied_late = 11;
         rec.pose = [0.5, -0.125, 0.3, std::f64::consts::PI, 0.0, 0.0];
         rec.correction = [0.0, 0.0, 0.001, 0.0, -0.01, 0.0];
         let mut buf = Vec::new();
         encode(&CYCLE, &rec, &mut buf);
         let mut back = Record::unknown();
         decode(&CYCLE, &buf, &mut back).unwrap();
-        assert_eq!(back.missed, 7);
+        assert_eq!((back.missed, back.replied_late), (7, 11));
         for (x, y) in back.pose.iter().zip(rec.pose) {
             assert!(same(*x, f64::from(y as f32)), "pose {x} vs {y}");
         }

@@ -15,6 +15,7 @@ fn cycle_at(seq: u64, x: f64) -> Cycle {
         programmed: Pose::identity(),
         late_replies: 0,
         missed: 0,
+        replied_late: 0,
         new_session: false,
         process: None,
     }
