@@ -137,8 +137,10 @@ port = "ft300"
     std::fs::write(dir.path().join("cell.toml"), cell).unwrap();
     let mut child = spawn(&["run", "--config", "cell.toml"], dir.path());
     let (seen, r) = read_until(&mut child, "listening on");
-    // The robot stand-in: a plain UDP socket sending <Rob> in the forcecell layout every time it has a
-    // reply, the tool pointing down (A 180, C 180) and following the correction along its z.
+    // The robot stand-in: a plain UDP socket sending <Rob> in the forcecell layout on a 4 ms real-time
+    // cycle as a robot does (a faster one outruns the FT 300's 10 ms frames: the loop would see its
+    // sensor stale and fault), the tool pointing down (A 180, C 180) and following the correction
+    // along its z.
     let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
     sock.connect(("127.0.0.1", port)).unwrap();
     sock.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
@@ -147,7 +149,11 @@ port = "ft300"
     let mut skipped = Vec::new();
     let mut stop_ipoc = None;
     let mut buf = [0u8; 2048];
+    let start = std::time::Instant::now();
     for i in 0..2_000u32 {
+        // Pacing only (the robot's clock); nothing here asserts a time.
+        let tick = start + Duration::from_millis(4 * u64::from(i));
+        std::thread::sleep(tick.saturating_duration_since(std::time::Instant::now()));
         if i % 25 == 24 {
             skipped.push(ipoc); // sent by the robot, lost on the way
             ipoc += 4;
