@@ -10,7 +10,8 @@
 //! One round, as the shell does it:
 //! 1. [`RsiSession::wait_budget`] before blocking: how long the shell may wait (the watchdog), or
 //!    [`LinkError::LinkLost`].
-//! 2. [`RsiSession::offer`] for every datagram read (a burst: all of them, oldest first), then
+//! 2. [`RsiSession::offer_arrived`] for every datagram read (a burst: all of them, oldest first), with
+//!    the kernel's arrival stamp when it has one (what late replies are measured from), then
 //!    [`RsiSession::take_cycle`] for the newest good one. ([`RsiSession::receive`] does both for one.)
 //! 3. [`RsiSession::reply`] writes `<Sen>`; the shell sends it to [`Outgoing::to`] and reports the
 //!    time with [`RsiSession::sent`] (or [`RsiSession::send_failed`]).
