@@ -212,6 +212,19 @@ impl SensorConfig {
                     ),
                     None => println!("sensor: Robotiq FT 300, found streaming (identity not read)"),
                 }
+                // Start-up ends at the 410 write: the first frame follows within a frame or two.
+                // The loop must not begin (and hold, and fault) before it, however fast the robot's
+                // first cycles come: wait for it, bounded.
+                let t0 = std::time::Instant::now();
+                while ft.health() == robotiq::Health::Waiting && t0.elapsed() < FIRST_FRAME_WAIT {
+                    std::thread::sleep(Duration::from_millis(2));
+                }
+                if ft.health() == robotiq::Health::Waiting {
+                    eprintln!(
+                        "warning: the FT 300 sent no frame within {} ms of its start-up",
+                        FIRST_FRAME_WAIT.as_millis()
+                    );
+                }
                 if zero_at_start {
                     let bias = ft.zero(crate::robotiq::zero_config())?;
                     println!("zero taken (N, N·m): {:.3?}", bias.to_array());
@@ -287,6 +300,9 @@ impl ForceSensor for CellSensor {
         }
     }
 }
+
+/// How long opening an FT 300 waits for its first frame after start-up (ten frames of 10 ms).
+const FIRST_FRAME_WAIT: Duration = Duration::from_millis(100);
 
 /// The poll rates a cell's ATI sensor accepts, Hz (as `sensor ati read --rate`).
 pub const POLL_HZ: (f64, f64) = (1.0, 10_000.0);

@@ -208,7 +208,11 @@ pub fn egm_config(a: &crate::args::EgmConfigArgs) -> Result<Vec<std::path::PathB
 /// `robot.state_to`). The controller starts once the client's sensor has started its stream (the
 /// client is then about to listen), and stops after the scenario's duration. Loopback only.
 /// Returns the exit status: 0 when the controller ran its course, 3 when it ended early.
-pub fn dry_run(spec: &RunSpec, client: SocketAddr, sensor_link: Option<&std::path::Path>) -> Result<u8> {
+pub fn dry_run(
+    spec: &RunSpec,
+    client: SocketAddr,
+    sensor_link: Option<&std::path::Path>,
+) -> Result<u8> {
     use std::sync::atomic::Ordering;
     if !client.ip().is_loopback() {
         anyhow::bail!(
@@ -243,8 +247,8 @@ pub fn dry_run(spec: &RunSpec, client: SocketAddr, sensor_link: Option<&std::pat
         sim::ati_node::WorldSource::measured(world.clone()),
     )
     .context("simulated FT 300")?;
-    let state_sock = std::net::UdpSocket::bind((Ipv4Addr::LOCALHOST, 0))
-        .context("the process state's port")?;
+    let state_sock =
+        std::net::UdpSocket::bind((Ipv4Addr::LOCALHOST, 0)).context("the process state's port")?;
     state_sock.set_read_timeout(Some(Duration::from_millis(50)))?;
     let state_addr = state_sock.local_addr()?;
     println!(
@@ -262,7 +266,9 @@ pub fn dry_run(spec: &RunSpec, client: SocketAddr, sensor_link: Option<&std::pat
             "robot program: {} (its command in RAPIDfromRobot.dnum); its state from robot.state_to = \"{state_addr}\"",
             spec.scenario.name
         ),
-        None => println!("robot program: none (the client runs force control from its first cycle)"),
+        None => {
+            println!("robot program: none (the client runs force control from its first cycle)")
+        }
     }
     let stop = crate::stop::flag();
     // The controller waits for the client's sensor to start its stream: the client binds its link
@@ -283,22 +289,24 @@ pub fn dry_run(spec: &RunSpec, client: SocketAddr, sensor_link: Option<&std::pat
     let done = Arc::new(AtomicBool::new(false));
     let helper = {
         let done = done.clone();
-        thread::Builder::new().name("sim-irc5-rws".into()).spawn(move || {
-            let mut buf = [0u8; 64];
-            let mut states = 0u64;
-            while !done.load(Ordering::Relaxed) {
-                if stop.load(Ordering::Relaxed) {
-                    abort.store(true, Ordering::Relaxed);
+        thread::Builder::new()
+            .name("sim-irc5-rws".into())
+            .spawn(move || {
+                let mut buf = [0u8; 64];
+                let mut states = 0u64;
+                while !done.load(Ordering::Relaxed) {
+                    if stop.load(Ordering::Relaxed) {
+                        abort.store(true, Ordering::Relaxed);
+                    }
+                    if let Ok((n, _)) = state_sock.recv_from(&mut buf)
+                        && let Some(v) = crate::robot::UdpState::decode(&buf[..n])
+                    {
+                        vars.write(v);
+                        states += 1;
+                    }
                 }
-                if let Ok((n, _)) = state_sock.recv_from(&mut buf)
-                    && let Some(v) = crate::robot::UdpState::decode(&buf[..n])
-                {
-                    vars.write(v);
-                    states += 1;
-                }
-            }
-            states
-        })?
+                states
+            })?
     };
     let mut mech = world.clone();
     let report = irc5.run(&mut mech);

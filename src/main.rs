@@ -448,7 +448,9 @@ fn sim(mut a: SimArgs) -> Result<ExitCode> {
         },
         spec.steps()
     );
-    if let (Some(client), forcecell::args::RobotBackend::Egm) = (a.robot.external_robot, a.robot.robot) {
+    if let (Some(client), forcecell::args::RobotBackend::Egm) =
+        (a.robot.external_robot, a.robot.robot)
+    {
         if a.robot.process_channels || a.robot.ethernet_config.is_some() {
             anyhow::bail!(
                 "--process-channels and --ethernet-config are RSI options; with --robot egm the scenario's program runs on the simulated IRC5"

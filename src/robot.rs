@@ -408,7 +408,10 @@ impl RobotConfig {
 pub fn egm_settings_agree(r: &RobotConfig, o: &EgmOptions, text: &str) -> Result<(), String> {
     let f = abb_egm::rapid::SettingsFacts::parse(text);
     let Some(port) = f.port else {
-        return Err("no UDPUC -RemotePortNumber in it: is it the settings `forcecell egm-config` wrote?".into());
+        return Err(
+            "no UDPUC -RemotePortNumber in it: is it the settings `forcecell egm-config` wrote?"
+                .into(),
+        );
     };
     if port != r.listen.port() {
         return Err(format!(
@@ -431,7 +434,9 @@ pub fn egm_settings_agree(r: &RobotConfig, o: &EgmOptions, text: &str) -> Result
             "the path-correction range is {mm} mm, robot.correction_mm says {} mm (rewrite both with `forcecell egm-config --correction-mm`)",
             o.correction_mm
         )),
-        None => Err("no path-correction range in it: rewrite it with `forcecell egm-config`".into()),
+        None => {
+            Err("no path-correction range in it: rewrite it with `forcecell egm-config`".into())
+        }
     }
 }
 
@@ -453,9 +458,9 @@ impl RobotSpec {
     /// Bind the link: the one place the application turns a robot kind into a running driver.
     pub fn open(self) -> Result<CellRobot> {
         Ok(match self {
-            Self::Rsi(lc) => CellRobot::Rsi(Box::new(
-                kuka_rsi::RsiLink::bind(lc).context("RSI link")?,
-            )),
+            Self::Rsi(lc) => {
+                CellRobot::Rsi(Box::new(kuka_rsi::RsiLink::bind(lc).context("RSI link")?))
+            }
             Self::Egm { link, state_to } => {
                 let mut l = abb_egm::EgmLink::bind(link).context("EGM link")?;
                 if let Some(to) = state_to {
@@ -640,20 +645,23 @@ mod tests {
         )
         .unwrap_err();
         assert!(
-            e.contains("robot.poscorr_mm is a kuka-rsi option")
-                && e.contains("kind = \"abb-egm\""),
+            e.contains("robot.poscorr_mm is a kuka-rsi option") && e.contains("kind = \"abb-egm\""),
             "{e}"
         );
         assert!(!e.contains('\n'), "{e}");
-        let e = parse("listen = \"127.0.0.1:6510\"\nrobot_ip = \"127.0.0.1\"\ncorrection_mm = 5.0\n")
-            .unwrap_err();
+        let e =
+            parse("listen = \"127.0.0.1:6510\"\nrobot_ip = \"127.0.0.1\"\ncorrection_mm = 5.0\n")
+                .unwrap_err();
         assert!(e.contains("robot.correction_mm is a abb-egm option"), "{e}");
         let e = parse("kind = \"fanuc\"\nlisten = \"127.0.0.1:6510\"\nrobot_ip = \"127.0.0.1\"\n")
             .unwrap_err();
         assert!(e.contains("\"fanuc\" is not a robot family"), "{e}");
         let e = parse("kind = \"abb-egm\"\nlisten = \"127.0.0.1:6510\"\nrobot_ip = \"127.0.0.1\"\nspeed = 1\n")
             .unwrap_err();
-        assert!(e.contains("robot.speed is not an option of kind = \"abb-egm\""), "{e}");
+        assert!(
+            e.contains("robot.speed is not an option of kind = \"abb-egm\""),
+            "{e}"
+        );
     }
 
     #[test]

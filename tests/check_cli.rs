@@ -145,7 +145,12 @@ fn each_broken_cell_file_is_not_ready_and_names_its_problem() {
 
 /// `examples/egm-cell.toml` on loopback (port `port`), the simulated FT 300 at `dir/ft300` as its
 /// sensor and, when given, `settings` (what `forcecell egm-config` wrote) as its `egm_settings`.
-fn egm_cell(dir: &Path, port: u16, settings: Option<&Path>, edit: impl Fn(String) -> String) -> std::path::PathBuf {
+fn egm_cell(
+    dir: &Path,
+    port: u16,
+    settings: Option<&Path>,
+    edit: impl Fn(String) -> String,
+) -> std::path::PathBuf {
     let example = std::fs::read_to_string(
         Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/egm-cell.toml"),
     )
@@ -227,7 +232,12 @@ fn each_broken_egm_cell_is_not_ready_and_names_its_problem() {
     let moved = dir.path().join("other-port-settings.txt");
     std::fs::rename(&other_port, &moved).unwrap();
     let settings = egm_config(dir.path(), 49322, &["--correction-mm", "4.0"]);
-    type EgmCase = (&'static str, Option<std::path::PathBuf>, Box<dyn Fn(String) -> String>, &'static str);
+    type EgmCase = (
+        &'static str,
+        Option<std::path::PathBuf>,
+        Box<dyn Fn(String) -> String>,
+        &'static str,
+    );
     let cases: Vec<EgmCase> = vec![
         (
             "a UDPUC entry that sends to another port",
@@ -266,7 +276,9 @@ fn each_broken_egm_cell_is_not_ready_and_names_its_problem() {
     let (code, text) = check(&path);
     assert_eq!(code, Some(2), "{text}");
     assert!(
-        text.contains("robot.poscorr_mm is a kuka-rsi option, and this [robot] is kind = \"abb-egm\""),
+        text.contains(
+            "robot.poscorr_mm is a kuka-rsi option, and this [robot] is kind = \"abb-egm\""
+        ),
         "{text}"
     );
     assert_eq!(text.trim_end().lines().count(), 1, "{text}");

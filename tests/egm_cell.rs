@@ -64,7 +64,10 @@ port = "ft300"
         dir.path(),
     );
     let (seen, r) = read_until(&mut child, "listening on");
-    assert!(seen.contains(&format!("listening on 127.0.0.1:{port}")), "{seen}");
+    assert!(
+        seen.contains(&format!("listening on 127.0.0.1:{port}")),
+        "{seen}"
+    );
     let mut cfg = Irc5Config::new(SocketAddr::from(([127, 0, 0, 1], port)));
     cfg.timing = Timing::Realtime;
     // Three holds of 1.2 s, then a little more; calibrate ends once it has its poses.
@@ -81,7 +84,10 @@ port = "ft300"
         matches!(report.end, Irc5End::Completed | Irc5End::CommTimeout),
         "{report:?}"
     );
-    assert!(report.good >= 600, "calibrate answered the robot: {report:?}");
+    assert!(
+        report.good >= 600,
+        "calibrate answered the robot: {report:?}"
+    );
     for n in 1..=3 {
         assert!(text.contains(&format!("pose {n} of 3")), "{text}");
     }

@@ -56,9 +56,10 @@ fn writes_the_module_and_settings_with_the_port_the_link_binds() {
     let module = std::fs::read_to_string(dir.path().join("egm/FcEgm.mod")).unwrap();
     let settings = std::fs::read_to_string(dir.path().join("egm/FcEgm-settings.txt")).unwrap();
     assert!(settings.contains("-Type \"UDPUC\" -RemoteAddress \"192.168.125.7\""));
-    assert!(module.contains(
-        "EGMActMove fc_egm_id, tPad.tframe \\SampleRate:=4 \\DataToSensor:=fc_cmd;"
-    ));
+    assert!(
+        module
+            .contains("EGMActMove fc_egm_id, tPad.tframe \\SampleRate:=4 \\DataToSensor:=fc_cmd;")
+    );
     // The correction range given is the one a cell file's robot.correction_mm is checked against.
     assert_eq!(
         abb_egm::rapid::SettingsFacts::parse(&settings).correction_mm,

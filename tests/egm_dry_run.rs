@@ -136,7 +136,11 @@ port = "ft300"
     let span = pressing.last().unwrap().0 - pressing.first().unwrap().0;
     // 100 mm at 50 mm/s: two seconds of pressing.
     assert!(span >= 1.5, "pressing for {span} s");
-    let forces: Vec<f64> = pressing.iter().map(|p| p.1).filter(|f| f.is_finite()).collect();
+    let forces: Vec<f64> = pressing
+        .iter()
+        .map(|p| p.1)
+        .filter(|f| f.is_finite())
+        .collect();
     let mean = forces.iter().sum::<f64>() / forces.len() as f64;
     let within = forces.iter().filter(|f| (**f - 20.0).abs() <= 2.0).count();
     assert!((mean - 20.0).abs() <= 1.0, "mean pressing force {mean} N");

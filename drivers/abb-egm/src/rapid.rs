@@ -68,14 +68,10 @@ impl SettingsFacts {
                 .map(|rest| rest.trim_start().trim_start_matches('"'))
         };
         let host = after("-RemoteAddress").and_then(|r| r.split('"').next()?.parse().ok());
-        let port = after("-RemotePortNumber").and_then(|r| {
-            r.split(|c: char| !c.is_ascii_digit())
-                .next()?
-                .parse()
-                .ok()
-        });
-        let correction_mm = after(CORRECTION_LINE)
-            .and_then(|r| r.split_whitespace().next()?.parse().ok());
+        let port = after("-RemotePortNumber")
+            .and_then(|r| r.split(|c: char| !c.is_ascii_digit()).next()?.parse().ok());
+        let correction_mm =
+            after(CORRECTION_LINE).and_then(|r| r.split_whitespace().next()?.parse().ok());
         Self {
             host,
             port,
@@ -481,9 +477,9 @@ mod tests {
         assert!(
             m.contains("EGMSetupUC ROB_1, fc_egm_id, \"MyCorr\", \"MyDev\" \\PathCorr \\APTR;")
         );
-        assert!(m.contains(
-            "EGMActMove fc_egm_id, tPad.tframe \\SampleRate:=4 \\DataToSensor:=fc_cmd;"
-        ));
+        assert!(
+            m.contains("EGMActMove fc_egm_id, tPad.tframe \\SampleRate:=4 \\DataToSensor:=fc_cmd;")
+        );
         assert!(m.contains("EGMMoveL fc_egm_id, fc_end, v100, fine, tPad \\WObj:=wPart;"));
         assert!(m.contains("EGMMoveC fc_egm_id, fc_via, fc_end, v100, fine, tPad \\WObj:=wPart;"));
         assert!(m.contains("EGMStop fc_egm_id, EGM_STOP_HOLD;"));
@@ -530,13 +526,19 @@ mod tests {
         assert_eq!(f.port, Some(6611));
         assert_eq!(f.correction_mm, Some(7.5));
         let none = SettingsFacts::parse("nothing here");
-        assert_eq!((none.host, none.port, none.correction_mm), (None, None, None));
+        assert_eq!(
+            (none.host, none.port, none.correction_mm),
+            (None, None, None)
+        );
     }
 
     #[test]
     fn both_corrected_moves_run_between_press_and_release_with_the_data_exchange_on() {
         let lines = code(&cfg().rapid_module());
-        for (entry, mv) in [("PROC FcPass()", "EGMMoveL"), ("PROC FcArcPass()", "EGMMoveC")] {
+        for (entry, mv) in [
+            ("PROC FcPass()", "EGMMoveL"),
+            ("PROC FcArcPass()", "EGMMoveC"),
+        ] {
             let start = lines.iter().position(|l| l == entry).unwrap();
             let body: Vec<&String> = lines[start..]
                 .iter()
