@@ -307,16 +307,21 @@ impl Rezero {
             _ => w.unhealthy = true,
         }
         match inp.pose {
-            Some(pose) if pose.position.iter().all(|v| v.is_finite()) => match w.first {
-                None => w.first = Some(pose),
-                Some(first) => {
-                    let d = (pose.position - first.position).norm();
-                    let a = pose.orientation.angle_to(&first.orientation);
-                    if d > p.still || !(a <= p.still_angle) {
-                        w.moved = true;
+            Some(pose)
+                if pose.position.iter().all(|v| v.is_finite())
+                    && pose.orientation.coords.iter().all(|v| v.is_finite()) =>
+            {
+                match w.first {
+                    None => w.first = Some(pose),
+                    Some(first) => {
+                        let d = (pose.position - first.position).norm();
+                        let a = pose.orientation.angle_to(&first.orientation);
+                        if d > p.still || a.is_nan() || a > p.still_angle {
+                            w.moved = true;
+                        }
                     }
                 }
-            },
+            }
             _ => w.no_pose = true,
         }
         if inp.t - w.start + 1e-9 < p.window {
@@ -420,7 +425,7 @@ mod tests {
         let mut rz = stage();
         // 3 s at OFF, tool still, 1.2 N of offset with a ±0.3 N ripple: one re-zero, after the
         // free-air time, removing the mean.
-        let ripple = |k: usize| if k % 2 == 0 { 0.3 } else { -0.3 };
+        let ripple = |k: usize| if k.is_multiple_of(2) { 0.3 } else { -0.3 };
         let ev = feed(
             &mut rz,
             10.0,
@@ -536,7 +541,7 @@ mod tests {
             &mut rz,
             0.0,
             1000,
-            |k| (k % 50 != 0).then(|| drift(1.0)),
+            |k| (!k.is_multiple_of(50)).then(|| drift(1.0)),
             |_| Some(pose(0.0)),
         );
         assert_eq!(ev.len(), 1, "{ev:?}");
@@ -563,7 +568,7 @@ mod tests {
             &mut rz,
             0.0,
             500,
-            |k| Some(drift(if k % 2 == 0 { 1.9 } else { -1.9 })),
+            |k| Some(drift(if k.is_multiple_of(2) { 1.9 } else { -1.9 })),
             |_| Some(pose(0.0)),
         );
         assert_eq!(ev[0].outcome, RezeroOutcome::Unsteady);
