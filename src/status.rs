@@ -229,6 +229,7 @@ mod tests {
             command: Correction::along_z(0.0011),
             set_point: 5.0,
             fault: None,
+            rezero: None,
         }
     }
 

@@ -241,6 +241,7 @@ impl<R: RobotLink, S: ForceSensor> Cycler for Collecting<'_, R, S> {
             command,
             set_point: 0.0,
             fault: None,
+            rezero: None,
         })
     }
 

@@ -433,6 +433,7 @@ mod tests {
             command: Correction::default(),
             set_point: 0.0,
             fault: None,
+            rezero: None,
         }
     }
 
