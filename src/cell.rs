@@ -838,7 +838,7 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
             crate::robot::RobotKind::AbbEgm(_) => "the RAPID program (EGMActMove)",
         }
     );
-    crate::rsi::say_stamps(&link);
+    link.say_stamps();
     let mcap = stem.with_extension("mcap");
     // The cell file as the input rule reads it (a regular file, capped), once: hashed and attached.
     let cell = crate::input::read(path, "cell config", crate::input::MAX_CONFIG).ok();

@@ -95,12 +95,13 @@ impl WireSummary {
     }
 }
 
-/// Say once, when the link is bound, that the kernel gives no receive timestamps: late replies are
-/// then measured from the receive call's return, blind to a datagram's wait in the socket.
-pub fn say_stamps(link: &RsiLink) {
-    if !link.kernel_stamps() {
+/// Say once, when a robot link is bound, that the kernel gives its socket no receive timestamps
+/// (`stamps` false): late replies are then measured from the receive call's return, blind to a
+/// datagram's wait in the socket.
+pub fn say_stamps(stamps: bool, link: &str) {
+    if !stamps {
         eprintln!(
-            "warning: the kernel refused receive timestamps (SO_TIMESTAMPNS) on the RSI socket: late replies \
+            "warning: the kernel refused receive timestamps (SO_TIMESTAMPNS) on the {link} socket: late replies \
              are measured from the receive call's return, blind to the time a datagram waited in the socket"
         );
     }
@@ -321,7 +322,7 @@ impl RobotSide {
         // 1 s: lockstep pauses whenever the loop does.
         lc.watchdog_cycles = ((1.0 / spec.plant.period).ceil() as u32).max(25);
         let mut link = RsiLink::bind(lc).context("RSI driver")?;
-        say_stamps(&link);
+        say_stamps(link.kernel_stamps(), "RSI");
         let mut kc = KrcConfig::new(ethernet, link.local_addr()?);
         kc.period = period_of(&spec.plant);
         kc.ipoc_step = ((spec.plant.period * 1000.0).round() as u64).max(1);
@@ -430,7 +431,7 @@ impl RobotSide {
             "listening for an RSI client on {} (SENTYPE {sentype}; `forcecell rsi-config` writes its files)",
             link.local_addr()?
         );
-        say_stamps(&link);
+        say_stamps(link.kernel_stamps(), "RSI");
         Ok(Self {
             spec,
             world,
