@@ -96,6 +96,15 @@ sensor_priority = 10
             .unwrap()
             .contains("Robotiq FT 300")
     );
+    // The sensor's identity as it answered its start-up queries (the simulated FT 300's registers).
+    assert_eq!(summary["sensor_serial"], "FTS-875704368", "{summary}");
+    assert!(
+        summary["sensor_firmware"]
+            .as_str()
+            .unwrap()
+            .starts_with("FTS-3.1"),
+        "{summary}"
+    );
     assert!(summary["started"].as_str().unwrap().ends_with('Z'));
     assert!(summary["ended"].as_str().unwrap() >= summary["started"].as_str().unwrap());
 }
