@@ -934,7 +934,12 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
         live.as_ref().map(crate::live::LiveServer::sink),
     )?;
     let stop = crate::stop::flag();
-    let robot = crate::stop::Interruptible::new(&mut link, stop);
+    // While it waits: what arrives and is not the robot's cycle, a line per kind, rate-limited.
+    let robot = crate::stop::Interruptible::new(&mut link, stop).while_waiting(|l| {
+        for line in l.rejection_lines() {
+            eprintln!("{line}");
+        }
+    });
     dir.keep();
     // The cycle runs on this thread: its real-time settings now, before the first cycle.
     let mut applied = cfg.realtime.apply_to_cycle_thread();
