@@ -198,6 +198,7 @@ mod tests {
                 actual: Pose::identity(),
                 programmed: Pose::identity(),
                 late_replies: late,
+                missed: 0,
                 new_session: false,
                 process: None,
             },
@@ -214,6 +215,7 @@ mod tests {
             command: Correction::along_z(0.0011),
             set_point: 5.0,
             fault: None,
+            rezero: None,
         }
     }
 

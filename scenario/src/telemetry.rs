@@ -15,7 +15,7 @@
 //! input, a limited step; [`Condition`]); a **fault** is only ever the force process's latched fault
 //! ([`hal::ProcessFault`], the number the robot program reads in `FcState.Fault`).
 
-use controller::{ContactState, CycleReport, Events};
+use controller::{ContactState, CycleReport, Events, RezeroOutcome};
 use hal::{ProcessFault, ProcessMode, ProcessPhase};
 
 use crate::record::Row;
@@ -212,6 +212,19 @@ impl Coded for ProcessFault {
     }
 }
 
+/// What a re-zero check of the sensor decided (the control loop's own codes and names).
+impl Coded for RezeroOutcome {
+    fn code(self) -> i64 {
+        RezeroOutcome::code(self)
+    }
+    fn name(self) -> &'static str {
+        RezeroOutcome::name(self)
+    }
+    fn all() -> Vec<Self> {
+        RezeroOutcome::ALL.to_vec()
+    }
+}
+
 /// One of the law's event flags.
 #[derive(Clone, Copy, Debug)]
 pub struct EventFlag {
@@ -308,14 +321,34 @@ pub struct Record {
     pub period: f64,
     /// Replies the robot reported late so far.
     pub late_replies: u64,
+    /// Robot cycles lost so far (gaps in the robot's cycle stamps).
+    pub missed: u64,
+    /// The robot's measured tool pose (RSI `RIst`), base frame: position x, y, z (m) and orientation as
+    /// a rotation vector (rad); NaN where unknown.
+    pub pose: [f64; 6],
+    /// The correction sent, tool frame: translation x, y, z (m) and rotation vector (rad); NaN where
+    /// unknown.
+    pub correction: [f64; 6],
     /// Contact state code ([`Coded`] for `Option<ContactState>`; [`NO_STATE`] for laws without a
     /// state machine).
     pub state: u8,
     /// The law's events of this step, one bit each in [`EVENTS`] order.
     pub events: u16,
+    /// A re-zero of the sensor in this cycle, or a refusal to: its [`RezeroOutcome`] code (`None`:
+    /// no decision this cycle).
+    pub rezero: Option<u8>,
+    /// That re-zero's offset removed (a refusal: the window's mean over the old zero), sensor frame,
+    /// `[Fx, Fy, Fz, Tx, Ty, Tz]` in N and N·m; NaN without one.
+    pub rezero_offset: [f64; 6],
 }
 
 const NAN6: [f64; 6] = [f64::NAN; 6];
+
+/// A pose as position (m) and rotation vector (rad).
+fn pose6(p: &hal::Pose) -> [f64; 6] {
+    let r = p.orientation.scaled_axis();
+    [p.position.x, p.position.y, p.position.z, r.x, r.y, r.z]
+}
 
 impl Record {
     /// The record of an answered cycle with set-point `f_r`; the process segment, command and state
@@ -340,8 +373,20 @@ impl Record {
             robot_seq: r.cycle.seq,
             period: r.cycle.period,
             late_replies: u64::from(r.cycle.late_replies),
+            missed: r.cycle.missed,
+            pose: pose6(&r.cycle.actual),
+            correction: [
+                r.command.translation.x,
+                r.command.translation.y,
+                r.command.translation.z,
+                r.command.rotation.x,
+                r.command.rotation.y,
+                r.command.rotation.z,
+            ],
             state: r.out.state.map_or(NO_STATE, ContactState::code),
             events: event_bits(&r.out.events),
+            rezero: r.rezero.map(|e| e.outcome.code() as u8),
+            rezero_offset: r.rezero.map_or(NAN6, |e| e.offset.to_array()),
         }
     }
 
@@ -356,8 +401,13 @@ impl Record {
             robot_seq: 0,
             period: f64::NAN,
             late_replies: 0,
+            missed: 0,
+            pose: NAN6,
+            correction: NAN6,
             state: NO_STATE,
             events: 0,
+            rezero: None,
+            rezero_offset: NAN6,
         }
     }
 
@@ -791,6 +841,53 @@ pub const ROBOT: MessageType = MessageType {
             get: |r| Value::U64(r.late_replies),
             set: |r, v| r.late_replies = v.u64(),
         },
+        Field {
+            name: "missed",
+            number: 4,
+            ty: Type::Uint64,
+            optional: false,
+            unit: "",
+            description: "robot cycles lost so far (gaps in the robot's cycle stamps)",
+            label: "missed cycles",
+            get: |r| Value::U64(r.missed),
+            set: |r, v| r.missed = v.u64(),
+        },
+        message!(
+            "pose",
+            5,
+            &POSE,
+            "the measured tool pose (absent: unknown)",
+            |r| r.pose.iter().all(|v| v.is_finite())
+        ),
+    ],
+};
+
+/// `forcecell.Pose`: the robot's measured tool pose, base frame.
+pub const POSE: MessageType = MessageType {
+    name: "Pose",
+    description: "the robot's measured tool pose (RSI RIst), base frame: position and rotation vector",
+    fields: &[
+        float!("x", 1, "m", "position x", |r| r.pose[0]),
+        float!("y", 2, "m", "position y", |r| r.pose[1]),
+        float!("z", 3, "m", "position z", |r| r.pose[2]),
+        float!("rx", 4, "rad", "rotation vector x", |r| r.pose[3]),
+        float!("ry", 5, "rad", "rotation vector y", |r| r.pose[4]),
+        float!("rz", 6, "rad", "rotation vector z", |r| r.pose[5]),
+    ],
+};
+
+/// `forcecell.Correction`: the correction sent, tool frame.
+pub const CORRECTION: MessageType = MessageType {
+    name: "Correction",
+    description: "the correction sent to the robot, tool frame: translation and rotation vector",
+    fields: &[
+        float!("x", 1, "m", "translation x", |r| r.correction[0]),
+        float!("y", 2, "m", "translation y", |r| r.correction[1]),
+        float!("z", 3, "m", "translation z (along the tool normal)", |r| r
+            .correction[2]),
+        float!("rx", 4, "rad", "rotation about tool x", |r| r.correction[3]),
+        float!("ry", 5, "rad", "rotation about tool y", |r| r.correction[4]),
+        float!("rz", 6, "rad", "rotation about tool z", |r| r.correction[5]),
     ],
 };
 
@@ -940,6 +1037,55 @@ pub const PROCESS: MessageType = MessageType {
     fields: &[SEGMENT, MODE, F_CMD, PHASE, FAULT, MODE_CODE],
 };
 
+// Re-zero ----------------------------------------------------------------------------------------
+
+/// `forcecell.RezeroOutcome.Code`.
+pub const REZERO_CODES: EnumType = EnumType {
+    name: "RezeroOutcome",
+    values: values_of::<RezeroOutcome>,
+    description: "what a re-zero check of the sensor in free air decided",
+};
+
+/// The re-zero's outcome.
+pub const REZERO_OUTCOME: Field = Field {
+    name: "outcome",
+    number: 1,
+    ty: Type::Enum(&REZERO_CODES),
+    optional: true,
+    unit: "",
+    description: "re-zeroed, or why the re-zero was refused (the old zero kept)",
+    label: "re-zero",
+    get: |r| opt_i64(r.rezero.map(i64::from)),
+    set: |r, v| r.rezero = v.code_u8(),
+};
+
+const REZERO_FORCE: MessageType = vector3!(
+    "RezeroForce",
+    "force offset, sensor frame",
+    "N",
+    rezero_offset,
+    0
+);
+const REZERO_TORQUE: MessageType = vector3!(
+    "RezeroTorque",
+    "torque offset, sensor frame",
+    "N·m",
+    rezero_offset,
+    3
+);
+
+/// `forcecell.Rezero`: a re-zero of the sensor in free air between passes, or a refusal; its time is
+/// the cycle's.
+pub const REZERO: MessageType = MessageType {
+    name: "Rezero",
+    description: "a re-zero of the force sensor between passes (or a refusal): the outcome and the offset removed (a refusal: measured, not removed)",
+    fields: &[
+        REZERO_OUTCOME,
+        message!("force", 2, &REZERO_FORCE, "force offset", |_r| true),
+        message!("torque", 3, &REZERO_TORQUE, "torque offset", |_r| true),
+    ],
+};
+
 // Cycle, truth -----------------------------------------------------------------------------------
 
 /// `forcecell.Cycle`: one control cycle, on [`CYCLE_TOPIC`].
@@ -965,6 +1111,20 @@ pub const CYCLE: MessageType = MessageType {
         message!("robot", 8, &ROBOT, "the robot's cycle", |_r| true),
         message!("sensor", 9, &SENSOR, "the sensor's sample", |_r| true),
         message!("process", 10, &PROCESS, "the force process", |_r| true),
+        message!(
+            "correction",
+            11,
+            &CORRECTION,
+            "the correction sent (absent: unknown)",
+            |r| r.correction.iter().all(|v| v.is_finite())
+        ),
+        message!(
+            "rezero",
+            12,
+            &REZERO,
+            "a re-zero of the sensor, or a refusal (absent: no decision this cycle)",
+            |r| r.rezero.is_some()
+        ),
     ],
 };
 
@@ -1580,6 +1740,8 @@ mod tests {
         rec.late_replies = 2;
         rec.state = 2;
         rec.events = 0b1000_0101;
+        rec.rezero = Some(RezeroOutcome::Moving.code() as u8);
+        rec.rezero_offset = [0.5, -0.25, 1.5, 0.0, 0.125, -0.0625];
         rec
     }
 
@@ -1628,6 +1790,19 @@ mod tests {
             (300, u64::MAX, 2, 2, 0b1000_0101)
         );
         assert!(same(back.period, f64::from(0.004f32)));
+        assert_eq!(back.rezero, Some(RezeroOutcome::Moving.code() as u8));
+        for (x, y) in back.rezero_offset.iter().zip(rec.rezero_offset) {
+            assert!(same(*x, y), "re-zero offset {x} vs {y}");
+        }
+        // A cycle without a re-zero sends none, and reads back without one.
+        let mut none = rec;
+        none.rezero = None;
+        let mut buf = Vec::new();
+        encode(&CYCLE, &none, &mut buf);
+        let mut back = Record::unknown();
+        decode(&CYCLE, &buf, &mut back).unwrap();
+        assert_eq!(back.rezero, None);
+        assert!(back.rezero_offset.iter().all(|v| v.is_nan()));
         // A mode beyond 32 bits travels in its own field; one within, in the enum.
         let mut small = rec;
         small.row.mode = Some(-7);
@@ -1654,6 +1829,31 @@ mod tests {
         );
         // Truncated: an error, not a panic.
         assert!(decode(&CYCLE, &buf[..buf.len() - 3], &mut back).is_err());
+    }
+
+    #[test]
+    fn the_pose_the_correction_and_the_missed_cycles_round_trip() {
+        let mut rec = sample();
+        rec.missed = 7;
+        rec.pose = [0.5, -0.125, 0.3, std::f64::consts::PI, 0.0, 0.0];
+        rec.correction = [0.0, 0.0, 0.001, 0.0, -0.01, 0.0];
+        let mut buf = Vec::new();
+        encode(&CYCLE, &rec, &mut buf);
+        let mut back = Record::unknown();
+        decode(&CYCLE, &buf, &mut back).unwrap();
+        assert_eq!(back.missed, 7);
+        for (x, y) in back.pose.iter().zip(rec.pose) {
+            assert!(same(*x, f64::from(y as f32)), "pose {x} vs {y}");
+        }
+        for (x, y) in back.correction.iter().zip(rec.correction) {
+            assert!(same(*x, f64::from(y as f32)), "correction {x} vs {y}");
+        }
+        // Unknown poses and corrections are left out, and read back unknown (as in older files).
+        let mut buf = Vec::new();
+        encode(&CYCLE, &sample(), &mut buf);
+        let mut back = Record::unknown();
+        decode(&CYCLE, &buf, &mut back).unwrap();
+        assert!(back.pose.iter().chain(&back.correction).all(|v| v.is_nan()));
     }
 
     #[test]
