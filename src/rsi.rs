@@ -652,9 +652,18 @@ pub struct RsiTarget {
 /// PC's and the robot's addresses and POSCORR/POSCORRMON have no default: without them it refuses,
 /// in one line naming each missing value.
 pub fn rsi_target(a: &RsiConfigArgs) -> Result<RsiTarget> {
-    let cell = match &a.config {
-        Some(p) => Some(crate::cell::CellConfig::load(p)?.robot),
-        None => None,
+    let (cell, rsi) = match &a.config {
+        Some(p) => {
+            let robot = crate::cell::CellConfig::load(p)?.robot;
+            let crate::robot::RobotKind::KukaRsi(rsi) = robot.kind.clone() else {
+                bail!(
+                    "rsi-config: {} is an ABB EGM cell (`forcecell egm-config` writes its files)",
+                    p.display()
+                );
+            };
+            (Some(robot), Some(rsi))
+        }
+        None => (None, None),
     };
     let cell_ip = match cell.as_ref().map(|r| r.listen.ip()) {
         Some(std::net::IpAddr::V4(ip)) => Some(ip),
@@ -675,11 +684,11 @@ pub fn rsi_target(a: &RsiConfigArgs) -> Result<RsiTarget> {
     };
     let poscorr_mm = a
         .poscorr_mm
-        .or(cell.as_ref().map(|r| r.poscorr_mm))
+        .or(rsi.as_ref().map(|r| r.poscorr_mm))
         .or(tuning_limits.map(|t| t.0));
     let poscorrmon_mm = a
         .poscorrmon_mm
-        .or(cell.as_ref().map(|r| r.poscorrmon_mm))
+        .or(rsi.as_ref().map(|r| r.poscorrmon_mm))
         .or(tuning_limits.map(|t| t.1));
     let (Some(ip), Some(robot_ip), Some(poscorr_mm), Some(poscorrmon_mm)) =
         (ip, robot_ip, poscorr_mm, poscorrmon_mm)
@@ -709,7 +718,7 @@ pub fn rsi_target(a: &RsiConfigArgs) -> Result<RsiTarget> {
              monitor stops the robot beyond what the correction may reach)"
         );
     }
-    let mode = a.mode.or(cell.as_ref().map(|r| match r.mode {
+    let mode = a.mode.or(rsi.as_ref().map(|r| match r.mode {
         crate::cell::ModeName::Absolute => ModeArg::Absolute,
         crate::cell::ModeName::Relative => ModeArg::Relative,
     }));
@@ -730,10 +739,7 @@ pub fn rsi_target(a: &RsiConfigArgs) -> Result<RsiTarget> {
         },
         relative: mode == Some(ModeArg::Relative),
         ipo_fast: !(a.ipo12 || cell.as_ref().is_some_and(|r| r.cycle_ms == 12)),
-        timeout: a
-            .timeout
-            .or(cell.as_ref().map(|r| r.timeout))
-            .unwrap_or(100),
+        timeout: a.timeout.or(rsi.as_ref().map(|r| r.timeout)).unwrap_or(100),
         process: !a.no_process && cell.as_ref().is_none_or(|r| r.process),
     })
 }
@@ -820,13 +826,13 @@ pub fn rsi_config(a: &RsiConfigArgs) -> Result<(Vec<PathBuf>, Vec<String>)> {
     }
     // Even with --force, only a regular file is replaced: found now, before anything is written.
     for p in &paths {
-        if let Ok(m) = std::fs::symlink_metadata(p) {
-            if !m.is_file() {
-                bail!(
-                    "rsi-config: {} is not a regular file; nothing was written",
-                    p.display()
-                );
-            }
+        if let Ok(m) = std::fs::symlink_metadata(p)
+            && !m.is_file()
+        {
+            bail!(
+                "rsi-config: {} is not a regular file; nothing was written",
+                p.display()
+            );
         }
     }
     let dir = crate::output::OutDir::create(&a.out, "output directory (--out)")?;

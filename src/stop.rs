@@ -51,6 +51,9 @@ pub fn install() -> anyhow::Result<()> {
     result
 }
 
+/// What an [`Interruptible`] calls with its link after a wait that found no cycle.
+type OnWait<'a, R> = Option<Box<dyn FnMut(&mut R) + 'a>>;
+
 /// A robot link whose waits end: a wait for the first datagram (the link's `first_contact_timeout`
 /// returns a transient timeout now and then) ends with [`Interrupted::Stopped`] once `stop` is set,
 /// or [`Interrupted::PeerGone`] once `alive` says the robot's process has ended.
@@ -58,7 +61,7 @@ pub struct Interruptible<'a, R> {
     inner: R,
     stop: &'a AtomicBool,
     alive: Option<Box<dyn Fn() -> bool + 'a>>,
-    waiting: Option<Box<dyn FnMut(&mut R) + 'a>>,
+    waiting: OnWait<'a, R>,
 }
 
 impl<'a, R> Interruptible<'a, R> {
