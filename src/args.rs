@@ -73,28 +73,47 @@ pub enum ModeArg {
     Relative,
 }
 
-/// `forcecell rsi-config` options.
+/// `forcecell rsi-config` options. The addresses and the robot's correction limits come from the cell
+/// file (`--config`) or from their flags (which override the file); without either the command refuses.
 #[derive(Args, Clone, Debug)]
 pub struct RsiConfigArgs {
-    /// The PC's address as the robot sees it (IP_NUMBER).
-    #[arg(long, default_value = "192.168.1.10")]
-    pub ip: Ipv4Addr,
-    /// UDP port (PORT).
-    #[arg(long, default_value_t = 49152, allow_negative_numbers = true, value_parser = robot_port)]
-    pub port: u16,
-    /// Correction mode.
-    #[arg(long, value_enum, default_value = "absolute")]
-    pub mode: ModeArg,
-    /// Use the 12 ms `#IPO` cycle instead of 4 ms `#IPO_FAST`.
+    /// The cell file `forcecell run` will use: the PC's address and port (`robot.listen`), the
+    /// robot's (`robot.robot_ip`), POSCORR and POSCORRMON (`robot.poscorr_mm`, `robot.poscorrmon_mm`),
+    /// the mode, the cycle, the Timeout and the process channels (`robot.process`).
+    #[arg(long, short)]
+    pub config: Option<PathBuf>,
+    /// The PC's address as the robot sees it (IP_NUMBER); default: the cell file's `robot.listen`.
+    #[arg(long)]
+    pub ip: Option<Ipv4Addr>,
+    /// The robot controller's own address (never the PC's); default: the cell file's `robot.robot_ip`.
+    #[arg(long)]
+    pub robot_ip: Option<std::net::IpAddr>,
+    /// UDP port (PORT); default: the cell file's `robot.listen` port, else 49152.
+    #[arg(long, allow_negative_numbers = true, value_parser = robot_port)]
+    pub port: Option<u16>,
+    /// The robot's POSCORR translation limit, mm; default: the cell file's `robot.poscorr_mm`.
+    #[arg(long, allow_negative_numbers = true, value_parser = poscorr_mm)]
+    pub poscorr_mm: Option<f64>,
+    /// The robot's POSCORRMON translation limit, mm; default: the cell file's `robot.poscorrmon_mm`.
+    #[arg(long, allow_negative_numbers = true, value_parser = poscorr_mm)]
+    pub poscorrmon_mm: Option<f64>,
+    /// Correction mode; default: the cell file's `robot.mode`, else absolute.
+    #[arg(long, value_enum)]
+    pub mode: Option<ModeArg>,
+    /// Use the 12 ms `#IPO` cycle instead of 4 ms `#IPO_FAST` (default: the cell file's `robot.cycle_ms`).
     #[arg(long)]
     pub ipo12: bool,
-    /// ETHERNET Timeout: late replies tolerated before RSI stops.
-    #[arg(long, default_value_t = 100)]
-    pub timeout: u32,
-    /// Built-in tuning name or tuning TOML file: its loop limits set POSCORR and POSCORRMON.
-    /// Without it, RSI's defaults (5 mm / 5°, 6 mm / 6°).
+    /// ETHERNET Timeout: late replies tolerated before RSI stops; default: the cell file's
+    /// `robot.timeout`, else 100.
     #[arg(long)]
+    pub timeout: Option<u32>,
+    /// Built-in tuning name or tuning TOML file: its loop limits set POSCORR and POSCORRMON (instead
+    /// of `--poscorr-mm`/`--poscorrmon-mm`; not with `--config`, whose limits are the robot's).
+    #[arg(long, conflicts_with = "config")]
     pub tuning: Option<String>,
+    /// Replace files of the same names in the output directory (without it, nothing is overwritten).
+    #[arg(long)]
+    pub force: bool,
     /// Base name of the files.
     #[arg(long, default_value = "forcecell_rsi")]
     pub name: String,
@@ -271,6 +290,26 @@ pub fn set_point_n(s: &str) -> Result<f64, String> {
         Ok(v)
     } else {
         Err("0 N: the set-point must press on the surface".into())
+    }
+}
+
+/// The largest POSCORR/POSCORRMON translation limit `rsi-config` writes, mm: an RSI correction is a
+/// small correction of a programmed path, and a metre is no longer one.
+pub const MAX_POSCORR_MM: f64 = 1000.0;
+
+/// A POSCORR or POSCORRMON translation limit, mm.
+pub fn poscorr_mm(s: &str) -> Result<f64, String> {
+    let v = bounded(
+        s,
+        0.0,
+        MAX_POSCORR_MM,
+        "mm",
+        "RSI corrects a programmed path by millimetres; beyond a metre it is no correction",
+    )?;
+    if v > 0.0 {
+        Ok(v)
+    } else {
+        Err("0 mm: the robot would accept no correction at all".into())
     }
 }
 

@@ -19,7 +19,7 @@ use crate::runner::RunSpec;
 use crate::scenario::{PlantSpec, Scenario, builtin_names};
 
 /// One line of the table.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct BenchRow {
     /// Scenario name.
     pub scenario: String,
@@ -31,12 +31,22 @@ pub struct BenchRow {
     pub metric: String,
     /// Evaluation window, for humans.
     pub window: String,
-    /// The measured value.
+    /// The measured value (in JSON a number, or `"inf"`, `"-inf"`, `"NaN"` as the table prints it).
+    #[serde(serialize_with = "finite_or_text")]
     pub value: f64,
     /// The target, for humans.
     pub target: String,
     /// Whether the target is met.
     pub pass: bool,
+}
+
+/// A number as itself when finite, else as the table prints it (JSON has no infinity).
+fn finite_or_text<S: serde::Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+    if v.is_finite() {
+        s.serialize_f64(*v)
+    } else {
+        s.serialize_str(&v.to_string())
+    }
 }
 
 /// What to run.
@@ -159,6 +169,87 @@ pub fn run(
 
 /// What the runs go over, for the table's heading.
 pub const WIRES: &str = "over the default wires: KUKA RSI driver ↔ simulated KRC (loopback UDP, lockstep), ATI driver ↔ simulated node (in-memory CAN)";
+
+/// The name of the bench's JSON summary in its output directory.
+pub const SUMMARY: &str = "bench-scenarios.json";
+
+/// The JSON summary of a bench: its provenance (command, version, start and end, the scenarios and
+/// tunings, the wires), the targets met per tuning, and every row of the table with the same figures.
+#[derive(Debug, serde::Serialize)]
+pub struct BenchSummary<'a> {
+    /// Where the figures came from.
+    pub provenance: crate::provenance::Provenance,
+    /// Targets met per tuning, in the table's order.
+    pub met: Vec<Met>,
+    /// The table's rows (a value the run could not measure is `null`).
+    pub rows: &'a [BenchRow],
+}
+
+/// How many of its targets a tuning met.
+#[derive(Debug, PartialEq, serde::Serialize)]
+pub struct Met {
+    /// The tuning's name.
+    pub tuning: String,
+    /// Targets met.
+    pub met: usize,
+    /// Targets.
+    pub targets: usize,
+}
+
+/// The provenance of a bench started now with `opts`.
+pub fn provenance(opts: &BenchOptions) -> crate::provenance::Provenance {
+    let source = if opts.only.is_empty() {
+        "every B scenario".to_string()
+    } else {
+        format!("B scenarios starting with {}", opts.only.join(", "))
+    };
+    let mut p = crate::provenance::Provenance::start("bench-scenarios", &source, None);
+    p.tuning = opts.tunings.join(", ");
+    p.robot = "KUKA RSI driver ↔ simulated KRC (loopback UDP, lockstep)".into();
+    p.sensor = "ATI driver ↔ simulated node (in-memory CAN)".into();
+    p
+}
+
+/// Write `out/bench-scenarios.json` ([`BenchSummary`]) through the output rule (a temporary file
+/// renamed when complete); returns its path.
+pub fn write_summary(
+    out: &Path,
+    mut provenance: crate::provenance::Provenance,
+    rows: &[BenchRow],
+) -> Result<std::path::PathBuf> {
+    let mut met: Vec<Met> = Vec::new();
+    for r in rows {
+        match met.iter_mut().find(|m| m.tuning == r.tuning) {
+            Some(m) => {
+                m.met += usize::from(r.pass);
+                m.targets += 1;
+            }
+            None => met.push(Met {
+                tuning: r.tuning.clone(),
+                met: usize::from(r.pass),
+                targets: 1,
+            }),
+        }
+    }
+    let reason = met
+        .iter()
+        .map(|m| format!("{}: {} of {} targets met", m.tuning, m.met, m.targets))
+        .collect::<Vec<_>>()
+        .join("; ");
+    provenance.finish(&reason, false, 0);
+    let summary = BenchSummary {
+        provenance,
+        met,
+        rows,
+    };
+    let path = out.join(SUMMARY);
+    crate::output::replace(&path, |tmp| {
+        let text = serde_json::to_string_pretty(&summary)?;
+        std::fs::write(tmp, text + "\n")?;
+        Ok(())
+    })?;
+    Ok(path)
+}
 
 /// The table as text.
 pub fn table(rows: &[BenchRow]) -> String {

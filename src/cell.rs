@@ -251,7 +251,58 @@ pub enum CellSensor {
     Robotiq(Box<robotiq::Ft300>),
 }
 
+/// What a sensor says of itself, read by its driver at start-up (the ATI board's serial and firmware
+/// queries, the FT 300's identity registers): [`UNKNOWN`] where the sensor could not say.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SensorIdentity {
+    /// The serial number as the sensor reports it.
+    pub serial: String,
+    /// The firmware version as the sensor reports it.
+    pub firmware: String,
+}
+
+/// What a recording says of a sensor's serial or firmware it could not read.
+pub const UNKNOWN: &str = "unknown";
+
+impl SensorIdentity {
+    /// Nothing known.
+    pub fn unknown() -> Self {
+        Self {
+            serial: UNKNOWN.into(),
+            firmware: UNKNOWN.into(),
+        }
+    }
+}
+
 impl CellSensor {
+    /// The sensor's identity, as its driver read it when it started.
+    pub fn identity(&self) -> SensorIdentity {
+        let known = |s: String| {
+            if s.trim().is_empty() || s == "UNKNOWN" {
+                UNKNOWN.to_string()
+            } else {
+                s
+            }
+        };
+        match self {
+            Self::Ati(s) => match s.info() {
+                Some(info) => SensorIdentity {
+                    serial: known(info.serial_text().unwrap_or_default()),
+                    firmware: known(info.firmware.to_string()),
+                },
+                None => SensorIdentity::unknown(),
+            },
+            // Found streaming, the FT 300 is not asked (that would stop its stream).
+            Self::Robotiq(s) => match s.identity() {
+                Some(id) => SensorIdentity {
+                    serial: known(id.serial_text()),
+                    firmware: known(id.firmware_text()),
+                },
+                None => SensorIdentity::unknown(),
+            },
+        }
+    }
+
     /// The sensor's background reader thread (to give it its real-time priority), while it runs.
     pub fn reader_thread(&self) -> Option<std::os::unix::thread::RawPthread> {
         match self {
@@ -843,13 +894,19 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
     // The cell file as the input rule reads it (a regular file, capped), once: hashed and attached.
     let cell = crate::input::read(path, "cell config", crate::input::MAX_CONFIG).ok();
     let mut prov = provenance("run", &cfg, path, cell.as_deref(), &tuning);
+    prov.identify_sensor(&sensor.identity());
     let (tx, recording) = crate::recorder::start(
         &mcap,
         recording_options(cell, &tuning, &prov),
         live.as_ref().map(crate::live::LiveServer::sink),
     )?;
     let stop = crate::stop::flag();
-    let robot = crate::stop::Interruptible::new(&mut link, stop);
+    // While it waits: what arrives and is not the robot's cycle, a line per kind, rate-limited.
+    let robot = crate::stop::Interruptible::new(&mut link, stop).while_waiting(|l| {
+        for line in l.rejection_lines() {
+            eprintln!("{line}");
+        }
+    });
     dir.keep();
     // The cycle runs on this thread: its real-time settings now, before the first cycle.
     let mut applied = cfg.realtime.apply_to_cycle_thread();
@@ -978,7 +1035,8 @@ pub fn calibrate(path: &Path, poses: usize) -> Result<()> {
     let stamp = crate::provenance::file_stamp(std::time::SystemTime::now());
     let mcap = cfg.record.join(format!("calibrate-{stamp}.mcap"));
     let cell = crate::input::read(path, "cell config", crate::input::MAX_CONFIG).ok();
-    let prov = provenance("calibrate", &cfg, path, cell.as_deref(), &tuning);
+    let mut prov = provenance("calibrate", &cfg, path, cell.as_deref(), &tuning);
+    prov.identify_sensor(&sensor.identity());
     let (tx, recording) =
         crate::recorder::start(&mcap, recording_options(cell, &tuning, &prov), None)?;
     dir.keep();

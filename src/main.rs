@@ -316,6 +316,10 @@ struct SimArgs {
     /// simulated controller then runs on the wall clock (--realtime).
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = LIVE_DEFAULT)]
     live: Option<std::net::SocketAddr>,
+    /// With `--live`: when the scenario ends (its files written), keep serving the live view until
+    /// Ctrl-C (SIGINT) or SIGTERM.
+    #[arg(long, requires = "live")]
+    hold: bool,
     #[command(flatten)]
     robot: forcecell::args::RsiArgs,
 }
@@ -503,6 +507,22 @@ fn sim(mut a: SimArgs) -> Result<ExitCode> {
     // name and renamed when complete, so an earlier run's files survive a failed one.
     let out_dir = forcecell::output::OutDir::create(&a.out, "output directory (--out)")?;
     let mcap = a.out.join(format!("{}.mcap", spec.file_stem()));
+    // Another run's results of the same name are replaced: said before the run, not found after it.
+    let earlier: Vec<String> = ["mcap", "csv", "png"]
+        .iter()
+        .map(|ext| mcap.with_extension(ext))
+        .chain(std::iter::once(
+            a.out.join(format!("{}-pass.png", spec.file_stem())),
+        ))
+        .filter(|p| p.is_file())
+        .map(|p| p.display().to_string())
+        .collect();
+    if !earlier.is_empty() {
+        println!(
+            "replacing an earlier run's {} (--out another directory keeps them)",
+            earlier.join(", ")
+        );
+    }
     let (tx, recording) = forcecell::runner::start_recording(
         &spec,
         &mcap,
@@ -523,6 +543,20 @@ fn sim(mut a: SimArgs) -> Result<ExitCode> {
     out_dir.keep();
     let code = ExitCode::from(forcecell::report::sim(&spec, &run, &a.out, a.check)?);
     println!("recorded {recorded}");
+    if let (Some(server), true) = (&live, a.hold) {
+        // Every file is written: only the live view is left, until the operator ends it. A stop
+        // asked during the run ends the command now.
+        if !forcecell::stop::requested() {
+            println!(
+                "holding the live view on ws://{} (Ctrl-C ends)",
+                server.local_addr()
+            );
+            while !forcecell::stop::requested() {
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            println!("live view closed");
+        }
+    }
     Ok(code)
 }
 
@@ -556,9 +590,12 @@ fn bench_scenarios(a: BenchArgs) -> Result<ExitCode> {
         opts.tunings = a.tunings;
     }
     println!("bench-scenarios {}", forcecell::bench::WIRES);
+    let prov = forcecell::bench::provenance(&opts);
     let rows = forcecell::bench::run(&opts, &a.out, &mut |label| eprintln!("running {label}"))?;
     print!("{}", forcecell::bench::table(&rows));
+    let summary = forcecell::bench::write_summary(&a.out, prov, &rows)?;
     println!("plots and traces in {}", a.out.display());
+    println!("summary {}", summary.display());
     let missed = rows.iter().any(|r| r.tuning != "paper" && !r.pass);
     Ok(if a.check && missed {
         ExitCode::from(1)

@@ -71,8 +71,12 @@ pub struct Provenance {
     pub source_sha256: String,
     /// The tuning's name.
     pub tuning: String,
-    /// The sensor's identity as it reported it (model, serial, firmware), or the simulated one.
+    /// The sensor as configured (model, port or bus, address).
     pub sensor: String,
+    /// The sensor's serial number as it reported it, or `unknown`.
+    pub sensor_serial: String,
+    /// The sensor's firmware version as it reported it, or `unknown`.
+    pub sensor_firmware: String,
     /// The robot link (its kind and address).
     pub robot: String,
     /// Why it ended, in words.
@@ -94,8 +98,16 @@ impl Provenance {
             started: iso8601(SystemTime::now()),
             source: source.into(),
             source_sha256,
+            sensor_serial: crate::cell::UNKNOWN.into(),
+            sensor_firmware: crate::cell::UNKNOWN.into(),
             ..Self::default()
         }
+    }
+
+    /// Record what the sensor said of itself.
+    pub fn identify_sensor(&mut self, id: &crate::cell::SensorIdentity) {
+        self.sensor_serial = id.serial.clone();
+        self.sensor_firmware = id.firmware.clone();
     }
 
     /// Mark the end now, with its reason.
@@ -169,6 +181,15 @@ mod tests {
         assert_eq!(m["stop_sent"], "true");
         assert_eq!(m["cycles"], "3001");
         assert_eq!(m["forcecell"], env!("CARGO_PKG_VERSION"));
+        assert_eq!(
+            (m["sensor_serial"].as_str(), m["sensor_firmware"].as_str()),
+            ("unknown", "unknown")
+        );
+        p.identify_sensor(&crate::cell::SensorIdentity {
+            serial: "FTS-875704368".into(),
+            firmware: "FTS-3.1.0".into(),
+        });
+        assert_eq!(p.metadata()["sensor_serial"], "FTS-875704368");
         let built_in = Provenance::start("sim", "paper-fig9", None);
         assert_eq!(built_in.source_sha256, "", "a built-in name is no file");
     }

@@ -584,6 +584,15 @@ impl RobotLink for CellRobot {
 }
 
 impl CellRobot {
+    /// The lines due about datagrams rejected while waiting for the robot (RSI; EGM reports its
+    /// counters at the end only).
+    pub fn rejection_lines(&mut self) -> Vec<String> {
+        match self {
+            Self::Rsi(l) => l.rejection_lines(),
+            Self::Egm(_) => Vec::new(),
+        }
+    }
+
     /// The address actually bound.
     pub fn local_addr(&self) -> std::io::Result<SocketAddr> {
         match self {

@@ -654,6 +654,126 @@ fn parse_segments(text: &str) -> Result<Vec<Segment>> {
         .collect()
 }
 
+/// What `rsi-config` writes for, resolved from its flags over the cell file's values.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RsiTarget {
+    /// The PC's address (IP_NUMBER).
+    pub ip: Ipv4Addr,
+    /// The robot controller's address.
+    pub robot_ip: std::net::IpAddr,
+    /// UDP port.
+    pub port: u16,
+    /// POSCORR and POSCORRMON.
+    pub poscorr: PoscorrLimits,
+    /// POSCORRMON.
+    pub poscorrmon: PoscorrLimits,
+    /// `#RELATIVE`.
+    pub relative: bool,
+    /// `#IPO_FAST` (4 ms).
+    pub ipo_fast: bool,
+    /// ETHERNET Timeout.
+    pub timeout: u32,
+    /// With the process channels.
+    pub process: bool,
+}
+
+/// Resolve the addresses, limits and settings of `rsi-config`: each flag given, else the cell file's
+/// value (`--config`), else (for the port, mode, cycle, Timeout and channels only) the default. The
+/// PC's and the robot's addresses and POSCORR/POSCORRMON have no default: without them it refuses,
+/// in one line naming each missing value.
+pub fn rsi_target(a: &RsiConfigArgs) -> Result<RsiTarget> {
+    let (cell, rsi) = match &a.config {
+        Some(p) => {
+            let robot = crate::cell::CellConfig::load(p)?.robot;
+            let crate::robot::RobotKind::KukaRsi(rsi) = robot.kind.clone() else {
+                bail!(
+                    "rsi-config: {} is an ABB EGM cell (`forcecell egm-config` writes its files)",
+                    p.display()
+                );
+            };
+            (Some(robot), Some(rsi))
+        }
+        None => (None, None),
+    };
+    let cell_ip = match cell.as_ref().map(|r| r.listen.ip()) {
+        Some(std::net::IpAddr::V4(ip)) => Some(ip),
+        Some(std::net::IpAddr::V6(ip)) => {
+            bail!("rsi-config: robot.listen {ip} is IPv6; RSI is IPv4")
+        }
+        None => None,
+    };
+    let ip = a.ip.or(cell_ip);
+    let robot_ip = a.robot_ip.or(cell.as_ref().map(|r| r.robot_ip));
+    let tuning_limits = match &a.tuning {
+        Some(t) => {
+            let t = crate::scenario::load_tuning(t)?;
+            let (_, p, m) = cell_limits(&t.loop_cfg);
+            Some((p.translation * 1e3, m.translation * 1e3))
+        }
+        None => None,
+    };
+    let poscorr_mm = a
+        .poscorr_mm
+        .or(rsi.as_ref().map(|r| r.poscorr_mm))
+        .or(tuning_limits.map(|t| t.0));
+    let poscorrmon_mm = a
+        .poscorrmon_mm
+        .or(rsi.as_ref().map(|r| r.poscorrmon_mm))
+        .or(tuning_limits.map(|t| t.1));
+    let (Some(ip), Some(robot_ip), Some(poscorr_mm), Some(poscorrmon_mm)) =
+        (ip, robot_ip, poscorr_mm, poscorrmon_mm)
+    else {
+        let missing: Vec<&str> = [
+            (ip.is_none(), "the PC's address (--ip)"),
+            (robot_ip.is_none(), "the robot's address (--robot-ip)"),
+            (poscorr_mm.is_none(), "POSCORR (--poscorr-mm)"),
+            (poscorrmon_mm.is_none(), "POSCORRMON (--poscorrmon-mm)"),
+        ]
+        .into_iter()
+        .filter_map(|(m, what)| m.then_some(what))
+        .collect();
+        bail!(
+            "rsi-config: missing {}: give the cell file (--config cell.toml) or the flags",
+            missing.join(", ")
+        );
+    };
+    if std::net::IpAddr::V4(ip) == robot_ip {
+        bail!(
+            "rsi-config: the PC's address {ip} (IP_NUMBER, where the robot sends) is the robot's own              address: give the PC's address as the robot sees it (--ip, or robot.listen)"
+        );
+    }
+    if poscorrmon_mm <= poscorr_mm {
+        bail!(
+            "rsi-config: POSCORRMON {poscorrmon_mm} mm must be above POSCORR {poscorr_mm} mm (the \
+             monitor stops the robot beyond what the correction may reach)"
+        );
+    }
+    let mode = a.mode.or(rsi.as_ref().map(|r| match r.mode {
+        crate::cell::ModeName::Absolute => ModeArg::Absolute,
+        crate::cell::ModeName::Relative => ModeArg::Relative,
+    }));
+    Ok(RsiTarget {
+        ip,
+        robot_ip,
+        port: a
+            .port
+            .or(cell.as_ref().map(|r| r.listen.port()))
+            .unwrap_or(49152),
+        poscorr: PoscorrLimits {
+            translation: poscorr_mm * 1e-3,
+            ..PoscorrLimits::default()
+        },
+        poscorrmon: PoscorrLimits {
+            translation: poscorrmon_mm * 1e-3,
+            ..PoscorrLimits::MONITOR_DEFAULT
+        },
+        relative: mode == Some(ModeArg::Relative),
+        ipo_fast: !(a.ipo12 || cell.as_ref().is_some_and(|r| r.cycle_ms == 12)),
+        timeout: a.timeout.or(rsi.as_ref().map(|r| r.timeout)).unwrap_or(100),
+        process: !a.no_process && cell.as_ref().is_none_or(|r| r.process),
+    })
+}
+
 /// The robot-side setup for these options.
 pub fn robot_setup(a: &RsiConfigArgs) -> Result<RobotSetup> {
     if a.name.is_empty()
@@ -667,17 +787,10 @@ pub fn robot_setup(a: &RsiConfigArgs) -> Result<RobotSetup> {
             a.name
         );
     }
-    let relative = a.mode == ModeArg::Relative;
-    let (poscorr, poscorrmon) = match &a.tuning {
-        Some(t) => {
-            let t = crate::scenario::load_tuning(t)?;
-            let (_, p, m) = cell_limits(&t.loop_cfg);
-            (p, m)
-        }
-        None => (PoscorrLimits::default(), PoscorrLimits::MONITOR_DEFAULT),
-    };
-    let mut ethernet = EthernetConfig::forcecell(a.ip, a.port, relative);
-    let process = if a.no_process {
+    let t = rsi_target(a)?;
+    let relative = t.relative;
+    let mut ethernet = EthernetConfig::forcecell(t.ip, t.port, relative);
+    let process = if !t.process {
         None
     } else {
         ethernet = ethernet.with_process(ProcessChannels::default());
@@ -707,11 +820,11 @@ pub fn robot_setup(a: &RsiConfigArgs) -> Result<RobotSetup> {
         } else {
             CorrectionMode::Absolute
         },
-        ipo_fast: !a.ipo12,
-        timeout: a.timeout,
+        ipo_fast: t.ipo_fast,
+        timeout: t.timeout,
         precision: 4,
-        poscorr,
-        poscorrmon,
+        poscorr: t.poscorr,
+        poscorrmon: t.poscorrmon,
         name: a.name.clone(),
         process,
     };
@@ -720,17 +833,65 @@ pub fn robot_setup(a: &RsiConfigArgs) -> Result<RobotSetup> {
 }
 
 /// Write the robot-side files; returns their paths and, with the process channels, the
-/// `$SEN_PINT`/`$SEN_PREA` mapping the integrator must build in RSI Visual.
+/// `$SEN_PINT`/`$SEN_PREA` mapping the integrator must build in RSI Visual. Everything is validated
+/// and rendered first; a file of the same name is refused (all of them named) unless `--force`; every
+/// file is written to a temporary name and only when all were written is any renamed over its name,
+/// so a failure leaves every earlier file as it was.
 pub fn rsi_config(a: &RsiConfigArgs) -> Result<(Vec<PathBuf>, Vec<String>)> {
     let setup = robot_setup(a)?;
+    let files = setup.files();
+    let paths: Vec<PathBuf> = files.iter().map(|(n, _)| a.out.join(n)).collect();
+    if !a.force {
+        let existing: Vec<String> = paths
+            .iter()
+            .filter(|p| std::fs::symlink_metadata(p).is_ok())
+            .map(|p| p.display().to_string())
+            .collect();
+        if !existing.is_empty() {
+            bail!(
+                "rsi-config: {} already exist(s); nothing was written (--force replaces them)",
+                existing.join(", ")
+            );
+        }
+    }
+    // Even with --force, only a regular file is replaced: found now, before anything is written.
+    for p in &paths {
+        if let Ok(m) = std::fs::symlink_metadata(p)
+            && !m.is_file()
+        {
+            bail!(
+                "rsi-config: {} is not a regular file; nothing was written",
+                p.display()
+            );
+        }
+    }
     let dir = crate::output::OutDir::create(&a.out, "output directory (--out)")?;
-    let mut written = Vec::new();
-    for (name, text) in setup.files() {
-        let path = a.out.join(name);
-        crate::output::replace(&path, |tmp| {
-            std::fs::write(tmp, &text).with_context(|| format!("cannot write {}", path.display()))
-        })?;
-        written.push(path);
+    let temps: Vec<PathBuf> = paths.iter().map(|p| crate::output::temp_path(p)).collect();
+    let cleanup = |temps: &[PathBuf]| {
+        for t in temps {
+            let _ = std::fs::remove_file(t);
+        }
+    };
+    for ((_, text), (tmp, path)) in files.iter().zip(temps.iter().zip(&paths)) {
+        let written = std::fs::write(tmp, text).and_then(|()| std::fs::File::open(tmp)?.sync_all());
+        if let Err(e) = written {
+            cleanup(&temps);
+            bail!(
+                "cannot write {}: {}; nothing was replaced",
+                path.display(),
+                crate::input::os_error(&e)
+            );
+        }
+    }
+    for (i, (tmp, path)) in temps.iter().zip(&paths).enumerate() {
+        if let Err(e) = std::fs::rename(tmp, path) {
+            cleanup(&temps[i..]);
+            bail!(
+                "cannot write {}: {}",
+                path.display(),
+                crate::input::os_error(&e)
+            );
+        }
     }
     dir.keep();
     let mapping = setup
@@ -738,5 +899,5 @@ pub fn rsi_config(a: &RsiConfigArgs) -> Result<(Vec<PathBuf>, Vec<String>)> {
         .as_ref()
         .map(|p| p.mapping(&setup.ethernet))
         .unwrap_or_default();
-    Ok((written, mapping))
+    Ok((paths, mapping))
 }

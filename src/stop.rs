@@ -51,6 +51,9 @@ pub fn install() -> anyhow::Result<()> {
     result
 }
 
+/// What an [`Interruptible`] calls with its link after a wait that found no cycle.
+type OnWait<'a, R> = Option<Box<dyn FnMut(&mut R) + 'a>>;
+
 /// A robot link whose waits end: a wait for the first datagram (the link's `first_contact_timeout`
 /// returns a transient timeout now and then) ends with [`Interrupted::Stopped`] once `stop` is set,
 /// or [`Interrupted::PeerGone`] once `alive` says the robot's process has ended.
@@ -58,6 +61,7 @@ pub struct Interruptible<'a, R> {
     inner: R,
     stop: &'a AtomicBool,
     alive: Option<Box<dyn Fn() -> bool + 'a>>,
+    waiting: OnWait<'a, R>,
 }
 
 impl<'a, R> Interruptible<'a, R> {
@@ -67,7 +71,15 @@ impl<'a, R> Interruptible<'a, R> {
             inner,
             stop,
             alive: None,
+            waiting: None,
         }
+    }
+
+    /// Call `waiting` with the link at each end of a wait for the robot that found no cycle (to say
+    /// what the link saw meanwhile).
+    pub fn while_waiting(mut self, waiting: impl FnMut(&mut R) + 'a) -> Self {
+        self.waiting = Some(Box::new(waiting));
+        self
     }
 
     /// Also end a wait once `alive` returns false (the simulated controller's thread has ended).
@@ -128,6 +140,9 @@ impl<R: RobotLink> RobotLink for Interruptible<'_, R> {
         match self.inner.next_cycle() {
             Ok(c) => Ok(c),
             Err(e) if e.kind() == ErrorKind::Timeout => {
+                if let Some(w) = &mut self.waiting {
+                    w(&mut self.inner);
+                }
                 if self.stop.load(Ordering::Relaxed) {
                     Err(Interrupted::Stopped)
                 } else if self.alive.as_ref().is_some_and(|alive| !alive()) {

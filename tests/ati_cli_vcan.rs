@@ -261,6 +261,21 @@ fn run_with_the_example_cell_file_tares_runs_and_records() {
             .any(|f| f.extension().is_some_and(|e| e == "csv")),
         "{files:?}"
     );
+    // The board's identity, from its serial and firmware answers, in the run's summary.
+    let json = files
+        .iter()
+        .find(|f| f.extension().is_some_and(|e| e == "json"))
+        .unwrap_or_else(|| panic!("a summary: {files:?}"));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(json).unwrap()).unwrap();
+    assert_eq!(summary["sensor_serial"], "FT-SIM01", "{summary}");
+    assert!(
+        summary["sensor_firmware"]
+            .as_str()
+            .unwrap()
+            .starts_with("3.8"),
+        "{summary}"
+    );
     assert!(
         files
             .iter()

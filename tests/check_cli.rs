@@ -83,6 +83,12 @@ fn each_broken_cell_file_is_not_ready_and_names_its_problem() {
         "127.0.0.1",
         "--port",
         "49312",
+        "--robot-ip",
+        "127.0.0.2",
+        "--poscorr-mm",
+        "5",
+        "--poscorrmon-mm",
+        "6",
         "--out",
         robot.to_str().unwrap(),
     ]);

@@ -206,6 +206,35 @@ fn bench_scenarios_prints_one_table_and_writes_the_plots() {
         })
         .count();
     assert_eq!(pngs, 8);
+    // A JSON summary beside the bench: the same figures as the table, and where they came from.
+    let json: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("b/bench-scenarios.json")).unwrap(),
+    )
+    .unwrap();
+    let p = &json["provenance"];
+    assert_eq!(p["command"], "bench-scenarios");
+    assert_eq!(p["forcecell"], env!("CARGO_PKG_VERSION"));
+    assert!(p["started"].as_str().unwrap().ends_with('Z'));
+    assert!(p["ended"].as_str().unwrap().ends_with('Z'));
+    assert_eq!(p["tuning"], "robust, paper");
+    let rows = json["rows"].as_array().unwrap();
+    let table_rows: Vec<&str> = s
+        .lines()
+        .filter(|l| l.starts_with("b01-") || l.starts_with("b09-"))
+        .collect();
+    assert_eq!(rows.len(), table_rows.len(), "{s}");
+    for (r, line) in rows.iter().zip(&table_rows) {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        assert_eq!(r["scenario"], words[0], "{line}");
+        assert!(line.contains(r["metric"].as_str().unwrap()), "{line}");
+        let value = match r["value"].as_f64() {
+            Some(v) => format!("{v:.4}"),
+            None => r["value"].as_str().unwrap().to_string(),
+        };
+        assert!(line.contains(&value), "{value} not in {line}");
+        assert_eq!(r["pass"], line.trim_end().ends_with("pass"), "{line}");
+    }
+    assert!(s.contains("summary b/bench-scenarios.json"), "{s}");
     // B9 over the wires: the simulated node reports the injected NaN as a saturated gauge (unusable,
     // as the board would), not as 0 N, so the robust law holds through it on both plants.
     for line in s
@@ -281,4 +310,75 @@ fn bench_scenarios_compares_the_fast_and_the_gentle_search() {
             assert!(!pass && g > 0.05 && g > f, "gentle {g} s, fast {f} s");
         }
     }
+}
+
+/// The process columns (segment, mode, f_cmd, phase, fault) of a run without process channels are
+/// empty, as docs/recordings.md says, not 0 (a phase "off" and a fault "none" would read as a process
+/// that is there); a run with a robot program fills them; the export of the recording is the CSV.
+#[test]
+fn process_columns_are_empty_without_process_channels() {
+    let dir = tempfile::tempdir().unwrap();
+    let columns = |csv: &str| -> Vec<Vec<String>> {
+        let text = std::fs::read_to_string(dir.path().join(csv)).unwrap();
+        let mut lines = text.lines();
+        let head: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let at: Vec<usize> = ["segment", "mode", "f_cmd", "phase", "fault"]
+            .iter()
+            .map(|c| head.iter().position(|h| h == c).unwrap())
+            .collect();
+        lines
+            .map(|l| {
+                let cols: Vec<&str> = l.split(',').collect();
+                at.iter().map(|&i| cols[i].to_string()).collect()
+            })
+            .collect()
+    };
+    for robot in ["inproc", "rsi"] {
+        let out = format!("plain-{robot}");
+        let o = forcecell(
+            &["sim", "--sensor", "inproc", "--robot", robot, "--out", &out],
+            dir.path(),
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        let rows = columns(&format!("{out}/paper-fig9.csv"));
+        assert!(rows.len() > 100);
+        for r in &rows {
+            assert!(r.iter().all(String::is_empty), "{robot}: {r:?}");
+        }
+        let o = forcecell(
+            &[
+                "export",
+                &format!("{out}/paper-fig9.mcap"),
+                "--csv",
+                "--out",
+                &format!("{out}/export.csv"),
+            ],
+            dir.path(),
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert_eq!(
+            std::fs::read(dir.path().join(format!("{out}/export.csv"))).unwrap(),
+            std::fs::read(dir.path().join(format!("{out}/paper-fig9.csv"))).unwrap()
+        );
+    }
+    let o = forcecell(
+        &[
+            "sim",
+            "--sensor",
+            "inproc",
+            "--robot",
+            "inproc",
+            "-s",
+            "pass-flat-20n",
+            "--out",
+            "p",
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let rows = columns("p/pass-flat-20n.csv");
+    assert!(
+        rows.iter().all(|r| r.iter().all(|c| !c.is_empty())),
+        "a run with a robot program fills every process column"
+    );
 }

@@ -158,3 +158,90 @@ fn unbase64(s: &str) -> Vec<u8> {
     }
     out
 }
+
+/// `sim --live --hold`: the scenario runs, every file is written, and the live view stays open until
+/// Ctrl-C, which then ends the command cleanly (status 0, the files complete). The earlier run's
+/// files it replaces are named before the run.
+#[test]
+fn sim_live_hold_serves_after_the_scenario_until_ctrl_c() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("res")).unwrap();
+    std::fs::write(dir.path().join("res/paper-fig9.csv"), "an earlier run").unwrap();
+    let mut child = Kill(
+        Command::new(env!("CARGO_BIN_EXE_forcecell"))
+            .args([
+                "sim",
+                "--sensor",
+                "inproc",
+                "--robot",
+                "inproc",
+                "--live",
+                "127.0.0.1:0",
+                "--hold",
+                "--out",
+                "res",
+            ])
+            .current_dir(dir.path())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let stdout = child.0.stdout.take().unwrap();
+    let mut lines = BufReader::new(stdout).lines();
+    let mut before = Vec::new();
+    let addr = loop {
+        let line = lines
+            .next()
+            .unwrap_or_else(|| panic!("sim ended without holding: {before:?}"))
+            .unwrap();
+        if let Some(rest) = line.strip_prefix("holding the live view on ws://") {
+            break rest.split_whitespace().next().unwrap().to_string();
+        }
+        before.push(line);
+    };
+    let said = before.join("\n");
+    assert!(
+        said.contains("replacing an earlier run's") && said.contains("res/paper-fig9.csv"),
+        "{said}"
+    );
+    // The scenario is over and its files are complete...
+    assert!(said.contains("recorded"), "{said}");
+    let res = dir.path().join("res");
+    assert!(res.join("paper-fig9.mcap").is_file());
+    assert!(!res.join("paper-fig9.mcap.partial").exists());
+    assert!(res.join("paper-fig9.png").is_file());
+    let csv = std::fs::read_to_string(res.join("paper-fig9.csv")).unwrap();
+    assert!(csv.starts_with("t,f,"), "the earlier file replaced");
+    // ... and the live view still serves.
+    assert!(child.0.try_wait().unwrap().is_none(), "still running");
+    let mut req = format!("ws://{addr}").into_client_request().unwrap();
+    req.headers_mut().insert(
+        "Sec-WebSocket-Protocol",
+        "foxglove.websocket.v1".parse().unwrap(),
+    );
+    let (mut ws, _) = tungstenite::client(req, TcpStream::connect(&addr).unwrap()).unwrap();
+    match ws.read().unwrap() {
+        Message::Text(t) => {
+            let v: serde_json::Value = serde_json::from_str(&t).unwrap();
+            assert_eq!(v["op"], "serverInfo");
+        }
+        other => panic!("expected serverInfo, got {other:?}"),
+    }
+    // Ctrl-C ends it cleanly: the forcecell process this test started, by its id.
+    let st = Command::new("/bin/kill")
+        .args(["-INT", &child.0.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let rest: Vec<String> = lines.map_while(Result::ok).collect();
+    let status = child.0.wait().unwrap();
+    assert_eq!(status.code(), Some(0), "{rest:?}");
+    assert!(rest.iter().any(|l| l == "live view closed"), "{rest:?}");
+    let names: Vec<String> = std::fs::read_dir(&res)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.') || n.ends_with(".partial"))
+        .collect();
+    assert!(names.is_empty(), "left behind: {names:?}");
+}

@@ -102,6 +102,33 @@ fn a_cell_file_with_a_robotiq_sensor_opens_and_reads_it() {
     };
     assert!(sample.wrench.force.z.abs() < 1e-9, "zeroed: {sample:?}");
     assert_eq!(device.stats().starts, 1);
+    // Its identity, as the start-up read it, for the run's provenance.
+    let id = sensor.identity();
+    assert_eq!(id.serial, "FTS-875704368");
+    assert_eq!(id.firmware, "FTS-3.1.0");
+}
+
+/// A sensor found streaming is not asked for its identity (that would stop its stream): the
+/// provenance says `unknown`, plainly.
+#[test]
+fn a_robotiq_sensor_found_streaming_has_an_unknown_identity() {
+    use sim::ft300::{Ft300Config, SimFt300};
+    let device = SimFt300::spawn(
+        Ft300Config {
+            streaming_at_start: true,
+            ..Ft300Config::default()
+        },
+        |_t: core::time::Duration| hal::Wrench::from_array([0.0, 0.0, 8.0, 0.0, 0.0, 0.0]),
+    )
+    .unwrap();
+    let path = device.path().display().to_string();
+    let cfg = forcecell::cell::CellConfig::from_toml(&cell_file(&path, ""), "cell.toml").unwrap();
+    let sensor = cfg.sensor.open(false, None).unwrap();
+    assert_eq!(
+        sensor.identity(),
+        forcecell::cell::SensorIdentity::unknown()
+    );
+    assert_eq!(sensor.identity().serial, "unknown");
 }
 
 #[test]

@@ -30,6 +30,12 @@ fn rsi_config_writes_matching_robot_files() {
             "rsi-config",
             "--ip",
             "10.0.0.5",
+            "--robot-ip",
+            "10.0.0.6",
+            "--poscorr-mm",
+            "5",
+            "--poscorrmon-mm",
+            "6",
             "--port",
             "6008",
             "--out",
@@ -54,6 +60,10 @@ fn rsi_config_writes_matching_robot_files() {
     let o = forcecell(
         &[
             "rsi-config",
+            "--ip",
+            "10.0.0.5",
+            "--robot-ip",
+            "10.0.0.6",
             "--mode",
             "relative",
             "--ipo12",
@@ -104,6 +114,14 @@ fn rsi_config_writes_the_process_channels_and_a_polishing_template() {
     let o = forcecell(
         &[
             "rsi-config",
+            "--ip",
+            "192.168.1.100",
+            "--robot-ip",
+            "192.168.1.10",
+            "--poscorr-mm",
+            "5",
+            "--poscorrmon-mm",
+            "6",
             "--out",
             "robot",
             "--pint-mode",
@@ -249,14 +267,44 @@ fn rsi_config_writes_the_process_channels_and_a_polishing_template() {
     );
 
     // Indices used twice, and bad segments, are refused with a reason.
-    let o = forcecell(&["rsi-config", "--pint-state", "1"], dir.path());
+    let o = forcecell(
+        &[
+            "rsi-config",
+            "--pint-state",
+            "1",
+            "--ip",
+            "192.168.1.100",
+            "--robot-ip",
+            "192.168.1.10",
+            "--poscorr-mm",
+            "5",
+            "--poscorrmon-mm",
+            "6",
+        ],
+        dir.path(),
+    );
     assert!(!o.status.success());
     assert!(
         text(&o.stderr).contains("$SEN_PINT[1] is used for both"),
         "{}",
         text(&o.stderr)
     );
-    let o = forcecell(&["rsi-config", "--segments", "10:50,x"], dir.path());
+    let o = forcecell(
+        &[
+            "rsi-config",
+            "--segments",
+            "10:50,x",
+            "--ip",
+            "192.168.1.100",
+            "--robot-ip",
+            "192.168.1.10",
+            "--poscorr-mm",
+            "5",
+            "--poscorrmon-mm",
+            "6",
+        ],
+        dir.path(),
+    );
     assert!(!o.status.success());
     assert!(
         text(&o.stderr).contains("--segments"),
@@ -266,14 +314,27 @@ fn rsi_config_writes_the_process_channels_and_a_polishing_template() {
 
     // Without the process channels: the config of before.
     let o = forcecell(
-        &["rsi-config", "--no-process", "--out", "plain"],
+        &[
+            "rsi-config",
+            "--no-process",
+            "--out",
+            "plain",
+            "--ip",
+            "192.168.1.100",
+            "--robot-ip",
+            "192.168.1.10",
+            "--poscorr-mm",
+            "5",
+            "--poscorrmon-mm",
+            "6",
+        ],
         dir.path(),
     );
     assert!(o.status.success(), "{}", text(&o.stderr));
     let xml = std::fs::read_to_string(dir.path().join("plain/forcecell_rsi.xml")).unwrap();
     assert_eq!(
         EthernetConfig::parse(&xml).unwrap(),
-        EthernetConfig::forcecell([192, 168, 1, 10].into(), 49152, false)
+        EthernetConfig::forcecell([192, 168, 1, 100].into(), 49152, false)
     );
     roxmltree::Document::parse(&xml).unwrap();
     let krl = std::fs::read_to_string(dir.path().join("plain/forcecell_rsi.src")).unwrap();
@@ -470,5 +531,181 @@ fn a_tight_rate_limit_does_not_drag_the_tool_back_at_start() {
     assert!(
         worst < 1e-5,
         "RSI and in-process robots differ by {worst} m"
+    );
+}
+
+/// `rsi-config` writes for the cell `run` will use: the addresses and the robot's correction limits
+/// come from the cell file (flags override), and without either it refuses, naming what is missing,
+/// instead of guessing an address. It never replaces a file without `--force`, and a failure on one
+/// file leaves every other as it was.
+#[test]
+fn rsi_config_takes_the_cell_file_or_refuses_and_overwrites_nothing_unasked() {
+    let dir = tempfile::tempdir().unwrap();
+    let cell = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/cell.toml");
+
+    // Neither the cell file nor the flags: one line naming each missing value, nothing written.
+    let o = forcecell(&["rsi-config", "--out", "none"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    let err = text(&o.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    for needle in [
+        "--ip",
+        "--robot-ip",
+        "--poscorr-mm",
+        "--poscorrmon-mm",
+        "--config",
+    ] {
+        assert!(err.contains(needle), "{needle} in {err}");
+    }
+    assert!(!dir.path().join("none").exists());
+    // Some flags but not all: only the missing ones are named.
+    let o = forcecell(
+        &[
+            "rsi-config",
+            "--ip",
+            "10.0.0.5",
+            "--poscorr-mm",
+            "5",
+            "--out",
+            "none",
+        ],
+        dir.path(),
+    );
+    let err = text(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("--robot-ip") && err.contains("--poscorrmon-mm"),
+        "{err}"
+    );
+    assert!(
+        !err.contains("(--ip)") && !err.contains("(--poscorr-mm)"),
+        "{err}"
+    );
+
+    // From the cell file: the PC's address and port of `robot.listen`, its POSCORR (5 mm),
+    // POSCORRMON (6 mm), and its `process = false` (the plain layout `run` then expects).
+    let o = forcecell(
+        &["rsi-config", "--config", cell, "--out", "robot"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let xml = std::fs::read_to_string(dir.path().join("robot/forcecell_rsi.xml")).unwrap();
+    assert_eq!(
+        EthernetConfig::parse(&xml).unwrap(),
+        EthernetConfig::forcecell([192, 168, 1, 100].into(), 49152, false)
+    );
+    let krl = std::fs::read_to_string(dir.path().join("robot/forcecell_rsi.src")).unwrap();
+    assert!(krl.contains("+-5.000 mm"), "{krl}");
+    let rsix = std::fs::read_to_string(dir.path().join("robot/forcecell_rsi.rsix")).unwrap();
+    assert!(
+        rsix.contains(r#"Name="UpperLimX" ParamId="3" ParamValue="5.000""#)
+            && rsix.contains(r#"Name="MaxTrans" ParamId="0" ParamValue="6.000""#),
+        "{rsix}"
+    );
+
+    // Flags override the file.
+    let o = forcecell(
+        &[
+            "rsi-config",
+            "--config",
+            cell,
+            "--ip",
+            "192.168.1.50",
+            "--poscorr-mm",
+            "3",
+            "--out",
+            "over",
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let xml = std::fs::read_to_string(dir.path().join("over/forcecell_rsi.xml")).unwrap();
+    assert_eq!(
+        EthernetConfig::parse(&xml).unwrap(),
+        EthernetConfig::forcecell([192, 168, 1, 50].into(), 49152, false)
+    );
+    let krl = std::fs::read_to_string(dir.path().join("over/forcecell_rsi.src")).unwrap();
+    assert!(krl.contains("+-3.000 mm"), "{krl}");
+
+    // The robot's own address as the PC's: refused.
+    let o = forcecell(
+        &[
+            "rsi-config",
+            "--config",
+            cell,
+            "--ip",
+            "192.168.1.10",
+            "--out",
+            "same",
+        ],
+        dir.path(),
+    );
+    assert!(!o.status.success());
+    assert!(
+        text(&o.stderr).contains("robot's own"),
+        "{}",
+        text(&o.stderr)
+    );
+    assert!(!dir.path().join("same").exists());
+
+    // Existing files are not replaced without --force; every one is named.
+    let robot = dir.path().join("robot");
+    let xml_path = robot.join("forcecell_rsi.xml");
+    std::fs::write(&xml_path, "the integrator's edited file").unwrap();
+    let o = forcecell(
+        &["rsi-config", "--config", cell, "--out", "robot"],
+        dir.path(),
+    );
+    assert!(!o.status.success());
+    let err = text(&o.stderr);
+    assert!(
+        err.contains("--force") && err.contains("forcecell_rsi.src"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(&xml_path).unwrap(),
+        "the integrator's edited file"
+    );
+    // With --force, a failure on the second file leaves the first as it was.
+    let src_path = robot.join("forcecell_rsi.src");
+    std::fs::remove_file(&src_path).unwrap();
+    std::fs::create_dir(&src_path).unwrap();
+    std::fs::write(src_path.join("keep"), "x").unwrap();
+    let o = forcecell(
+        &["rsi-config", "--config", cell, "--out", "robot", "--force"],
+        dir.path(),
+    );
+    assert!(!o.status.success());
+    assert_eq!(
+        std::fs::read_to_string(&xml_path).unwrap(),
+        "the integrator's edited file",
+        "{}",
+        text(&o.stderr)
+    );
+    // No temporary file is left behind.
+    let mut names: Vec<String> = std::fs::read_dir(&robot)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(
+        names,
+        [
+            "forcecell_rsi.rsix",
+            "forcecell_rsi.src",
+            "forcecell_rsi.xml"
+        ]
+    );
+    // And with --force and nothing in the way, they are replaced.
+    std::fs::remove_dir_all(&src_path).unwrap();
+    let o = forcecell(
+        &["rsi-config", "--config", cell, "--out", "robot", "--force"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(
+        std::fs::read_to_string(&xml_path)
+            .unwrap()
+            .contains("192.168.1.100")
     );
 }

@@ -96,6 +96,15 @@ sensor_priority = 10
             .unwrap()
             .contains("Robotiq FT 300")
     );
+    // The sensor's identity as it answered its start-up queries (the simulated FT 300's registers).
+    assert_eq!(summary["sensor_serial"], "FTS-875704368", "{summary}");
+    assert!(
+        summary["sensor_firmware"]
+            .as_str()
+            .unwrap()
+            .starts_with("FTS-3.1"),
+        "{summary}"
+    );
     assert!(summary["started"].as_str().unwrap().ends_with('Z'));
     assert!(summary["ended"].as_str().unwrap() >= summary["started"].as_str().unwrap());
 }
@@ -233,4 +242,74 @@ port = "ft300"
         );
         assert!(w[1].replied_late >= w[0].replied_late);
     }
+}
+
+/// While `run` waits for the robot, what arrives and is not the robot's cycle is said on stderr: a
+/// line per class of rejected datagram, naming the sender and the reason, at most one a second per
+/// class however many arrive (here about 150 of each in 1.5 s).
+#[test]
+fn run_says_why_it_drops_datagrams_while_it_waits() {
+    let dir = tempfile::tempdir().unwrap();
+    let _sensor = common::ft300(&dir.path().join("ft300"), "0.0");
+    let port = free_port();
+    let cell = format!(
+        r#"tuning = "robust-100hz"
+duration = 1.0
+record = "rec"
+
+[robot]
+listen = "127.0.0.1:{port}"
+robot_ip = "127.0.0.2"
+poscorr_mm = 55.0
+poscorrmon_mm = 60.0
+
+[sensor]
+kind = "robotiq"
+port = "ft300"
+"#
+    );
+    std::fs::write(dir.path().join("cell.toml"), cell).unwrap();
+    let mut child = spawn(&["run", "--config", "cell.toml"], dir.path());
+    let (seen, r) = read_until(&mut child, "listening on");
+    // A stranger on 127.0.0.1 sends a good datagram; the robot's address sends one without <RSol>.
+    let good = r#"<Rob Type="KUKA"><RIst X="445.0000" Y="0.0000" Z="890.0000" A="180.0000" B="0.0000" C="180.0000"/><RSol X="445.0000" Y="0.0000" Z="890.0000" A="180.0000" B="0.0000" C="180.0000"/><AIPos A1="0.0000" A2="-90.0000" A3="90.0000" A4="0.0000" A5="90.0000" A6="0.0000"/><ASPos A1="0.0000" A2="-90.0000" A3="90.0000" A4="0.0000" A5="90.0000" A6="0.0000"/><Delay D="0"/><IPOC>1000</IPOC></Rob>"#;
+    let no_rsol = good.replace(
+        r#"<RSol X="445.0000" Y="0.0000" Z="890.0000" A="180.0000" B="0.0000" C="180.0000"/>"#,
+        "",
+    );
+    let stranger = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let robot = std::net::UdpSocket::bind("127.0.0.2:0").unwrap();
+    let to = format!("127.0.0.1:{port}");
+    for _ in 0..150 {
+        stranger.send_to(good.as_bytes(), &to).unwrap();
+        robot.send_to(no_rsol.as_bytes(), &to).unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    common::signal(child.id(), "INT");
+    let (code, text) = finish(child, seen, r);
+    assert_eq!(code, 130, "{text}");
+    let foreign: Vec<&str> = text
+        .lines()
+        .filter(|l| l.contains("from 127.0.0.1, expected 127.0.0.2"))
+        .collect();
+    let malformed: Vec<&str> = text
+        .lines()
+        .filter(|l| l.contains("malformed: no complete <RSol>, which the Ethernet config lists"))
+        .collect();
+    assert!(!foreign.is_empty(), "{text}");
+    assert!(!malformed.is_empty(), "{text}");
+    for l in foreign.iter().chain(&malformed) {
+        assert!(l.starts_with("waiting for the robot: "), "{l}");
+    }
+    assert!(
+        malformed.iter().all(|l| l.contains("from 127.0.0.2:")),
+        "{malformed:?}"
+    );
+    // Rate-limited: 150 of each class in about 1.5 s give a handful of lines, not 150.
+    assert!(foreign.len() <= 5 && malformed.len() <= 5, "{text}");
+    // The lines together account for what was dropped (the rest counted at the end).
+    assert!(
+        text.contains(" foreign, ") && text.contains(" malformed, "),
+        "{text}"
+    );
 }

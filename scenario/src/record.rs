@@ -73,8 +73,16 @@ impl Row {
             segment: r.cycle.process.map(|p| p.segment),
             mode: r.cycle.process.map(|p| p.mode.code()),
             f_cmd: r.cycle.process.map_or(f64::NAN, |p| p.force),
-            phase: Some(r.command.process.phase.code() as u8),
-            fault: Some(r.command.process.fault.code() as u8),
+            // Empty where the link carries no process command (docs/recordings.md): a phase "off"
+            // and a fault "none" would read as a process that is there.
+            phase: r
+                .cycle
+                .process
+                .map(|_| r.command.process.phase.code() as u8),
+            fault: r
+                .cycle
+                .process
+                .map(|_| r.command.process.fault.code() as u8),
             s: f64::NAN,
         }
     }

@@ -78,6 +78,109 @@ pub struct Diagnostics {
     pub measured: Measured,
 }
 
+/// How often each class of rejected datagram is reported while the link waits for the robot.
+pub const REJECT_REPORT_INTERVAL: std::time::Duration = std::time::Duration::from_secs(1);
+
+/// The classes of rejected datagrams, each reported apart ([`RejectLog`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RejectClass {
+    /// From a source other than the robot.
+    Foreign,
+    /// Above `max_datagram`.
+    Oversized,
+    /// Not a `<Rob>` of the configured layout.
+    Malformed,
+    /// A duplicate or reordered `<Rob>`.
+    Stale,
+}
+
+impl RejectClass {
+    fn index(self) -> usize {
+        self as usize
+    }
+}
+
+/// A class's report that is due: how many of the class were rejected since its last report, and the
+/// latest of them (its sender, why, and its size in bytes).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RejectDue {
+    /// The class.
+    pub class: RejectClass,
+    /// Rejected since the class's last report.
+    pub count: u64,
+    /// The latest one's sender.
+    pub from: std::net::SocketAddr,
+    /// Why the latest one was rejected.
+    pub why: crate::session::Rejected,
+    /// The latest one's size, bytes.
+    pub len: usize,
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+struct RejectSlot {
+    last_report: Option<std::time::Instant>,
+    pending: u64,
+    latest: Option<(std::net::SocketAddr, crate::session::Rejected, usize)>,
+}
+
+/// A rate limiter for the reports of rejected datagrams, per [`RejectClass`]: the first of a class is
+/// due at once, later ones are gathered and due together once `interval` has passed since that
+/// class's last report. Noting copies a few words (no allocation, no text); the time is the host's,
+/// passed in (robot-independent: a robot that sends nothing usable has no clock to go by).
+#[derive(Clone, Debug)]
+pub struct RejectLog {
+    interval: std::time::Duration,
+    slots: [RejectSlot; 4],
+}
+
+impl RejectLog {
+    /// A log reporting each class at most once per `interval`.
+    pub fn new(interval: std::time::Duration) -> Self {
+        Self {
+            interval,
+            slots: [RejectSlot::default(); 4],
+        }
+    }
+
+    /// Note one rejected datagram.
+    pub fn note(
+        &mut self,
+        class: RejectClass,
+        from: std::net::SocketAddr,
+        why: crate::session::Rejected,
+        len: usize,
+    ) {
+        let s = &mut self.slots[class.index()];
+        s.pending += 1;
+        s.latest = Some((from, why, len));
+    }
+
+    /// Hand every report due at `now` to `out` (in class order) and start the class's interval again.
+    pub fn due(&mut self, now: std::time::Instant, mut out: impl FnMut(RejectDue)) {
+        for (i, s) in self.slots.iter_mut().enumerate() {
+            let ready = s
+                .last_report
+                .is_none_or(|t| now.saturating_duration_since(t) >= self.interval);
+            if let (true, true, Some((from, why, len))) = (s.pending > 0, ready, s.latest) {
+                out(RejectDue {
+                    class: [
+                        RejectClass::Foreign,
+                        RejectClass::Oversized,
+                        RejectClass::Malformed,
+                        RejectClass::Stale,
+                    ][i],
+                    count: s.pending,
+                    from,
+                    why,
+                    len,
+                });
+                s.pending = 0;
+                s.last_report = Some(now);
+            }
+        }
+    }
+}
+
 /// Cycles of a session the detectors watch before they judge.
 pub const PROBE_CYCLES: u32 = 50;
 
@@ -141,6 +244,51 @@ impl Diagnostics {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn each_class_of_rejection_is_reported_at_once_then_at_most_once_an_interval() {
+        use crate::session::Rejected;
+        use std::time::{Duration, Instant};
+        let t0 = Instant::now();
+        let ms = |n| t0 + Duration::from_millis(n);
+        let stranger: std::net::SocketAddr = "10.0.0.5:6008".parse().unwrap();
+        let robot: std::net::SocketAddr = "192.168.1.10:6008".parse().unwrap();
+        let mut log = RejectLog::new(Duration::from_secs(1));
+        let due = |log: &mut RejectLog, at| {
+            let mut v = Vec::new();
+            log.due(at, |d| v.push(d));
+            v
+        };
+        assert!(due(&mut log, ms(0)).is_empty(), "nothing rejected");
+        log.note(RejectClass::Foreign, stranger, Rejected::Foreign, 100);
+        let d = due(&mut log, ms(0));
+        assert_eq!(d.len(), 1);
+        assert_eq!(
+            (d[0].class, d[0].count, d[0].from),
+            (RejectClass::Foreign, 1, stranger)
+        );
+        // 250 more within the interval: gathered, not reported.
+        for _ in 0..250 {
+            log.note(RejectClass::Foreign, stranger, Rejected::Foreign, 100);
+        }
+        assert!(due(&mut log, ms(999)).is_empty());
+        // Another class is reported at once, apart.
+        log.note(
+            RejectClass::Malformed,
+            robot,
+            Rejected::Malformed(ParseError::Truncated),
+            40,
+        );
+        let d = due(&mut log, ms(999));
+        assert_eq!(d.len(), 1);
+        assert_eq!((d[0].class, d[0].count), (RejectClass::Malformed, 1));
+        assert_eq!(d[0].why, Rejected::Malformed(ParseError::Truncated));
+        // The interval over: the gathered ones in one report.
+        let d = due(&mut log, ms(1000));
+        assert_eq!(d.len(), 1);
+        assert_eq!((d[0].class, d[0].count), (RejectClass::Foreign, 250));
+        assert!(due(&mut log, ms(5000)).is_empty(), "nothing new");
+    }
 
     #[test]
     fn decimals_are_read_from_the_values() {

@@ -29,7 +29,7 @@ mod xml;
 
 pub use codec::{Direction, Frame, Ipoc, Schema, ValueType, WriteError};
 pub use config::{ConfigElement, ConfigError, EthernetConfig, Indx};
-pub use diag::{Counters, Diagnostics, Latency, Measured};
+pub use diag::{Counters, Diagnostics, Latency, Measured, RejectClass, RejectDue, RejectLog};
 pub use krl::{ProcessIo, ProcessSetup, RobotSetup, Segment};
 pub use layout::Layout;
 pub use limits::{Limits, PoscorrLimits};

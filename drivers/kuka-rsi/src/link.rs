@@ -434,6 +434,12 @@ impl RsiLink {
         self.session.set_robot_filter(robot);
     }
 
+    /// The lines due now about datagrams rejected while waiting for the robot
+    /// ([`RsiSession::rejection_lines`]), for the application to print.
+    pub fn rejection_lines(&mut self) -> Vec<String> {
+        self.session.rejection_lines(Instant::now())
+    }
+
     /// True after a stop was sent.
     pub fn is_stopped(&self) -> bool {
         self.session.is_stopped()

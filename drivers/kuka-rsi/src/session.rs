@@ -164,6 +164,8 @@ pub struct RsiSession {
     last_wire: [f64; 6],
     stopped: bool,
     diag: Diagnostics,
+    /// Datagrams rejected while waiting for the robot, for the rate-limited report.
+    rejects: crate::diag::RejectLog,
 }
 
 impl fmt::Debug for RsiSession {
@@ -224,8 +226,49 @@ impl RsiSession {
             last_wire: [0.0; 6],
             stopped: false,
             diag: Diagnostics::default(),
+            rejects: crate::diag::RejectLog::new(crate::diag::REJECT_REPORT_INTERVAL),
             cfg,
         })
+    }
+
+    /// The lines due at `now` (host time) about the datagrams rejected while no robot session has
+    /// started: one per class of rejection at most once per [`REJECT_REPORT_INTERVAL`], naming the
+    /// sender and the reason ("from 10.0.0.5, expected 192.168.1.10"; "malformed: no complete
+    /// `<RSol>`, which the Ethernet config lists").
+    ///
+    /// [`REJECT_REPORT_INTERVAL`]: crate::diag::REJECT_REPORT_INTERVAL
+    pub fn rejection_lines(&mut self, now: Instant) -> Vec<String> {
+        let mut lines = Vec::new();
+        let (rob, cfg) = (&self.rob, &self.cfg);
+        self.rejects.due(now, |d| {
+            let reason = match d.why {
+                Rejected::Foreign => match cfg.robot {
+                    RobotFilter::Ip(ip) => format!("from {}, expected {ip}", d.from.ip()),
+                    RobotFilter::Exact(a) => format!("from {}, expected {a}", d.from),
+                    RobotFilter::Any => format!(
+                        "from {}, not the robot whose session this link follows",
+                        d.from
+                    ),
+                },
+                Rejected::Oversized => format!(
+                    "oversized: {} bytes or more, above max_datagram {}",
+                    d.len, cfg.max_datagram
+                ),
+                Rejected::Malformed(ParseError::MissingElement { element }) => format!(
+                    "malformed: no complete <{}>, which the Ethernet config lists",
+                    rob.element_name(element).unwrap_or("?")
+                ),
+                Rejected::Malformed(e) => format!("malformed: {e}"),
+                other => other.to_string(),
+            };
+            lines.push(format!(
+                "waiting for the robot: {} datagram{} from {} dropped: {reason}",
+                d.count,
+                if d.count == 1 { "" } else { "s" },
+                d.from
+            ));
+        });
+        lines
     }
 
     /// The configuration.
@@ -327,7 +370,19 @@ impl RsiSession {
         if self.stopped {
             return Err(Rejected::Stopped);
         }
-        let mut a = self.accept(datagram, from, rx_at)?;
+        let waiting = self.track.is_none();
+        let mut a = self.accept(datagram, from, rx_at).inspect_err(|&r| {
+            let class = match r {
+                Rejected::Foreign => Some(crate::diag::RejectClass::Foreign),
+                Rejected::Oversized => Some(crate::diag::RejectClass::Oversized),
+                Rejected::Malformed(_) => Some(crate::diag::RejectClass::Malformed),
+                Rejected::Stale { .. } => Some(crate::diag::RejectClass::Stale),
+                Rejected::Stopped => None,
+            };
+            if let (true, Some(c)) = (waiting, class) {
+                self.rejects.note(c, from, r, datagram.len());
+            }
+        })?;
         a.arrived = arrived.map(|t| t.min(rx_at));
         if let Some(old) = self.candidate.take() {
             self.diag.counters.skipped += 1;
