@@ -43,6 +43,9 @@ enum Command {
     Plot(PlotArgs),
     /// Export an MCAP recording as a CSV trace (the columns `sim` and `run` write).
     Export(ExportArgs),
+    /// What a recorded pass did to the part: removal depth and dwell along the path, the 2-D map, its
+    /// uniformity; writes NAME-removal.mcap and NAME-removal.png beside the recording.
+    Removal(RemovalArgs),
     /// Judge a tuning (damping ratio, delay margin) or propose impedance parameters for a stiffness range
     /// and the robot's loop.
     Tune(TuneArgs),
@@ -275,6 +278,19 @@ struct ExportArgs {
 }
 
 #[derive(Args)]
+struct RemovalArgs {
+    /// The recording (MCAP from `sim` or `run`; it must carry the robot's poses).
+    mcap: PathBuf,
+    /// Where the `[removal]` table is (pad, tool speed, Preston's coefficient): a built-in scenario's
+    /// name, or a scenario or cell TOML file.
+    #[arg(long)]
+    config: String,
+    /// Output directory (default: the recording's).
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+#[derive(Args)]
 struct PlotArgs {
     /// The trace: an MCAP recording or a CSV.
     csv: PathBuf,
@@ -341,6 +357,7 @@ fn main() -> ExitCode {
         }),
         Command::Plot(a) => plot_trace(a),
         Command::Export(a) => export(a),
+        Command::Removal(a) => removal(a),
         Command::Run(a) => forcecell::cell::run(&a.config, a.live).map(ExitCode::from),
         Command::Check(a) => forcecell::check::check(&a.config).map(|findings| {
             for f in &findings {
@@ -509,6 +526,16 @@ fn sim(mut a: SimArgs) -> Result<ExitCode> {
     out_dir.keep();
     let code = ExitCode::from(forcecell::report::sim(&spec, &run, &a.out, a.check)?);
     println!("recorded {recorded}");
+    if let (Some(cfg), Some(_), None) = (
+        &spec.scenario.removal,
+        &spec.scenario.program,
+        a.robot.external_robot,
+    ) {
+        match forcecell::removal::run(&mcap, cfg, None) {
+            Ok(o) => println!("{}", forcecell::removal::report(&o)),
+            Err(e) => eprintln!("removal map not written: {e:#}"),
+        }
+    }
     Ok(code)
 }
 
@@ -589,6 +616,13 @@ fn export(a: ExportArgs) -> Result<ExitCode> {
     }
     forcecell::output::write_csv(&csv, &rows)?;
     println!("wrote {} ({} rows)", csv.display(), rows.len());
+    Ok(ExitCode::SUCCESS)
+}
+
+fn removal(a: RemovalArgs) -> Result<ExitCode> {
+    let cfg = forcecell::removal::load_config(&a.config)?;
+    let o = forcecell::removal::run(&a.mcap, &cfg, a.out.as_deref())?;
+    println!("{}", forcecell::removal::report(&o));
     Ok(ExitCode::SUCCESS)
 }
 
