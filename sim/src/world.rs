@@ -114,9 +114,11 @@ impl World {
     }
 
     /// Where the programmed path is on the part now, base frame, m: a line runs along base x (x = the
-    /// path position, y = 0).
+    /// path position, y = 0); a raster's passes lie `step_over` apart along base y.
     pub fn path_xy(&self) -> (f64, f64) {
-        (self.path_position(), 0.0)
+        self.program
+            .as_ref()
+            .map_or((self.s, 0.0), ProgramRunner::path_xy)
     }
 
     /// The programmed (uncorrected) tool pose now: the start pose moved along the path by
@@ -181,7 +183,8 @@ impl World {
     /// True contact force now, N.
     pub fn true_force(&self) -> f64 {
         // The form shifts the surface: the same as the tool standing back by its height.
-        let h = self.form.height(self.path_position());
+        let (x, y) = self.path_xy();
+        let h = self.form.height_at(x, y);
         self.plant.force(
             self.time(),
             self.inner.position() - h,
@@ -191,7 +194,8 @@ impl World {
 
     /// True surface position now, m (the plant's, plus the form under the tool).
     pub fn surface(&self) -> f64 {
-        self.plant.x_c.at(self.time()) + self.form.height(self.path_position())
+        let (x, y) = self.path_xy();
+        self.plant.x_c.at(self.time()) + self.form.height_at(x, y)
     }
 
     /// True stiffness now, N/m.
@@ -400,6 +404,9 @@ mod tests {
                 dwell: 0.0,
             }],
             wait_timeout: 1.0,
+            passes: 1,
+            step_over: 0.0,
+            transfer_feed: 0.1,
         };
         let world = World::new(
             ContactPlant::spring(70_000.0, 0.01),
@@ -421,7 +428,10 @@ mod tests {
         let s = lock(&world).path_position();
         assert!((s - 0.01).abs() < 1e-12, "the move ran to its end: {s}");
         let moved = last.programmed.position - start.programmed.position;
-        assert!((moved.x - s).abs() < 1e-12 && moved.y == 0.0 && moved.z == 0.0, "{moved:?}");
+        assert!(
+            (moved.x - s).abs() < 1e-12 && moved.y == 0.0 && moved.z == 0.0,
+            "{moved:?}"
+        );
         assert!((last.actual.position.x - (0.5 + s)).abs() < 1e-12);
         assert!((last.tool_offset().z - 0.002).abs() < 1e-12);
         assert!(last.tool_offset().x.abs() < 1e-12);
