@@ -279,8 +279,13 @@ struct ExportArgs {
 
 #[derive(Args)]
 struct RemovalArgs {
-    /// The recording (MCAP from `sim` or `run`; it must carry the robot's poses).
-    mcap: PathBuf,
+    /// The recordings (MCAP from `sim` or `run`; each must carry the robot's poses).
+    #[arg(required = true)]
+    mcap: Vec<PathBuf>,
+    /// Also draw the maps side by side into this PNG (one colour scale) and print a table of the
+    /// figures, one row per recording.
+    #[arg(long, value_name = "PNG")]
+    compare: Option<PathBuf>,
     /// Where the `[removal]` table is (pad, tool speed, Preston's coefficient): a built-in scenario's
     /// name, or a scenario or cell TOML file.
     #[arg(long)]
@@ -621,8 +626,25 @@ fn export(a: ExportArgs) -> Result<ExitCode> {
 
 fn removal(a: RemovalArgs) -> Result<ExitCode> {
     let cfg = forcecell::removal::load_config(&a.config)?;
-    let o = forcecell::removal::run(&a.mcap, &cfg, a.out.as_deref())?;
-    println!("{}", forcecell::removal::report(&o));
+    if let Some(png) = &a.compare {
+        forcecell::output::require_extension(png, &["png"], "a plot")?;
+        for m in &a.mcap {
+            forcecell::output::refuse_input(png, m)?;
+        }
+    }
+    let mut done = Vec::new();
+    for m in &a.mcap {
+        let o = forcecell::removal::run(m, &cfg, a.out.as_deref())?;
+        println!("{}", forcecell::removal::report(&o));
+        done.push((forcecell::removal::label(m), o));
+    }
+    if let Some(png) = &a.compare {
+        print!("{}", forcecell::removal::table(&done));
+        let maps: Vec<(&str, &scenario::removal::Removal)> =
+            done.iter().map(|(l, o)| (l.as_str(), &o.removal)).collect();
+        forcecell::plot::write_removal_png(png, &maps)?;
+        println!("wrote {}", png.display());
+    }
     Ok(ExitCode::SUCCESS)
 }
 

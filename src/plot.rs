@@ -366,9 +366,9 @@ fn heat(v: f64) -> RGBColor {
     RGBColor(c(0), c(1), c(2))
 }
 
-/// Write removal maps side by side, one panel each (a heat map in µm on one colour scale shared by the
-/// panels, the path overlaid in white, the target area in a green box). Written like
-/// [`write_png`].
+/// Write removal maps side by side, one panel each on one extent (a heat map in µm on one colour scale
+/// shared by the panels, up to 1.25 × the deepest cell within a target area; the path overlaid in white, the
+/// target area in a green box). Written like [`write_png`].
 pub fn write_removal_png(path: &Path, maps: &[(&str, &scenario::removal::Removal)]) -> Result<()> {
     crate::output::require_extension(path, &["png"], "a plot")?;
     if maps.is_empty() {
@@ -386,26 +386,60 @@ fn draw_removal_png(path: &Path, maps: &[(&str, &scenario::removal::Removal)]) -
     let w = panel_w * maps.len() as u32 + bar_w;
     let root = BitMapBackend::new(path, (w, 600)).into_drawing_area();
     root.fill(&WHITE).map_err(e)?;
-    let vmax = maps
+    // One colour scale: up to 1.25 × the deepest cell within any target area (a fault's dwell outside it
+    // would wash out the rest); deeper cells take the top colour. One extent: the union of the maps'.
+    let in_target = |r: &scenario::removal::Removal| {
+        let m = &r.map;
+        let t = r.target;
+        let mut deepest = 0.0_f64;
+        for j in 0..m.ny {
+            for i in 0..m.nx {
+                let (x, y) = m.centre(i, j);
+                if x >= t[0] && x <= t[1] && y >= t[2] && y <= t[3] {
+                    deepest = deepest.max(m.depth_at(i, j));
+                }
+            }
+        }
+        deepest
+    };
+    let mut vmax = maps
         .iter()
-        .flat_map(|(_, r)| r.map.depth.iter().copied())
-        .fold(0.0_f64, f64::max)
-        .max(1e-12);
+        .map(|(_, r)| in_target(r))
+        .fold(0.0_f64, f64::max);
+    if vmax <= 0.0 {
+        vmax = maps
+            .iter()
+            .flat_map(|(_, r)| r.map.depth.iter().copied())
+            .fold(0.0_f64, f64::max);
+    }
+    // A quarter of headroom: the deepest cells of the target stay distinguishable.
+    let vmax = (1.25 * vmax).max(1e-12);
+    let mm = |v: f64| v * 1e3;
+    let extent = maps.iter().fold(
+        [
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ],
+        |e, (_, r)| {
+            let m = &r.map;
+            [
+                e[0].min(mm(m.x0 - m.cell / 2.0)),
+                e[1].max(mm(m.x0 + (m.nx as f64 - 0.5) * m.cell)),
+                e[2].min(mm(m.y0 - m.cell / 2.0)),
+                e[3].max(mm(m.y0 + (m.ny as f64 - 0.5) * m.cell)),
+            ]
+        },
+    );
     let (panels, bar) = root.split_horizontally(panel_w * maps.len() as u32);
     for (area, (title, r)) in panels.split_evenly((1, maps.len())).iter().zip(maps) {
         let m = &r.map;
-        let mm = |v: f64| v * 1e3;
-        let (x0, x1) = (
-            mm(m.x0 - m.cell / 2.0),
-            mm(m.x0 + (m.nx as f64 - 0.5) * m.cell),
-        );
-        let (y0, y1) = (
-            mm(m.y0 - m.cell / 2.0),
-            mm(m.y0 + (m.ny as f64 - 0.5) * m.cell),
-        );
+        let [x0, x1, y0, y1] = extent;
         let mut chart = ChartBuilder::on(area)
             .caption(*title, ("sans-serif", 18))
             .margin(10)
+            .margin_bottom(30)
             .x_label_area_size(55)
             .y_label_area_size(55)
             .build_cartesian_2d(x0..x1, y0..y1)
@@ -417,6 +451,13 @@ fn draw_removal_png(path: &Path, maps: &[(&str, &scenario::removal::Removal)]) -
             .x_desc("x [mm]")
             .y_desc("y [mm]")
             .draw()
+            .map_err(e)?;
+        // Where this map has no cell nothing was removed.
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                [(x0, y0), (x1, y1)],
+                heat(0.0).filled(),
+            )))
             .map_err(e)?;
         let c = mm(m.cell);
         chart

@@ -246,3 +246,31 @@ fn write_mcap(path: &Path, r: &Removal) -> Result<()> {
     w.finish()?;
     Ok(())
 }
+
+/// A recording's label: its file name without `.mcap`.
+pub fn label(path: &Path) -> String {
+    path.file_stem()
+        .map_or("recording".into(), |s| s.to_string_lossy().into_owned())
+}
+
+/// A Markdown table of the figures, one row per labelled removal.
+pub fn table(rows: &[(String, RemovalOutput)]) -> String {
+    let mut t = String::from(
+        "| case | mean removal (µm) | uniformity σ/mean | min / max (µm) | coverage | under-polished | over-polished |\n|---|---|---|---|---|---|---|\n",
+    );
+    for (label, o) in rows {
+        let r = &o.removal;
+        let s = &r.stats;
+        t += &format!(
+            "| {label} | {:.4} | {:.4} | {:.4} / {:.4} | {:.1} % | {:.1} % | {:.1} % |\n",
+            s.mean * 1e6,
+            s.uniformity(),
+            s.min * 1e6,
+            s.max * 1e6,
+            s.coverage * 100.0,
+            r.under * 100.0,
+            r.over * 100.0
+        );
+    }
+    t
+}

@@ -334,7 +334,9 @@ pub struct RemovalConfig {
     #[serde(default)]
     pub target: Option<[f64; 4]>,
     /// A cell is under- or over-polished when its depth is below `(1 − band)` or above `(1 + band)`
-    /// times the nominal depth (what the set-point in effect would have removed on the same path).
+    /// times the nominal depth (what the set-point in effect would have removed on the same path); a
+    /// target cell the set-point's path never reached is under-polished when nothing was removed
+    /// there, over-polished otherwise.
     #[serde(default = "default_band")]
     pub band: f64,
 }
@@ -644,7 +646,15 @@ pub fn analyse(cfg: &RemovalConfig, samples: &[PathSample]) -> Result<Removal, S
             }
             n += 1;
             let (d, w) = (map.depth_at(i, j), nominal.depth_at(i, j));
-            if d < (1.0 - cfg.band) * w {
+            if w <= 0.0 {
+                // The set-point's pass never reached this target cell (a program that ended early):
+                // nothing removed is under-polished, anything removed is more than asked.
+                if d <= 0.0 {
+                    under += 1;
+                } else {
+                    over += 1;
+                }
+            } else if d < (1.0 - cfg.band) * w {
                 under += 1;
             } else if d > (1.0 + cfg.band) * w {
                 over += 1;
