@@ -174,3 +174,65 @@ fn a_config_without_a_removal_table_or_with_a_bad_value_is_refused() {
     assert!(!o.status.success());
     assert!(text.contains("removal.preston"), "{text}");
 }
+
+#[test]
+fn a_raster_from_sim_is_mapped_over_the_part_and_compared_side_by_side() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    let (o, text) = run(&["sim", "--scenario", "raster-step", "--out", out]);
+    assert!(o.status.success(), "{text}");
+    assert!(text.contains("coverage           100.0 %"), "{text}");
+    let rec = dir.path().join("raster-step.mcap");
+    // The recorded poses are the raster: 11 passes 10 mm apart along base y.
+    let back = forcecell::recorder::read_mcap(&std::fs::read(&rec).unwrap()).unwrap();
+    let ys: Vec<f64> = back
+        .poses
+        .iter()
+        .map(|p| p[1])
+        .filter(|y| y.is_finite())
+        .collect();
+    let span = ys.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+        - ys.iter().cloned().fold(f64::INFINITY, f64::min);
+    assert!(
+        (span - 0.1).abs() < 1e-3,
+        "the raster spans {span} m across"
+    );
+    let copy = dir.path().join("again.mcap");
+    std::fs::copy(&rec, &copy).unwrap();
+    let png = dir.path().join("both.png");
+    let (o, text) = run(&[
+        "removal",
+        rec.to_str().unwrap(),
+        copy.to_str().unwrap(),
+        "--config",
+        "raster-step",
+        "--out",
+        dir.path().join("maps").to_str().unwrap(),
+        "--compare",
+        png.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{text}");
+    let rows: Vec<&str> = text
+        .lines()
+        .filter(|l| l.starts_with("| raster-step") || l.starts_with("| again"))
+        .collect();
+    assert_eq!(rows.len(), 2, "{text}");
+    // The same recording twice: the same figures.
+    assert_eq!(
+        rows[0]
+            .split_once('|')
+            .unwrap()
+            .1
+            .split_once('|')
+            .unwrap()
+            .1,
+        rows[1]
+            .split_once('|')
+            .unwrap()
+            .1
+            .split_once('|')
+            .unwrap()
+            .1
+    );
+    assert!(png.metadata().unwrap().len() > 10_000);
+}

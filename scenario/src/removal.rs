@@ -854,4 +854,132 @@ mod tests {
         );
         assert!(bad.depth.iter().all(|d| *d == 0.0));
     }
+
+    fn config() -> RemovalConfig {
+        RemovalConfig {
+            preston: 1e-12,
+            pad: PadKind::Uniform,
+            pad_radius: 0.01,
+            pad_modulus: None,
+            tool: ToolKind::Belt,
+            rpm: None,
+            effective_radius: None,
+            belt_speed: Some(5.0),
+            cell: 0.0005,
+            target: None,
+            band: 0.1,
+        }
+    }
+
+    #[test]
+    fn a_removal_table_is_refused_where_it_cannot_be() {
+        assert!(config().validate().is_ok());
+        let bad = |c: RemovalConfig| c.validate().unwrap_err();
+        assert!(
+            bad(RemovalConfig {
+                preston: 0.0,
+                ..config()
+            })
+            .contains("removal.preston")
+        );
+        assert!(
+            bad(RemovalConfig {
+                pad_radius: f64::NAN,
+                ..config()
+            })
+            .contains("pad_radius")
+        );
+        assert!(
+            bad(RemovalConfig {
+                cell: 0.005,
+                ..config()
+            })
+            .contains("removal.cell")
+        );
+        assert!(
+            bad(RemovalConfig {
+                pad: PadKind::Hertz,
+                ..config()
+            })
+            .contains("pad_modulus")
+        );
+        assert!(
+            bad(RemovalConfig {
+                belt_speed: None,
+                ..config()
+            })
+            .contains("belt_speed")
+        );
+        assert!(
+            bad(RemovalConfig {
+                belt_speed: Some(500.0),
+                ..config()
+            })
+            .contains("belt_speed")
+        );
+        assert!(
+            bad(RemovalConfig {
+                band: 1.0,
+                ..config()
+            })
+            .contains("band")
+        );
+        assert!(
+            bad(RemovalConfig {
+                target: Some([0.1, 0.0, 0.0, 0.1]),
+                ..config()
+            })
+            .contains("target")
+        );
+    }
+
+    #[test]
+    fn analyse_maps_a_straight_pass_by_hand_and_refuses_a_path_without_poses() {
+        // 100 mm along x at 10 mm/s, 15 N, from base (0.4, 0.2): the part frame starts there.
+        let dt = 0.004;
+        let samples: Vec<PathSample> = (0..=2500)
+            .map(|k| PathSample {
+                t: k as f64 * dt,
+                x: 0.4 + 0.01 * k as f64 * dt,
+                y: 0.2,
+                force: 15.0,
+                setpoint: 15.0,
+            })
+            .collect();
+        let r = analyse(&config(), &samples).unwrap();
+        assert_eq!(r.origin, (0.4, 0.2));
+        let hand = 1e-12 * 15.0 / (PI * 1e-4) * (5.0 + 0.01) * 0.02 / 0.01;
+        assert!(
+            close(r.stats.mean, hand, 0.01),
+            "{} vs {hand}",
+            r.stats.mean
+        );
+        assert!(r.stats.uniformity() < 0.01);
+        assert_eq!((r.under, r.over), (0.0, 0.0));
+        // Dwell along the path: 1/u = 100 s/m in the middle (a bin holds 12 or 13 samples of 0.04 mm:
+        // the mean over 20 bins).
+        let n = r.along.len() / 2;
+        let mid = r.along[n..n + 20].iter().map(|a| a.dwell).sum::<f64>() / 20.0;
+        assert!(close(mid, 100.0, 0.01), "{mid}");
+        // Half the force everywhere: every target cell is under-polished against the set-point.
+        let half: Vec<PathSample> = samples
+            .iter()
+            .map(|s| PathSample { force: 7.5, ..*s })
+            .collect();
+        assert_eq!(analyse(&config(), &half).unwrap().under, 1.0);
+        let blind: Vec<PathSample> = samples
+            .iter()
+            .map(|s| PathSample { x: f64::NAN, ..*s })
+            .collect();
+        assert!(
+            analyse(&config(), &blind)
+                .unwrap_err()
+                .contains("robot.pose")
+        );
+        let air: Vec<PathSample> = samples
+            .iter()
+            .map(|s| PathSample { force: 0.0, ..*s })
+            .collect();
+        assert!(analyse(&config(), &air).unwrap_err().contains("contact"));
+    }
 }
