@@ -18,6 +18,7 @@ pub mod recorder;
 pub mod removal;
 pub mod report;
 pub mod rig;
+pub mod robot;
 pub mod robotiq;
 pub mod rsi;
 pub mod rt;

@@ -147,6 +147,9 @@ pub struct Scenario {
     /// Overrides of the tuning's values.
     #[serde(default)]
     pub controller: Overrides,
+    /// Overrides of the tuning's force process (`[loop.process]`).
+    #[serde(default)]
+    pub process: ProcessOverrides,
     /// Targets.
     #[serde(default)]
     pub targets: Vec<Target>,
@@ -158,6 +161,23 @@ pub struct Scenario {
     /// removed when it is given.
     #[serde(default)]
     pub removal: Option<crate::removal::RemovalConfig>,
+}
+
+/// Values of the tuning's force process (`[loop.process]`) a scenario may override.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ProcessOverrides {
+    /// Re-zero the sensor in free air between passes (`loop.process.rezero`; docs/rezero.md).
+    pub rezero: Option<bool>,
+}
+
+impl ProcessOverrides {
+    /// Apply to a loop's process configuration.
+    pub fn apply(&self, p: &mut controller::ProcessConfig) {
+        if let Some(r) = self.rezero {
+            p.rezero = r;
+        }
+    }
 }
 
 /// The tuning a scenario that names none runs: the shipped robust law (the paper's law faults where

@@ -32,6 +32,8 @@ pub struct World {
     program: Option<ProgramRunner>,
     /// Path position when no program moves the tool, m.
     s: f64,
+    /// World time at which the program was first done, s.
+    program_done_at: Option<f64>,
 }
 
 /// The true state of the cell at one cycle, logged by [`World::advance`] for recording and metrics.
@@ -74,6 +76,7 @@ impl World {
             form: SurfaceForm::default(),
             program: None,
             s: 0.0,
+            program_done_at: None,
         }
     }
 
@@ -243,6 +246,7 @@ impl World {
             programmed: p,
             late_replies: 0,
             missed: 0,
+            replied_late: 0,
             new_session: false,
             process: self.process_command(),
         }
@@ -287,6 +291,16 @@ impl World {
             p.advance(self.inner.model().period);
         }
         self.k += 1;
+        if self.program_done_at.is_none() && self.program.as_ref().is_some_and(|p| p.done()) {
+            self.program_done_at = Some(self.time());
+        }
+    }
+
+    /// World time at which the program was first done, s (`None`: not done, or no program). A peer
+    /// that answers cycles on another thread compares it with the time of the cycle it answered last:
+    /// the world may already have advanced past that cycle.
+    pub fn program_done_at(&self) -> Option<f64> {
+        self.program_done_at
     }
 }
 
@@ -435,6 +449,45 @@ mod tests {
         assert!((last.actual.position.x - (0.5 + s)).abs() < 1e-12);
         assert!((last.tool_offset().z - 0.002).abs() < 1e-12);
         assert!(last.tool_offset().x.abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_program_end_is_stamped_with_the_world_time_it_happened() {
+        use crate::program::{Program, Segment, SegmentMode};
+        // A PRESS that never sees PRESSING: the program aborts after its wait (20 ms).
+        let program = Program {
+            segments: vec![Segment {
+                mode: SegmentMode::Press,
+                force: 10.0,
+                ramp: 0.2,
+                segment: 1,
+                feed: 0.01,
+                length: 0.01,
+                dwell: 0.0,
+            }],
+            wait_timeout: 0.02,
+            passes: 1,
+            step_over: 0.0,
+            transfer_feed: 0.1,
+        };
+        let mut w = World::new(
+            ContactPlant::spring(70_000.0, 0.01),
+            InnerLoopModel::P0,
+            SensorParams::default(),
+            0.0,
+        )
+        .with_program(program);
+        let mut at = None;
+        for _ in 0..100 {
+            assert_eq!(w.program_done_at(), at, "stamped once, when it ends");
+            w.advance(None);
+            if at.is_none() && w.program().is_some_and(|p| p.done()) {
+                at = Some(w.time());
+            }
+        }
+        let at = at.expect("the program ended");
+        assert!(at >= 0.02, "not before its wait: {at}");
+        assert_eq!(w.program_done_at(), Some(at));
     }
 
     #[test]
