@@ -20,8 +20,11 @@ const RADIUS: f64 = 0.008;
 const KP: f64 = 1e-12;
 const BELT: f64 = 5.0;
 
-/// Samples `(t, x, y, f)` every 4 ms along `waypoints` (x, y, speed m/s; speed 0 = stay for `hold` s).
-fn path(legs: &[((f64, f64), (f64, f64), f64)], force: f64) -> Vec<(f64, f64, f64, f64)> {
+/// One straight leg: from (x, y) to (x, y), m, in so many seconds (the same point: a dwell).
+type Leg = ((f64, f64), (f64, f64), f64);
+
+/// Samples `(t, x, y, f)` every 4 ms along the legs at a constant force.
+fn path(legs: &[Leg], force: f64) -> Vec<(f64, f64, f64, f64)> {
     let dt = 0.004;
     let mut v = vec![];
     let mut t = 0.0;
