@@ -421,6 +421,9 @@ pub struct CellConfig {
     /// Real-time settings of the cycle (on by default: `SCHED_FIFO`, memory locked).
     #[serde(default)]
     pub realtime: crate::rt::Realtime,
+    /// The removal model for `forcecell removal` on this cell's recordings (not used by `run`).
+    #[serde(default)]
+    pub removal: Option<::scenario::removal::RemovalConfig>,
 }
 
 fn default_record() -> PathBuf {
@@ -445,6 +448,9 @@ impl CellConfig {
 
     fn validate(&self) -> Result<()> {
         self.realtime.validate().map_err(|e| anyhow!(e))?;
+        if let Some(r) = &self.removal {
+            r.validate().map_err(|e| anyhow!(e))?;
+        }
         let r = &self.robot;
         r.validate()?;
         let cycle = f64::from(r.cycle_ms) * 1e-3;

@@ -15,6 +15,7 @@ pub mod plot;
 pub mod provenance;
 pub mod readout;
 pub mod recorder;
+pub mod removal;
 pub mod report;
 pub mod rig;
 pub mod robot;

@@ -43,6 +43,9 @@ enum Command {
     Plot(PlotArgs),
     /// Export an MCAP recording as a CSV trace (the columns `sim` and `run` write).
     Export(ExportArgs),
+    /// What a recorded pass did to the part: removal depth and dwell along the path, the 2-D map, its
+    /// uniformity; writes NAME-removal.mcap and NAME-removal.png beside the recording.
+    Removal(RemovalArgs),
     /// Judge a tuning (damping ratio, delay margin) or propose impedance parameters for a stiffness range
     /// and the robot's loop.
     Tune(TuneArgs),
@@ -275,6 +278,24 @@ struct ExportArgs {
 }
 
 #[derive(Args)]
+struct RemovalArgs {
+    /// The recordings (MCAP from `sim` or `run`; each must carry the robot's poses).
+    #[arg(required = true)]
+    mcap: Vec<PathBuf>,
+    /// Also draw the maps side by side into this PNG (one colour scale) and print a table of the
+    /// figures, one row per recording.
+    #[arg(long, value_name = "PNG")]
+    compare: Option<PathBuf>,
+    /// Where the `[removal]` table is (pad, tool speed, Preston's coefficient): a built-in scenario's
+    /// name, or a scenario or cell TOML file.
+    #[arg(long)]
+    config: String,
+    /// Output directory (default: the recording's).
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+#[derive(Args)]
 struct PlotArgs {
     /// The trace: an MCAP recording or a CSV.
     csv: PathBuf,
@@ -345,6 +366,7 @@ fn main() -> ExitCode {
         }),
         Command::Plot(a) => plot_trace(a),
         Command::Export(a) => export(a),
+        Command::Removal(a) => removal(a),
         Command::Run(a) => forcecell::cell::run(&a.config, a.live).map(ExitCode::from),
         Command::Check(a) => forcecell::check::check(&a.config).map(|findings| {
             for f in &findings {
@@ -543,6 +565,16 @@ fn sim(mut a: SimArgs) -> Result<ExitCode> {
     out_dir.keep();
     let code = ExitCode::from(forcecell::report::sim(&spec, &run, &a.out, a.check)?);
     println!("recorded {recorded}");
+    if let (Some(cfg), Some(_), None) = (
+        &spec.scenario.removal,
+        &spec.scenario.program,
+        a.robot.external_robot,
+    ) {
+        match forcecell::removal::run(&mcap, cfg, None) {
+            Ok(o) => println!("{}", forcecell::removal::report(&o)),
+            Err(e) => eprintln!("removal map not written: {e:#}"),
+        }
+    }
     if let (Some(server), true) = (&live, a.hold) {
         // Every file is written: only the live view is left, until the operator ends it. A stop
         // asked during the run ends the command now.
@@ -640,6 +672,30 @@ fn export(a: ExportArgs) -> Result<ExitCode> {
     }
     forcecell::output::write_csv(&csv, &rows)?;
     println!("wrote {} ({} rows)", csv.display(), rows.len());
+    Ok(ExitCode::SUCCESS)
+}
+
+fn removal(a: RemovalArgs) -> Result<ExitCode> {
+    let cfg = forcecell::removal::load_config(&a.config)?;
+    if let Some(png) = &a.compare {
+        forcecell::output::require_extension(png, &["png"], "a plot")?;
+        for m in &a.mcap {
+            forcecell::output::refuse_input(png, m)?;
+        }
+    }
+    let mut done = Vec::new();
+    for m in &a.mcap {
+        let o = forcecell::removal::run(m, &cfg, a.out.as_deref())?;
+        println!("{}", forcecell::removal::report(&o));
+        done.push((forcecell::removal::label(m), o));
+    }
+    if let Some(png) = &a.compare {
+        print!("{}", forcecell::removal::table(&done));
+        let maps: Vec<(&str, &scenario::removal::Removal)> =
+            done.iter().map(|(l, o)| (l.as_str(), &o.removal)).collect();
+        forcecell::plot::write_removal_png(png, &maps)?;
+        println!("wrote {}", png.display());
+    }
     Ok(ExitCode::SUCCESS)
 }
 

@@ -339,3 +339,196 @@ fn draw_pass_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
     root.present().map_err(|e| anyhow!("plot: {e}"))?;
     Ok(())
 }
+
+/// A colour for `v` in `0..=1` (black-body-like: dark blue, purple, orange, yellow).
+fn heat(v: f64) -> RGBColor {
+    const STOPS: [(f64, [f64; 3]); 5] = [
+        (0.0, [13.0, 8.0, 135.0]),
+        (0.25, [126.0, 3.0, 168.0]),
+        (0.5, [204.0, 71.0, 120.0]),
+        (0.75, [248.0, 149.0, 64.0]),
+        (1.0, [240.0, 249.0, 33.0]),
+    ];
+    let v = if v.is_finite() {
+        v.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let k = STOPS
+        .iter()
+        .rposition(|(at, _)| *at <= v)
+        .unwrap_or(0)
+        .min(3);
+    let (a, ca) = STOPS[k];
+    let (b, cb) = STOPS[k + 1];
+    let f = (v - a) / (b - a);
+    let c = |i: usize| (ca[i] + (cb[i] - ca[i]) * f).round() as u8;
+    RGBColor(c(0), c(1), c(2))
+}
+
+/// Write removal maps side by side, one panel each on one extent (a heat map in µm on one colour scale
+/// shared by the panels, up to 1.25 × the deepest cell within a target area; the path overlaid in white, the
+/// target area in a green box). Written like [`write_png`].
+pub fn write_removal_png(path: &Path, maps: &[(&str, &scenario::removal::Removal)]) -> Result<()> {
+    crate::output::require_extension(path, &["png"], "a plot")?;
+    if maps.is_empty() {
+        return Err(anyhow!("no removal map to draw"));
+    }
+    crate::output::replace(path, |tmp| draw_removal_png(tmp, maps))
+}
+
+fn draw_removal_png(path: &Path, maps: &[(&str, &scenario::removal::Removal)]) -> Result<()> {
+    fonts();
+    check_writable(path)?;
+    let e = |e: DrawingAreaErrorKind<_>| anyhow!("plot: {e}");
+    let panel_w = 560u32;
+    let bar_w = 110u32;
+    let w = panel_w * maps.len() as u32 + bar_w;
+    let root = BitMapBackend::new(path, (w, 600)).into_drawing_area();
+    root.fill(&WHITE).map_err(e)?;
+    // One colour scale: up to 1.25 × the deepest cell within any target area (a fault's dwell outside it
+    // would wash out the rest); deeper cells take the top colour. One extent: the union of the maps'.
+    let in_target = |r: &scenario::removal::Removal| {
+        let m = &r.map;
+        let t = r.target;
+        let mut deepest = 0.0_f64;
+        for j in 0..m.ny {
+            for i in 0..m.nx {
+                let (x, y) = m.centre(i, j);
+                if x >= t[0] && x <= t[1] && y >= t[2] && y <= t[3] {
+                    deepest = deepest.max(m.depth_at(i, j));
+                }
+            }
+        }
+        deepest
+    };
+    let mut vmax = maps
+        .iter()
+        .map(|(_, r)| in_target(r))
+        .fold(0.0_f64, f64::max);
+    if vmax <= 0.0 {
+        vmax = maps
+            .iter()
+            .flat_map(|(_, r)| r.map.depth.iter().copied())
+            .fold(0.0_f64, f64::max);
+    }
+    // A quarter of headroom: the deepest cells of the target stay distinguishable.
+    let vmax = (1.25 * vmax).max(1e-12);
+    let mm = |v: f64| v * 1e3;
+    let extent = maps.iter().fold(
+        [
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ],
+        |e, (_, r)| {
+            let m = &r.map;
+            [
+                e[0].min(mm(m.x0 - m.cell / 2.0)),
+                e[1].max(mm(m.x0 + (m.nx as f64 - 0.5) * m.cell)),
+                e[2].min(mm(m.y0 - m.cell / 2.0)),
+                e[3].max(mm(m.y0 + (m.ny as f64 - 0.5) * m.cell)),
+            ]
+        },
+    );
+    let (panels, bar) = root.split_horizontally(panel_w * maps.len() as u32);
+    for (area, (title, r)) in panels.split_evenly((1, maps.len())).iter().zip(maps) {
+        let m = &r.map;
+        let [x0, x1, y0, y1] = extent;
+        let mut chart = ChartBuilder::on(area)
+            .caption(*title, ("sans-serif", 18))
+            .margin(10)
+            .margin_bottom(30)
+            .x_label_area_size(55)
+            .y_label_area_size(55)
+            .build_cartesian_2d(x0..x1, y0..y1)
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .label_style(("sans-serif", 13))
+            .x_desc("x [mm]")
+            .y_desc("y [mm]")
+            .draw()
+            .map_err(e)?;
+        // Where this map has no cell nothing was removed.
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                [(x0, y0), (x1, y1)],
+                heat(0.0).filled(),
+            )))
+            .map_err(e)?;
+        let c = mm(m.cell);
+        chart
+            .draw_series((0..m.ny).flat_map(|j| {
+                (0..m.nx).map(move |i| {
+                    let (cx, cy) = m.centre(i, j);
+                    let (cx, cy) = (mm(cx), mm(cy));
+                    Rectangle::new(
+                        [(cx - c / 2.0, cy - c / 2.0), (cx + c / 2.0, cy + c / 2.0)],
+                        heat(m.depth_at(i, j) / vmax).filled(),
+                    )
+                })
+            }))
+            .map_err(e)?;
+        chart
+            .draw_series(std::iter::once(PathElement::new(
+                r.path
+                    .iter()
+                    .map(|(x, y)| (mm(*x), mm(*y)))
+                    .collect::<Vec<_>>(),
+                WHITE.stroke_width(1),
+            )))
+            .map_err(e)?;
+        let t = r.target;
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                [(mm(t[0]), mm(t[2])), (mm(t[1]), mm(t[3]))],
+                GREEN_.stroke_width(2),
+            )))
+            .map_err(e)?;
+        let s = &r.stats;
+        area.draw(&Text::new(
+            format!(
+                "mean {:.3} µm · σ/mean {:.3} · under {:.0} % · over {:.0} %",
+                s.mean * 1e6,
+                s.uniformity(),
+                r.under * 100.0,
+                r.over * 100.0
+            ),
+            (60, 580),
+            ("sans-serif", 14).into_font(),
+        ))
+        .map_err(e)?;
+    }
+    // The colour scale, µm.
+    let vmax_um = vmax * 1e6;
+    let mut scale = ChartBuilder::on(&bar)
+        .caption("µm", ("sans-serif", 16))
+        .margin(10)
+        .margin_bottom(50)
+        .y_label_area_size(55)
+        .build_cartesian_2d(0.0..1.0, 0.0..vmax_um)
+        .map_err(e)?;
+    scale
+        .configure_mesh()
+        .disable_mesh()
+        .disable_x_axis()
+        .y_label_style(("sans-serif", 14))
+        .draw()
+        .map_err(e)?;
+    let n = 100;
+    scale
+        .draw_series((0..n).map(|k| {
+            let a = vmax_um * k as f64 / n as f64;
+            let b = vmax_um * (k + 1) as f64 / n as f64;
+            Rectangle::new(
+                [(0.0, a), (1.0, b)],
+                heat((k as f64 + 0.5) / n as f64).filled(),
+            )
+        }))
+        .map_err(e)?;
+    root.present().map_err(e)?;
+    Ok(())
+}

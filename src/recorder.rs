@@ -554,6 +554,9 @@ impl Writer {
 pub struct ReadBack {
     /// One row per recorded cycle, truth columns filled from `/truth` where present.
     pub rows: Vec<Row>,
+    /// The robot's measured tool pose of each row (`robot.pose`: x, y, z in m, rotation vector in
+    /// rad; NaN where the file carries none).
+    pub poses: Vec<[f64; 6]>,
     /// Set when the file ends early (not finished: a killed run); the rows are those before the end.
     pub truncated: Option<String>,
 }
@@ -610,6 +613,7 @@ fn read_json_message(topic: &str, v: &serde_json::Value, row: &mut Row) {
 /// to its last complete record and marked [`ReadBack::truncated`].
 pub fn read_mcap(bytes: &[u8]) -> Result<ReadBack> {
     let mut rows: BTreeMap<u64, Row> = BTreeMap::new();
+    let mut poses: BTreeMap<u64, [f64; 6]> = BTreeMap::new();
     let mut truncated = None;
     let mut any = false;
     let stream = mcap::MessageStream::new(bytes).context("not an MCAP file")?;
@@ -641,6 +645,9 @@ pub fn read_mcap(bytes: &[u8]) -> Result<ReadBack> {
                     )
                 })?;
                 *row = rec.row;
+                if rec.pose.iter().all(|v| v.is_finite()) {
+                    poses.insert(m.log_time, rec.pose);
+                }
             }
             _ => {
                 let v: serde_json::Value = match serde_json::from_slice(&m.data) {
@@ -660,8 +667,16 @@ pub fn read_mcap(bytes: &[u8]) -> Result<ReadBack> {
         );
     }
     // A row that only `/truth` touched (its cycle's messages were lost) is not a recorded cycle.
-    let rows = rows.into_values().filter(|r| !r.f_r.is_nan()).collect();
-    Ok(ReadBack { rows, truncated })
+    let (rows, poses) = rows
+        .into_iter()
+        .filter(|(_, r)| !r.f_r.is_nan())
+        .map(|(k, r)| (r, poses.get(&k).copied().unwrap_or([f64::NAN; 6])))
+        .unzip();
+    Ok(ReadBack {
+        rows,
+        poses,
+        truncated,
+    })
 }
 
 /// Read a trace from a file: an MCAP recording (by its magic) or a CSV. Returns the rows and, for an

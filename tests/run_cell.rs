@@ -417,6 +417,9 @@ can = "vcan0"
             seg(SegmentMode::Release, 0.0, 2, 0.0),
         ],
         wait_timeout: 5.0,
+        passes: 1,
+        step_over: 0.0,
+        transfer_feed: 0.1,
     };
     let world: SharedWorld = World::new(
         ContactPlant::spring(10_000.0, 0.001),

@@ -121,6 +121,9 @@ fn a_pass_presses_holds_releases_and_ends_off_at_zero() {
     let p = Program {
         segments: vec![press(20.0, 0.05, 1), release(2)],
         wait_timeout: 5.0,
+        passes: 1,
+        step_over: 0.0,
+        transfer_feed: 0.1,
     };
     let s = run(
         flat(),
@@ -170,12 +173,16 @@ fn a_force_above_the_limit_faults_retracts_and_off_rearms() {
         steps: vec![FormStep {
             at: 0.02,
             height: -0.0015,
+            along: Default::default(),
         }],
         ..SurfaceForm::default()
     };
     let p = Program {
         segments: vec![press(20.0, 0.05, 1), release(2)],
         wait_timeout: 5.0,
+        passes: 1,
+        step_over: 0.0,
+        transfer_feed: 0.1,
     };
     let s = run(flat(), form, SensorParams::default(), p, 10.0);
     let (at, fault) = s.first_fault().expect("faulted");
@@ -200,6 +207,9 @@ fn no_surface_within_the_envelope_is_a_correction_limit_fault() {
     let p = Program {
         segments: vec![press(20.0, 0.05, 1)],
         wait_timeout: 40.0,
+        passes: 1,
+        step_over: 0.0,
+        transfer_feed: 0.1,
     };
     let s = run(
         ContactPlant::spring(70_000.0, 0.06),
@@ -224,6 +234,9 @@ fn an_edge_loses_contact_for_too_long() {
     let p = Program {
         segments: vec![press(20.0, 0.05, 1), release(2)],
         wait_timeout: 5.0,
+        passes: 1,
+        step_over: 0.0,
+        transfer_feed: 0.1,
     };
     let s = run(flat(), form, SensorParams::default(), p, 10.0);
     let (at, fault) = s.first_fault().expect("faulted");
@@ -246,6 +259,9 @@ fn a_silent_sensor_faults_after_the_hold_limit_not_later() {
     let p = Program {
         segments: vec![press(20.0, 0.1, 1), release(2)],
         wait_timeout: 5.0,
+        passes: 1,
+        step_over: 0.0,
+        transfer_feed: 0.1,
     };
     let s = run(flat(), SurfaceForm::default(), sensor, p, 10.0);
     let (at, fault) = s.first_fault().expect("faulted");
@@ -267,6 +283,9 @@ fn bad_commands_fault_with_code_4() {
             .with_program(Program {
                 segments: vec![press(20.0, 0.01, 1)],
                 wait_timeout: 1.0,
+                passes: 1,
+                step_over: 0.0,
+                transfer_feed: 0.1,
             })
             .shared();
         let tuning = robust();
@@ -301,6 +320,9 @@ fn a_pass_on_a_rising_plant_keeps_its_stiffness_changes_out_of_faults() {
     let p = Program {
         segments: vec![press(20.0, 0.1, 1), release(2)],
         wait_timeout: 5.0,
+        passes: 1,
+        step_over: 0.0,
+        transfer_feed: 0.1,
     };
     let s = run(
         plant,

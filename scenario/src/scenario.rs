@@ -157,6 +157,10 @@ pub struct Scenario {
     /// the run ends when it does (within `duration`), with `Stop`.
     #[serde(default)]
     pub program: Option<Program>,
+    /// The removal model (pad, tool speed, Preston's coefficient): `sim` maps what a programmed pass
+    /// removed when it is given.
+    #[serde(default)]
+    pub removal: Option<crate::removal::RemovalConfig>,
 }
 
 /// Values of the tuning's force process (`[loop.process]`) a scenario may override.
@@ -302,6 +306,9 @@ impl Scenario {
             .map_err(|e| anyhow!("environment: {e}"))?;
         if let Some(p) = &self.program {
             p.validate().map_err(|e| anyhow!("program: {e}"))?;
+        }
+        if let Some(r) = &self.removal {
+            r.validate().map_err(|e| anyhow!("{e}"))?;
         }
         let (lo, hi) = extent(&plant.x_c, self.duration);
         if !(lo >= -MAX_SURFACE && hi <= MAX_SURFACE) {

@@ -13,6 +13,26 @@ use serde::{Deserialize, Serialize};
 /// Where the surface is beyond the part's edge: far out of reach along the normal, m.
 pub const NO_SURFACE: f64 = 1.0;
 
+/// A direction on the part: base x (along a line program's path) or base y (across it).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Axis {
+    /// Along base x.
+    #[default]
+    X,
+    /// Along base y.
+    Y,
+}
+
+impl Axis {
+    fn of(self, x: f64, y: f64) -> f64 {
+        match self {
+            Axis::X => x,
+            Axis::Y => y,
+        }
+    }
+}
+
 /// One sinusoidal waviness of the surface along the path.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -21,6 +41,9 @@ pub struct Wave {
     pub amplitude: f64,
     /// Wavelength along the path, m.
     pub wavelength: f64,
+    /// The direction it varies in (default x, along a line program's path).
+    #[serde(default)]
+    pub along: Axis,
 }
 
 /// A step of the surface at a path position.
@@ -31,6 +54,9 @@ pub struct FormStep {
     pub at: f64,
     /// Height along the normal (positive: the surface recedes from the tool), m.
     pub height: f64,
+    /// The direction it is crossed in: a step at x = `at` (default), or at y = `at`.
+    #[serde(default)]
+    pub along: Axis,
 }
 
 /// The workpiece's form along the path: the surface's offset along the tool normal at path position
@@ -38,8 +64,10 @@ pub struct FormStep {
 #[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SurfaceForm {
-    /// Slope along the path, m per m of path.
+    /// Slope along the path (base x), m per m of path.
     pub tilt: f64,
+    /// Slope across the path (base y), m per m.
+    pub tilt_y: f64,
     /// Waviness.
     pub waves: Vec<Wave>,
     /// Steps.
@@ -49,23 +77,29 @@ pub struct SurfaceForm {
 }
 
 impl SurfaceForm {
-    /// The surface's offset at path position `s`, m ([`NO_SURFACE`] beyond the edge).
+    /// The surface's offset at path position `s` of a line program (x = s, y = 0), m.
     pub fn height(&self, s: f64) -> f64 {
-        if self.edge.is_some_and(|e| s > e) {
+        self.height_at(s, 0.0)
+    }
+
+    /// The surface's offset at (x, y) on the part (base frame from the path's start), m
+    /// ([`NO_SURFACE`] beyond the edge, at x > edge).
+    pub fn height_at(&self, x: f64, y: f64) -> f64 {
+        if self.edge.is_some_and(|e| x > e) {
             return NO_SURFACE;
         }
         let waves: f64 = self
             .waves
             .iter()
-            .map(|w| w.amplitude * (TAU * s / w.wavelength).sin())
+            .map(|w| w.amplitude * (TAU * w.along.of(x, y) / w.wavelength).sin())
             .sum();
         let steps: f64 = self
             .steps
             .iter()
-            .filter(|st| s >= st.at)
+            .filter(|st| st.along.of(x, y) >= st.at)
             .map(|st| st.height)
             .sum();
-        self.tilt * s + waves + steps
+        self.tilt * x + self.tilt_y * y + waves + steps
     }
 
     /// Checks the values.
@@ -78,11 +112,11 @@ impl SurfaceForm {
             }
         };
         fin("tilt", self.tilt)?;
-        if self.tilt.abs() > 1.0 {
-            return Err(format!(
-                "form.tilt is a slope of at most 1 m/m, got {}",
-                self.tilt
-            ));
+        fin("tilt_y", self.tilt_y)?;
+        for (name, t) in [("tilt", self.tilt), ("tilt_y", self.tilt_y)] {
+            if t.abs() > 1.0 {
+                return Err(format!("form.{name} is a slope of at most 1 m/m, got {t}"));
+            }
         }
         for w in &self.waves {
             fin("waves.amplitude", w.amplitude)?;
@@ -153,11 +187,37 @@ pub struct Program {
     /// Longest wait for a state, s.
     #[serde(default = "default_wait")]
     pub wait_timeout: f64,
+    /// Parallel passes (a raster): the segments run once per pass, each pass `step_over` further
+    /// along base y; between passes the robot moves in free air (process OFF) back to the start of the
+    /// next pass at `transfer_feed`.
+    #[serde(default = "default_passes")]
+    pub passes: u32,
+    /// Distance between passes, base y, m.
+    #[serde(default)]
+    pub step_over: f64,
+    /// Speed of the free-air move between passes, m/s.
+    #[serde(default = "default_transfer")]
+    pub transfer_feed: f64,
 }
 
 fn default_wait() -> f64 {
     5.0
 }
+
+fn default_passes() -> u32 {
+    1
+}
+
+fn default_transfer() -> f64 {
+    0.1
+}
+
+/// The most passes of a raster.
+pub const MAX_PASSES: u32 = 1000;
+/// The widest raster, m (the farthest pass from the first).
+pub const MAX_RASTER_WIDTH: f64 = 1.0;
+/// The fastest free-air move between passes, m/s.
+pub const MAX_TRANSFER_FEED: f64 = 2.0;
 
 impl Program {
     /// Checks the values.
@@ -169,6 +229,37 @@ impl Program {
             return Err(format!(
                 "program.wait_timeout must be > 0 s, got {}",
                 self.wait_timeout
+            ));
+        }
+        if !(1..=MAX_PASSES).contains(&self.passes) {
+            return Err(format!(
+                "program.passes must be 1 … {MAX_PASSES}, got {}",
+                self.passes
+            ));
+        }
+        if self.passes > 1
+            && !(self.step_over.is_finite()
+                && self.step_over > 0.0
+                && self.step_over * f64::from(self.passes - 1) <= MAX_RASTER_WIDTH)
+        {
+            return Err(format!(
+                "program.step_over must be > 0 m with {} passes, and the raster at most {MAX_RASTER_WIDTH} m wide, got {} m",
+                self.passes, self.step_over
+            ));
+        }
+        if !(self.step_over.is_finite() && self.step_over >= 0.0) {
+            return Err(format!(
+                "program.step_over must be ≥ 0 m, got {}",
+                self.step_over
+            ));
+        }
+        if !(self.transfer_feed.is_finite()
+            && self.transfer_feed > 0.0
+            && self.transfer_feed <= MAX_TRANSFER_FEED)
+        {
+            return Err(format!(
+                "program.transfer_feed must be > 0 and ≤ {MAX_TRANSFER_FEED} m/s, got {}",
+                self.transfer_feed
             ));
         }
         for (i, s) in self.segments.iter().enumerate() {
@@ -193,7 +284,10 @@ impl Program {
 
     /// The longest the program can take, s: its moves, dwells and every wait at its timeout.
     pub fn max_duration(&self) -> f64 {
-        self.segments
+        let length: f64 = self.segments.iter().map(|s| s.length).sum();
+        let transfer = (length + self.step_over) / self.transfer_feed;
+        let pass: f64 = self
+            .segments
             .iter()
             .map(|s| {
                 let mv = if s.length > 0.0 {
@@ -203,7 +297,8 @@ impl Program {
                 };
                 mv + s.dwell + self.wait_timeout
             })
-            .sum()
+            .sum();
+        f64::from(self.passes) * pass + f64::from(self.passes - 1) * transfer
     }
 }
 
@@ -216,6 +311,8 @@ enum Stage {
     Move(f64),
     /// Dwelling, s.
     Dwell(f64),
+    /// Moving in free air to the start of the next pass, m travelled.
+    Transfer(f64),
 }
 
 /// A program running on the simulated controller, one cycle at a time.
@@ -225,6 +322,8 @@ pub struct ProgramRunner {
     i: usize,
     stage: Stage,
     s: f64,
+    pass: u32,
+    transfer_from: (f64, f64),
     state: ProcessState,
     cmd: ProcessCommand,
     last_force: f64,
@@ -240,6 +339,8 @@ impl ProgramRunner {
             i: 0,
             stage: Stage::Wait(0.0),
             s: 0.0,
+            pass: 0,
+            transfer_from: (0.0, 0.0),
             state: ProcessState::default(),
             cmd: ProcessCommand {
                 mode: ProcessMode::Off,
@@ -257,7 +358,19 @@ impl ProgramRunner {
 
     fn enter(&mut self, was_pressing: bool) {
         let Some(seg) = self.program.segments.get(self.i).copied() else {
-            self.done = true;
+            if self.pass + 1 < self.program.passes {
+                // Free air to the start of the next pass, process OFF.
+                self.transfer_from = self.path_xy();
+                self.cmd = ProcessCommand {
+                    mode: ProcessMode::Off,
+                    force: 0.0,
+                    ramp: 0.0,
+                    segment: 0,
+                };
+                self.stage = Stage::Transfer(0.0);
+            } else {
+                self.done = true;
+            }
             return;
         };
         if seg.mode == SegmentMode::Press {
@@ -299,9 +412,27 @@ impl ProgramRunner {
         self.state = state;
     }
 
-    /// Path position, m.
+    /// Path position along the current pass, m.
     pub fn path_position(&self) -> f64 {
         self.s
+    }
+
+    /// The pass under way (0 first).
+    pub fn pass(&self) -> u32 {
+        self.pass
+    }
+
+    /// Where the tool is on the part, base frame from the path's start, m: x along the pass (or on
+    /// the free-air move between passes), y the pass's offset.
+    pub fn path_xy(&self) -> (f64, f64) {
+        if let Stage::Transfer(m) = self.stage {
+            let (x0, y0) = self.transfer_from;
+            let (x1, y1) = (0.0, f64::from(self.pass + 1) * self.program.step_over);
+            let d = ((x1 - x0).powi(2) + (y1 - y0).powi(2)).sqrt();
+            let f = if d > 0.0 { (m / d).min(1.0) } else { 1.0 };
+            return (x0 + (x1 - x0) * f, y0 + (y1 - y0) * f);
+        }
+        (self.s, f64::from(self.pass) * self.program.step_over)
     }
 
     /// True once the last segment ended (or the program was aborted).
@@ -323,6 +454,21 @@ impl ProgramRunner {
     /// Advance one cycle of `dt` seconds.
     pub fn advance(&mut self, dt: f64) {
         if self.done {
+            return;
+        }
+        if let Stage::Transfer(m) = self.stage {
+            let (x0, y0) = self.transfer_from;
+            let y1 = f64::from(self.pass + 1) * self.program.step_over;
+            let d = (x0.powi(2) + (y1 - y0).powi(2)).sqrt();
+            let m = m + self.program.transfer_feed * dt;
+            if m >= d {
+                self.pass += 1;
+                self.s = 0.0;
+                self.i = 0;
+                self.enter(false);
+            } else {
+                self.stage = Stage::Transfer(m);
+            }
             return;
         }
         let seg = self.program.segments[self.i];
@@ -373,6 +519,8 @@ impl ProgramRunner {
                     self.stage = Stage::Dwell(d + dt);
                 }
             }
+            // Handled above.
+            Stage::Transfer(_) => {}
         }
     }
 }
@@ -397,13 +545,16 @@ mod tests {
     fn form_sums_tilt_waves_steps_and_ends_at_the_edge() {
         let f = SurfaceForm {
             tilt: 0.01,
+            tilt_y: 0.0,
             waves: vec![Wave {
                 amplitude: 2e-4,
                 wavelength: 0.025,
+                along: Default::default(),
             }],
             steps: vec![FormStep {
                 at: 0.05,
                 height: -1e-3,
+                along: Default::default(),
             }],
             edge: Some(0.1),
         };
@@ -416,6 +567,7 @@ mod tests {
             waves: vec![Wave {
                 amplitude: 1e-4,
                 wavelength: 0.0,
+                along: Default::default(),
             }],
             ..SurfaceForm::default()
         };
@@ -431,6 +583,9 @@ mod tests {
                 seg(SegmentMode::Release, 0.0, 0.0, 0.0, 3),
             ],
             wait_timeout: 1.0,
+            passes: 1,
+            step_over: 0.0,
+            transfer_feed: 0.1,
         };
         p.validate().unwrap();
         let mut r = ProgramRunner::new(p);
@@ -470,10 +625,111 @@ mod tests {
     }
 
     #[test]
+    fn a_raster_runs_each_pass_a_step_over_further_with_free_air_between() {
+        let p = Program {
+            segments: vec![
+                seg(SegmentMode::Press, 20.0, 0.05, 0.01, 1),
+                seg(SegmentMode::Release, 0.0, 0.0, 0.0, 2),
+            ],
+            wait_timeout: 1.0,
+            passes: 3,
+            step_over: 0.01,
+            transfer_feed: 0.1,
+        };
+        p.validate().unwrap();
+        let mut r = ProgramRunner::new(p.clone());
+        let dt = 0.004;
+        let pressing = ProcessState {
+            phase: ProcessPhase::Pressing,
+            ..ProcessState::default()
+        };
+        let (mut ys, mut off_moves, mut n) = (vec![], 0, 0);
+        while !r.done() && n < 10_000 {
+            // The PC follows the command at once.
+            r.observe(if r.command().mode == ProcessMode::Press {
+                pressing
+            } else {
+                ProcessState::default()
+            });
+            let before = r.path_xy();
+            r.advance(dt);
+            let after = r.path_xy();
+            if r.command().mode == ProcessMode::Off && before != after && r.command().segment == 0 {
+                off_moves += 1;
+            }
+            if r.command().mode == ProcessMode::Press && !ys.contains(&after.1) {
+                ys.push(after.1);
+            }
+            n += 1;
+        }
+        assert!(r.done() && r.aborted().is_none(), "{:?}", r.aborted());
+        assert_eq!(ys, vec![0.0, 0.01, 0.02], "three passes 10 mm apart");
+        // Two free-air moves of √(10² + 10²) mm at 100 mm/s: about 35 cycles each.
+        assert!(
+            (60..=80).contains(&off_moves),
+            "{off_moves} cycles moving with the process OFF"
+        );
+        assert_eq!(r.pass(), 2);
+        let bad = Program {
+            step_over: 0.0,
+            ..p.clone()
+        };
+        assert!(bad.validate().unwrap_err().contains("step_over"));
+        let bad = Program {
+            passes: 0,
+            ..p.clone()
+        };
+        assert!(bad.validate().unwrap_err().contains("passes"));
+        let bad = Program {
+            transfer_feed: f64::NAN,
+            ..p
+        };
+        assert!(bad.validate().unwrap_err().contains("transfer_feed"));
+    }
+
+    #[test]
+    fn a_two_d_form_varies_across_the_path_too() {
+        let f = SurfaceForm {
+            tilt_y: 0.01,
+            waves: vec![Wave {
+                amplitude: 1e-4,
+                wavelength: 0.04,
+                along: Axis::Y,
+            }],
+            steps: vec![FormStep {
+                at: 0.05,
+                height: 3e-4,
+                along: Axis::X,
+            }],
+            ..SurfaceForm::default()
+        };
+        assert!(f.height_at(0.0, 0.0).abs() < 1e-15);
+        assert!(
+            (f.height_at(0.0, 0.01) - (1e-4 + 1e-4)).abs() < 1e-12,
+            "tilt across plus a wave crest"
+        );
+        assert!(
+            (f.height_at(0.06, 0.0) - 3e-4).abs() < 1e-12,
+            "the step across the raster"
+        );
+        assert!(
+            SurfaceForm {
+                tilt_y: 2.0,
+                ..SurfaceForm::default()
+            }
+            .validate()
+            .is_err()
+        );
+    }
+
+    #[test]
     fn a_wait_that_times_out_or_a_fault_aborts_with_off() {
         let p = Program {
             segments: vec![seg(SegmentMode::Press, 20.0, 0.05, 0.01, 1)],
             wait_timeout: 0.1,
+            passes: 1,
+            step_over: 0.0,
+            transfer_feed: 0.1,
         };
         let mut r = ProgramRunner::new(p.clone());
         for _ in 0..30 {

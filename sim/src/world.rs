@@ -116,8 +116,26 @@ impl World {
             .map_or(self.s, ProgramRunner::path_position)
     }
 
-    /// The programmed (uncorrected) tool pose the simulation uses: 0.5 m out, 0.3 m up, tool z pointing
-    /// down onto the workpiece, so the normal axis is base −z.
+    /// Where the programmed path is on the part now, base frame, m: a line runs along base x (x = the
+    /// path position, y = 0); a raster's passes lie `step_over` apart along base y.
+    pub fn path_xy(&self) -> (f64, f64) {
+        self.program
+            .as_ref()
+            .map_or((self.s, 0.0), ProgramRunner::path_xy)
+    }
+
+    /// The programmed (uncorrected) tool pose now: the start pose moved along the path by
+    /// [`World::path_xy`] in the base frame (the tool's normal is base −z, so the move is across it).
+    pub fn programmed_pose(&self) -> Pose {
+        let (x, y) = self.path_xy();
+        Pose {
+            position: self.programmed.position + Vector3::new(x, y, 0.0),
+            orientation: self.programmed.orientation,
+        }
+    }
+
+    /// The programmed (uncorrected) tool pose at the start of the path: 0.5 m out, 0.3 m up, tool z
+    /// pointing down onto the workpiece, so the normal axis is base −z.
     pub fn default_programmed_pose() -> Pose {
         Pose {
             position: Vector3::new(0.5, 0.0, 0.3),
@@ -168,7 +186,8 @@ impl World {
     /// True contact force now, N.
     pub fn true_force(&self) -> f64 {
         // The form shifts the surface: the same as the tool standing back by its height.
-        let h = self.form.height(self.path_position());
+        let (x, y) = self.path_xy();
+        let h = self.form.height_at(x, y);
         self.plant.force(
             self.time(),
             self.inner.position() - h,
@@ -178,7 +197,8 @@ impl World {
 
     /// True surface position now, m (the plant's, plus the form under the tool).
     pub fn surface(&self) -> f64 {
-        self.plant.x_c.at(self.time()) + self.form.height(self.path_position())
+        let (x, y) = self.path_xy();
+        self.plant.x_c.at(self.time()) + self.form.height_at(x, y)
     }
 
     /// True stiffness now, N/m.
@@ -213,7 +233,7 @@ impl World {
 
     /// The measured state as the robot reports it for the current cycle.
     pub fn cycle(&self) -> Cycle {
-        let p = self.programmed;
+        let p = self.programmed_pose();
         let actual = Pose {
             position: p.position + p.orientation * Vector3::new(0.0, 0.0, self.inner.position()),
             orientation: p.orientation,
@@ -385,6 +405,53 @@ mod tests {
     }
 
     #[test]
+    fn the_programmed_pose_follows_the_path_and_the_offset_stays_along_the_normal() {
+        use crate::program::{Segment, SegmentMode};
+        let program = Program {
+            segments: vec![Segment {
+                mode: SegmentMode::Off,
+                force: 0.0,
+                ramp: 0.0,
+                segment: 1,
+                feed: 0.05,
+                length: 0.01,
+                dwell: 0.0,
+            }],
+            wait_timeout: 1.0,
+            passes: 1,
+            step_over: 0.0,
+            transfer_feed: 0.1,
+        };
+        let world = World::new(
+            ContactPlant::spring(70_000.0, 0.01),
+            InnerLoopModel::P0,
+            SensorParams::default(),
+            0.002,
+        )
+        .with_program(program)
+        .shared();
+        let mut robot = InProcRobot::new(world.clone());
+        let start = robot.next_cycle().unwrap();
+        let mut last = start;
+        // 10 mm at 50 mm/s is 0.2 s: run 0.4 s whatever the period.
+        let n = (0.4 / lock(&world).period()).round() as usize;
+        for _ in 0..n {
+            robot.reply(&Correction::along_z(0.002)).unwrap();
+            last = robot.next_cycle().unwrap();
+        }
+        let s = lock(&world).path_position();
+        assert!((s - 0.01).abs() < 1e-12, "the move ran to its end: {s}");
+        let moved = last.programmed.position - start.programmed.position;
+        assert!(
+            (moved.x - s).abs() < 1e-12 && moved.y == 0.0 && moved.z == 0.0,
+            "{moved:?}"
+        );
+        assert!((last.actual.position.x - (0.5 + s)).abs() < 1e-12);
+        assert!((last.tool_offset().z - 0.002).abs() < 1e-12);
+        assert!(last.tool_offset().x.abs() < 1e-12);
+    }
+
+    #[test]
     fn the_program_end_is_stamped_with_the_world_time_it_happened() {
         use crate::program::{Program, Segment, SegmentMode};
         // A PRESS that never sees PRESSING: the program aborts after its wait (20 ms).
@@ -399,6 +466,9 @@ mod tests {
                 dwell: 0.0,
             }],
             wait_timeout: 0.02,
+            passes: 1,
+            step_over: 0.0,
+            transfer_feed: 0.1,
         };
         let mut w = World::new(
             ContactPlant::spring(70_000.0, 0.01),
