@@ -9,7 +9,7 @@ use std::thread;
 use std::time::Duration;
 
 use anyhow::{Context, Result, anyhow, bail};
-use controller::LoopConfig;
+use controller::{LoopConfig, Tuning};
 use hal::{Correction, Cycle, ForceSensor, RobotLink};
 use kuka_rsi::{
     CorrectionMode, Diagnostics, EthernetConfig, Limits, LinkConfig, LinkError, PoscorrLimits,
@@ -133,21 +133,29 @@ pub fn print_link(d: &Diagnostics) {
 /// Robot-side limits wide enough for a tuning's own loop limits, so the driver never acts before the
 /// loop does: the envelope is the loop's `max_offset`, the rate limit its `max_step`, POSCORR 10 % and
 /// POSCORRMON 20 % beyond the envelope. (The scenarios work in absolute normal positions around 10 mm,
-/// beyond RSI's default ±5 mm.)
-pub fn cell_limits(loop_cfg: &LoopConfig) -> (Limits, PoscorrLimits, PoscorrLimits) {
-    let limits = Limits {
+/// beyond RSI's default ±5 mm.) With orientation following (`[orientation]` in the tuning) the
+/// rotation's POSCORR limit is the tuning's `poscorr`, POSCORRMON's 20 % beyond it, and the driver's
+/// envelope 90 % of it (the law's own envelope, `max_angle`, faults first); without it, RSI's defaults.
+pub fn cell_limits(tuning: &Tuning) -> (Limits, PoscorrLimits, PoscorrLimits) {
+    let loop_cfg: &LoopConfig = &tuning.loop_cfg;
+    let mut limits = Limits {
         max_translation: loop_cfg.max_offset,
         max_translation_step: loop_cfg.max_step,
         ..Limits::default()
     };
-    let poscorr = PoscorrLimits {
+    let mut poscorr = PoscorrLimits {
         translation: loop_cfg.max_offset * 1.1,
         ..PoscorrLimits::default()
     };
-    let mon = PoscorrLimits {
+    let mut mon = PoscorrLimits {
         translation: loop_cfg.max_offset * 1.2,
         ..PoscorrLimits::MONITOR_DEFAULT
     };
+    if let Some(o) = &tuning.orientation {
+        poscorr.rotation = o.poscorr;
+        mon.rotation = o.poscorr * 1.2;
+        limits.max_rotation = 0.9 * o.poscorr;
+    }
     (limits, poscorr, mon)
 }
 
@@ -279,7 +287,7 @@ impl RobotSide {
         if spec.scenario.program.is_some() {
             ethernet = ethernet.with_process(ProcessChannels::default());
         }
-        let (limits, poscorr, poscorrmon) = cell_limits(&spec.tuning.loop_cfg);
+        let (limits, poscorr, poscorrmon) = cell_limits(&spec.tuning);
         let mut lc = LinkConfig::new(ethernet.clone(), RobotFilter::Any);
         lc.bind = Some(local);
         lc.period = period_of(&spec.plant);
@@ -387,7 +395,7 @@ impl RobotSide {
             }
         };
         let sentype = ethernet.sentype.clone();
-        let (limits, poscorr, poscorrmon) = cell_limits(&spec.tuning.loop_cfg);
+        let (limits, poscorr, poscorrmon) = cell_limits(&spec.tuning);
         let mut lc = LinkConfig::new(ethernet, RobotFilter::Any);
         lc.bind = Some(addr);
         lc.limits = limits;
@@ -638,7 +646,7 @@ pub fn robot_setup(a: &RsiConfigArgs) -> Result<RobotSetup> {
     let (poscorr, poscorrmon) = match &a.tuning {
         Some(t) => {
             let t = crate::scenario::load_tuning(t)?;
-            let (_, p, m) = cell_limits(&t.loop_cfg);
+            let (_, p, m) = cell_limits(&t);
             (p, m)
         }
         None => (PoscorrLimits::default(), PoscorrLimits::MONITOR_DEFAULT),

@@ -51,6 +51,11 @@ pub struct Row {
     pub fault: Option<u8>,
     /// Path position along the workpiece, m (simulation only: NaN on a real cell and in files).
     pub s: f64,
+    /// On a simulated curved part: the true angle between the tool axis and the surface normal less
+    /// the program's tilt, rad (NaN elsewhere and in files; `docs/curved-parts.md`).
+    pub tilt_error: f64,
+    /// The magnitude of the correction's rotation sent, rad (NaN in files).
+    pub rotation: f64,
 }
 
 impl Row {
@@ -76,6 +81,8 @@ impl Row {
             phase: Some(r.command.process.phase.code() as u8),
             fault: Some(r.command.process.fault.code() as u8),
             s: f64::NAN,
+            tilt_error: f64::NAN,
+            rotation: r.command.rotation.norm(),
         }
     }
 
@@ -113,6 +120,8 @@ impl Row {
             phase: None,
             fault: None,
             s: f64::NAN,
+            tilt_error: f64::NAN,
+            rotation: f64::NAN,
         }
     }
 }
@@ -266,6 +275,8 @@ pub fn read_csv(text: &str) -> Result<Vec<Row>> {
             x_c: v[10],
             condition,
             s: f64::NAN,
+            tilt_error: f64::NAN,
+            rotation: f64::NAN,
         });
     }
     Ok(rows)
@@ -297,6 +308,8 @@ mod tests {
                 phase: Some(3),
                 fault: Some(0),
                 s: f64::NAN,
+                tilt_error: f64::NAN,
+                rotation: f64::NAN,
             };
             2
         ];
