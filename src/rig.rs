@@ -68,6 +68,7 @@ impl RobotLink for SpringRobot {
             actual: Pose::from_position(Vector3::new(0.0, 0.0, self.spring.x.get())),
             programmed: Pose::identity(),
             late_replies: 0,
+            missed: 0,
             new_session: false,
             process: None,
         })

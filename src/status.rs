@@ -198,6 +198,7 @@ mod tests {
                 actual: Pose::identity(),
                 programmed: Pose::identity(),
                 late_replies: late,
+                missed: 0,
                 new_session: false,
                 process: None,
             },

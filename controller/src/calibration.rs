@@ -356,6 +356,7 @@ mod tests {
                 },
                 programmed: Pose::identity(),
                 late_replies: 0,
+                missed: 0,
                 new_session: self.k == 0,
                 process: None,
             })

@@ -85,6 +85,7 @@ mod tests {
             },
             programmed: Pose::identity(),
             late_replies: 0,
+            missed: 0,
             new_session: false,
             process: None,
         }

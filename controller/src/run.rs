@@ -414,6 +414,7 @@ mod tests {
                 actual: Pose::identity(),
                 programmed: Pose::identity(),
                 late_replies: 0,
+                missed: 0,
                 new_session: k == 0,
                 process: process.then_some(ProcessCommand {
                     mode: ProcessMode::Press,

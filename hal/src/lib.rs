@@ -205,6 +205,9 @@ pub struct Cycle {
     pub programmed: Pose,
     /// The robot's own late-reply counter (RSI: `Delay`); anything above zero is an alarm.
     pub late_replies: u32,
+    /// Robot cycles lost before this one in the session so far (gaps in the robot's cycle stamps, as the
+    /// driver counts them); 0 where the link cannot tell.
+    pub missed: u64,
     /// True on the first cycle of a new robot session: references captured from earlier cycles are void.
     pub new_session: bool,
     /// The robot program's process command, when the link carries process channels (RSI: `FcCmd`).
@@ -362,6 +365,7 @@ mod tests {
             actual,
             programmed,
             late_replies: 0,
+            missed: 0,
             new_session: false,
             process: None,
         };

@@ -308,6 +308,14 @@ pub struct Record {
     pub period: f64,
     /// Replies the robot reported late so far.
     pub late_replies: u64,
+    /// Robot cycles lost so far (gaps in the robot's cycle stamps).
+    pub missed: u64,
+    /// The robot's measured tool pose (RSI `RIst`), base frame: position x, y, z (m) and orientation as
+    /// a rotation vector (rad); NaN where unknown.
+    pub pose: [f64; 6],
+    /// The correction sent, tool frame: translation x, y, z (m) and rotation vector (rad); NaN where
+    /// unknown.
+    pub correction: [f64; 6],
     /// Contact state code ([`Coded`] for `Option<ContactState>`; [`NO_STATE`] for laws without a
     /// state machine).
     pub state: u8,
@@ -316,6 +324,12 @@ pub struct Record {
 }
 
 const NAN6: [f64; 6] = [f64::NAN; 6];
+
+/// A pose as position (m) and rotation vector (rad).
+fn pose6(p: &hal::Pose) -> [f64; 6] {
+    let r = p.orientation.scaled_axis();
+    [p.position.x, p.position.y, p.position.z, r.x, r.y, r.z]
+}
 
 impl Record {
     /// The record of an answered cycle with set-point `f_r`; the process segment, command and state
@@ -340,6 +354,16 @@ impl Record {
             robot_seq: r.cycle.seq,
             period: r.cycle.period,
             late_replies: u64::from(r.cycle.late_replies),
+            missed: r.cycle.missed,
+            pose: pose6(&r.cycle.actual),
+            correction: [
+                r.command.translation.x,
+                r.command.translation.y,
+                r.command.translation.z,
+                r.command.rotation.x,
+                r.command.rotation.y,
+                r.command.rotation.z,
+            ],
             state: r.out.state.map_or(NO_STATE, ContactState::code),
             events: event_bits(&r.out.events),
         }
@@ -356,6 +380,9 @@ impl Record {
             robot_seq: 0,
             period: f64::NAN,
             late_replies: 0,
+            missed: 0,
+            pose: NAN6,
+            correction: NAN6,
             state: NO_STATE,
             events: 0,
         }
@@ -791,6 +818,53 @@ pub const ROBOT: MessageType = MessageType {
             get: |r| Value::U64(r.late_replies),
             set: |r, v| r.late_replies = v.u64(),
         },
+        Field {
+            name: "missed",
+            number: 4,
+            ty: Type::Uint64,
+            optional: false,
+            unit: "",
+            description: "robot cycles lost so far (gaps in the robot's cycle stamps)",
+            label: "missed cycles",
+            get: |r| Value::U64(r.missed),
+            set: |r, v| r.missed = v.u64(),
+        },
+        message!(
+            "pose",
+            5,
+            &POSE,
+            "the measured tool pose (absent: unknown)",
+            |r| r.pose.iter().all(|v| v.is_finite())
+        ),
+    ],
+};
+
+/// `forcecell.Pose`: the robot's measured tool pose, base frame.
+pub const POSE: MessageType = MessageType {
+    name: "Pose",
+    description: "the robot's measured tool pose (RSI RIst), base frame: position and rotation vector",
+    fields: &[
+        float!("x", 1, "m", "position x", |r| r.pose[0]),
+        float!("y", 2, "m", "position y", |r| r.pose[1]),
+        float!("z", 3, "m", "position z", |r| r.pose[2]),
+        float!("rx", 4, "rad", "rotation vector x", |r| r.pose[3]),
+        float!("ry", 5, "rad", "rotation vector y", |r| r.pose[4]),
+        float!("rz", 6, "rad", "rotation vector z", |r| r.pose[5]),
+    ],
+};
+
+/// `forcecell.Correction`: the correction sent, tool frame.
+pub const CORRECTION: MessageType = MessageType {
+    name: "Correction",
+    description: "the correction sent to the robot, tool frame: translation and rotation vector",
+    fields: &[
+        float!("x", 1, "m", "translation x", |r| r.correction[0]),
+        float!("y", 2, "m", "translation y", |r| r.correction[1]),
+        float!("z", 3, "m", "translation z (along the tool normal)", |r| r
+            .correction[2]),
+        float!("rx", 4, "rad", "rotation about tool x", |r| r.correction[3]),
+        float!("ry", 5, "rad", "rotation about tool y", |r| r.correction[4]),
+        float!("rz", 6, "rad", "rotation about tool z", |r| r.correction[5]),
     ],
 };
 
@@ -965,6 +1039,13 @@ pub const CYCLE: MessageType = MessageType {
         message!("robot", 8, &ROBOT, "the robot's cycle", |_r| true),
         message!("sensor", 9, &SENSOR, "the sensor's sample", |_r| true),
         message!("process", 10, &PROCESS, "the force process", |_r| true),
+        message!(
+            "correction",
+            11,
+            &CORRECTION,
+            "the correction sent (absent: unknown)",
+            |r| r.correction.iter().all(|v| v.is_finite())
+        ),
     ],
 };
 
@@ -1656,6 +1737,31 @@ mod tests {
         );
         // Truncated: an error, not a panic.
         assert!(decode(&CYCLE, &buf[..buf.len() - 3], &mut back).is_err());
+    }
+
+    #[test]
+    fn the_pose_the_correction_and_the_missed_cycles_round_trip() {
+        let mut rec = sample();
+        rec.missed = 7;
+        rec.pose = [0.5, -0.125, 0.3, std::f64::consts::PI, 0.0, 0.0];
+        rec.correction = [0.0, 0.0, 0.001, 0.0, -0.01, 0.0];
+        let mut buf = Vec::new();
+        encode(&CYCLE, &rec, &mut buf);
+        let mut back = Record::unknown();
+        decode(&CYCLE, &buf, &mut back).unwrap();
+        assert_eq!(back.missed, 7);
+        for (x, y) in back.pose.iter().zip(rec.pose) {
+            assert!(same(*x, f64::from(y as f32)), "pose {x} vs {y}");
+        }
+        for (x, y) in back.correction.iter().zip(rec.correction) {
+            assert!(same(*x, f64::from(y as f32)), "correction {x} vs {y}");
+        }
+        // Unknown poses and corrections are left out, and read back unknown (as in older files).
+        let mut buf = Vec::new();
+        encode(&CYCLE, &sample(), &mut buf);
+        let mut back = Record::unknown();
+        decode(&CYCLE, &buf, &mut back).unwrap();
+        assert!(back.pose.iter().chain(&back.correction).all(|v| v.is_nan()));
     }
 
     #[test]

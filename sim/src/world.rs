@@ -286,6 +286,7 @@ impl World {
             actual,
             programmed: p,
             late_replies: 0,
+            missed: 0,
             new_session: false,
             process: self.process_command(),
         }

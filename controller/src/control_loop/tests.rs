@@ -14,6 +14,7 @@ fn cycle_at(seq: u64, x: f64) -> Cycle {
         actual: Pose::from_position(Vector3::new(0.0, 0.0, x)),
         programmed: Pose::identity(),
         late_replies: 0,
+        missed: 0,
         new_session: false,
         process: None,
     }

@@ -36,6 +36,25 @@ pub struct Identified {
     pub projected: bool,
 }
 
+/// The identification's output for the rest of a step ([`Identifier::estimate`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Estimate {
+    /// `k̂_c`, N/m.
+    pub kc: f64,
+    /// Relative standard deviation of `k̂_c`.
+    pub kc_rel_sd: f64,
+    /// Surface damping `ĉ_e`, N·s/m.
+    pub damping: f64,
+    /// A contact onset's window is open ([`Identifier::onset_open`]).
+    pub onset_open: bool,
+    /// A transient is being fitted ([`Identifier::fitting`]).
+    pub fitting: bool,
+    /// The recursion is held after a re-contact ([`Identifier::held`]).
+    pub held: bool,
+    /// The force a jump under a steady contact rose to, while its re-fit has not resolved it, N.
+    pub unresolved_jump: Option<f64>,
+}
+
 /// The stiffness identification.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Identifier {
@@ -106,6 +125,19 @@ impl Identifier {
         self.c_e = 0.0;
         self.recontact_hold = 0.0;
         self.before_touch_down = None;
+    }
+
+    /// What is identified now.
+    pub fn estimate(&self) -> Estimate {
+        Estimate {
+            kc: self.kc(),
+            kc_rel_sd: self.kc_rel_sd(),
+            damping: self.damping(),
+            onset_open: self.onset_open(),
+            fitting: self.fitting(),
+            held: self.held(),
+            unresolved_jump: self.unresolved_jump(),
+        }
     }
 
     /// `k̂_c`, N/m.

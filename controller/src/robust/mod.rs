@@ -60,6 +60,7 @@ use crate::law::{ContactState, EventCounts, Events, ForceLaw, Output};
 pub mod cell;
 mod compose;
 pub mod contact;
+pub mod context;
 pub mod guards;
 pub mod identify;
 pub mod limiter;
@@ -75,10 +76,11 @@ mod tests;
 
 pub use cell::{CellParams, CycleMeter};
 pub use contact::{ContactMachine, ContactParams, Transition};
-pub use identify::{Identifier, IdentifyParams};
+pub use context::Context;
+pub use identify::{Estimate, Identifier, IdentifyParams};
 pub use limiter::{LimitParams, Limiter};
-pub use noise::{NoiseMeter, NoiseParams};
-pub use observer::{ObserverParams, SurfaceObserver};
+pub use noise::{NoiseEstimate, NoiseMeter, NoiseParams};
+pub use observer::{ObserverParams, SurfaceObserver, SurfaceStatus};
 pub use params::RobustParams;
 pub(crate) use params::{at_least, non_negative, positive};
 pub use response::{Response, ResponseParams};
@@ -195,9 +197,10 @@ impl ForceLaw for RobustLaw {
             return self.output(ev);
         }
         let cycle = self.cycle.step(dt);
-        self.response.slew(self.p.f_r, dt);
+        let set_point = self.response.slew(self.p.f_r, dt);
         let s = self.signals.step(x, f, dt, self.p.cell.sensor_delay);
-        self.noise.step(f, dt);
+        let noise = self.noise.step(f, dt);
+        let ctx = self.context(dt, cycle, set_point, noise);
         if matches!(
             self.contact.state(),
             ContactState::Approach | ContactState::Reacquire
@@ -205,7 +208,7 @@ impl ForceLaw for RobustLaw {
             self.identify.remember(x, f, s.v_raw, cycle);
         }
         let receding = self.observer.receding();
-        let th = self.thresholds(cycle);
+        let th = self.thresholds(&ctx);
         match self
             .contact
             .step(&s, &th, self.p.limits.max_force, receding, dt)
@@ -227,13 +230,14 @@ impl ForceLaw for RobustLaw {
             }
         }
         let in_contact = self.contact.state() == ContactState::Contact;
-        let moving = self
+        let surface = self
             .observer
             .hold(s.v_x, self.p.estimator.max_surface_speed, in_contact, dt);
         if in_contact {
-            self.identify_in_contact(&s, th.lift, cycle, moving, &mut ev, dt);
+            self.identify_in_contact(&s, &ctx, th.lift, &surface, &mut ev);
         }
-        let want = self.command(x, &s, &th, cycle, dt);
+        let est = self.identify.estimate();
+        let want = self.command(x, &s, &th, &ctx, &est);
         if want.is_finite() {
             self.limiter.step(want, dt, &mut ev);
         } else {

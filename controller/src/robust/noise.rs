@@ -46,6 +46,17 @@ impl NoiseParams {
     }
 }
 
+/// The noise meter's output: what it has measured so far.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NoiseEstimate {
+    /// The noise variance, N².
+    pub var: f64,
+    /// The noise standard deviation, N.
+    pub std: f64,
+    /// How long the noise has been measured since the reset, s.
+    pub age: f64,
+}
+
 /// Online estimate of the force sensor's noise variance.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NoiseMeter {
@@ -80,8 +91,8 @@ impl NoiseMeter {
         self.age = 0.0;
     }
 
-    /// Count one raw force sample `f` after a step of `dt`.
-    pub fn step(&mut self, f: f64, dt: f64) {
+    /// Count one raw force sample `f` after a step of `dt`; returns the estimate.
+    pub fn step(&mut self, f: f64, dt: f64) -> NoiseEstimate {
         if let Some((p1, Some(p2))) = self.prev {
             // The first second difference is taken whole: there is no estimate yet to clip it at.
             let clip = if self.age == 0.0 {
@@ -95,6 +106,16 @@ impl NoiseMeter {
             self.var += a * (d2 * d2 / SECOND_DIFFERENCE_GAIN - self.var);
         }
         self.prev = Some((f, self.prev.map(|p| p.0)));
+        self.estimate()
+    }
+
+    /// What has been measured so far.
+    pub fn estimate(&self) -> NoiseEstimate {
+        NoiseEstimate {
+            var: self.var,
+            std: self.var.sqrt(),
+            age: self.age,
+        }
     }
 
     /// The noise variance, N².

@@ -53,6 +53,42 @@ pub struct View {
     pub step_time: f64,
 }
 
+/// The observer's output for a step ([`SurfaceObserver::hold`]): what it knows of the surface's motion.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SurfaceStatus {
+    /// The estimator is to take the surface for a moving one.
+    pub moving: bool,
+    /// No surface motion is established.
+    pub still: bool,
+    /// The observed surface went further than a still one can appear to ([`SurfaceObserver::drifted`]).
+    pub drifted: bool,
+    /// Anything moved or jumped lately ([`SurfaceObserver::disturbed`]).
+    pub disturbed: bool,
+    /// Motion is held that began after a calm contact ([`SurfaceObserver::moving_after_calm`]).
+    pub moving_after_calm: bool,
+    /// A jump started at the last step on a still surface ([`SurfaceObserver::jump_on_still_surface`]).
+    pub jump_on_still_surface: bool,
+}
+
+impl View {
+    /// The view of conditioned signals `s` through stiffness `k` (N/m) with the identified damping
+    /// `c_e` (N·s/m) taken out of the force, in the step's context.
+    pub fn new(s: &crate::robust::Signals, k: f64, c_e: f64, ctx: &crate::robust::Context) -> Self {
+        Self {
+            x: s.x,
+            f: s.f - c_e * s.v_raw,
+            xf: s.xf,
+            ff: s.ff - c_e * s.v_x,
+            v_raw: s.v_raw,
+            k,
+            force_scale: ctx.force_scale,
+            noise_var: ctx.noise.var,
+            noise_gain: ctx.noise_gain,
+            step_time: ctx.step_time,
+        }
+    }
+}
+
 /// Surface observer, predictor and motion tests.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SurfaceObserver {
@@ -169,12 +205,26 @@ impl SurfaceObserver {
         !self.motion.still() || self.jump_time > 0.0 || self.pred_jump_time > 0.0
     }
 
-    /// Run the motion holds for a step; `v_x` is the conditioned position's velocity. Returns whether
-    /// the estimator is to take the surface for a moving one.
-    pub fn hold(&mut self, v_x: f64, max_surface_speed: f64, in_contact: bool, dt: f64) -> bool {
+    /// Run the motion holds for a step; `v_x` is the conditioned position's velocity. Returns what the
+    /// observer knows of the surface's motion for the rest of the step.
+    pub fn hold(
+        &mut self,
+        v_x: f64,
+        max_surface_speed: f64,
+        in_contact: bool,
+        dt: f64,
+    ) -> SurfaceStatus {
         let thr = threshold(max_surface_speed, &self.p, self.pred.velocity_std());
         let moving = surface_moving(self.vc, v_x, thr) && self.passing <= 0.0;
-        self.motion.hold(&self.p, moving && in_contact, dt) || moving
+        let moving = self.motion.hold(&self.p, moving && in_contact, dt) || moving;
+        SurfaceStatus {
+            moving,
+            still: self.still(),
+            drifted: self.drifted(),
+            disturbed: self.disturbed(),
+            moving_after_calm: self.moving_after_calm(),
+            jump_on_still_surface: self.jump_on_still_surface(),
+        }
     }
 
     /// A new `k̂_c` moves the observed surface `x − f/k̂_c` by the force times the change of `1/k̂_c`:

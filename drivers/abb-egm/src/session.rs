@@ -456,6 +456,7 @@ impl EgmSession {
             actual,
             programmed,
             late_replies: 0,
+            missed: 0,
             new_session,
             process,
         };

@@ -465,6 +465,7 @@ impl RsiSession {
             actual: wire::pose_from_wire(f.get6(self.rob_slots.rist)),
             programmed: wire::pose_from_wire(f.get6(self.rob_slots.rsol)),
             late_replies: delay,
+            missed: c.missed,
             new_session,
             process: self.rob_slots.process.map(|p| p.decode(f)),
         };
@@ -776,9 +777,14 @@ mod tests {
         assert_eq!(s.diagnostics().counters.stale, 2);
         assert_eq!(s.diagnostics().counters.missed, 0, "none lost so far");
         // 1008 and 1012 never arrived: two robot cycles missed (4 ms each, IPOC in ms).
-        s.receive(&rob(&s, 1016, 300.0, cmd), robot(), t0 + ms(16))
+        let after_gap = s
+            .receive(&rob(&s, 1016, 300.0, cmd), robot(), t0 + ms(16))
             .unwrap();
         assert_eq!(s.diagnostics().counters.missed, 2);
+        assert_eq!(
+            after_gap.missed, 2,
+            "the cycle carries the count to the loop"
+        );
         use hal::Error as _;
         assert_eq!(
             Rejected::Stale { ipoc: 1, last: 2 }.kind(),

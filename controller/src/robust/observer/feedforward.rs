@@ -1,6 +1,7 @@
 //! The feed-forward: the predictor run on the raw surface `x − f/k̂_c`, its jump test, the motion
 //! tests it feeds, and the command that puts the tool on the surface predicted the delay ahead.
 
+use super::super::Context;
 use super::super::guards::VARIANCE_GUARD;
 use super::super::motion::threshold;
 use super::{SurfaceObserver, View};
@@ -18,21 +19,17 @@ pub struct FeedForward {
 }
 
 impl SurfaceObserver {
-    /// The feed-forward for a cell of `lag` and `delay` (s) at `cycle` (s); `lead` is the whole lead
-    /// time of the fallback (lag, delay and conditioning), `jerk`, `noise_floor` and `deadband` the
-    /// response's surface parameters.
-    #[allow(clippy::too_many_arguments)]
+    /// The feed-forward in the step's context `ctx` (the cell's lag and delay, the cycle, the whole
+    /// lead time of the fallback: lag, delay and conditioning); `r` holds the response's surface
+    /// parameters (jerk, noise floor, dead-band, acceleration).
     pub fn feedforward(
         &mut self,
         s: &View,
+        ctx: &Context,
         r: &super::super::ResponseParams,
         max_surface_speed: f64,
-        lag: f64,
-        delay: f64,
-        cycle: f64,
-        lead: f64,
-        dt: f64,
     ) -> FeedForward {
+        let (lag, delay, cycle, lead, dt) = (ctx.lag, ctx.loop_delay, ctx.cycle, ctx.lead, ctx.dt);
         let (p, k, floor) = (self.p, s.k, r.noise_floor);
         let var = (s.noise_var + floor * floor) / (k * k);
         // A jump: beyond a share of the set-point's penetration, or far beyond a cycle of motion and

@@ -1,6 +1,30 @@
 //! Unit tests of the surface observer.
 
 use super::*;
+use crate::robust::Context;
+use crate::robust::noise::NoiseEstimate;
+
+/// A step's context with the cell's `lag` and `delay`, the `cycle`, the whole `lead` and the step `dt`
+/// (what the feed-forward reads of it).
+fn ctx(lag: f64, delay: f64, cycle: f64, lead: f64, dt: f64) -> Context {
+    Context {
+        dt,
+        cycle,
+        set_point: 5.0,
+        force_scale: 5.0,
+        noise: NoiseEstimate {
+            var: 0.0,
+            std: 0.0,
+            age: 0.0,
+        },
+        noise_gain: 1.0,
+        step_time: 0.03,
+        filter_delay: 0.0,
+        lag,
+        loop_delay: delay,
+        lead,
+    }
+}
 
 fn view(xf: f64, ff: f64) -> View {
     View {
@@ -76,7 +100,7 @@ fn a_jump_seen_raw_starts_a_jump_and_is_no_motion_while_it_passes() {
             ..view(x, ff)
         };
         o.track(&s, 8.0, dt);
-        o.feedforward(&s, &r, 1e-3, 0.01, 0.004, dt, 0.03, dt);
+        o.feedforward(&s, &ctx(0.01, 0.004, dt, 0.03, dt), &r, 1e-3);
     };
     for _ in 0..200 {
         step(&mut o, 5.0, 5.0);
@@ -90,7 +114,7 @@ fn a_jump_seen_raw_starts_a_jump_and_is_no_motion_while_it_passes() {
         if i == 1 {
             assert!(o.jump_on_still_surface(), "the raw jump starts a jump");
         }
-        moving |= o.hold(0.0, 1e-3, true, dt);
+        moving |= o.hold(0.0, 1e-3, true, dt).moving;
     }
     assert!(
         !moving && o.still(),
@@ -117,7 +141,7 @@ fn soft_pad_step(p: ObserverParams) -> (bool, f64, f64) {
             ..view(x, ff)
         };
         o.track(&s, 8.0, dt);
-        let ff = o.feedforward(&s, &r, 1e-3, 0.01, 0.012, dt, 0.03, dt);
+        let ff = o.feedforward(&s, &ctx(0.01, 0.012, dt, 0.03, dt), &r, 1e-3);
         o.hold(0.0, 1e-3, true, dt);
         (ff.weight, ff.fallback)
     };
@@ -189,7 +213,7 @@ fn a_new_stiffness_estimate_is_no_surface_motion() {
             ..view(x, f)
         };
         o.track(&s, 8.0, dt);
-        o.feedforward(&s, &r, 1e-3, 0.010, 0.024, dt, 0.04, dt)
+        o.feedforward(&s, &ctx(0.010, 0.024, dt, 0.04, dt), &r, 1e-3)
     };
     for _ in 0..50 {
         step(&mut o, k);
