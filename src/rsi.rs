@@ -588,7 +588,18 @@ impl RobotLink for ExternalRobot<'_> {
             }
         }
         if let Some(at) = at {
-            w.advance(Some(&Correction::along_z(at)));
+            // The reported rotation from the programmed pose turns the world's tool too (on a curved
+            // part, docs/curved-parts.md; the 1-DOF plant has no rotation and ignores it).
+            let turned = (c.programmed.orientation.inverse() * c.actual.orientation).scaled_axis();
+            let rotation = if turned.iter().all(|v| v.is_finite()) {
+                turned
+            } else {
+                hal::Vector3::zeros()
+            };
+            w.advance(Some(&Correction {
+                rotation,
+                ..Correction::along_z(at)
+            }));
         }
         // A client that sends no `FcCmd` gets the scenario's program (if it has one) run on its
         // behalf; one that does runs its own.

@@ -128,7 +128,11 @@ fn a_rotation_at_its_envelope_faults_and_backs_off_with_the_tool_turned_back() {
 fn a_saturated_moment_holds_the_rotation_and_counts_it() {
     // Every moment of the pass is beyond the believed range: the tool never turns.
     let run = cylinder_with(|o| o.max_moment = 1e-4, |_| {});
-    assert!(run.law_events.orientation_holds > 100, "{:?}", run.law_events);
+    assert!(
+        run.law_events.orientation_holds > 100,
+        "{:?}",
+        run.law_events
+    );
     assert!(run.rows.iter().all(|r| r.rotation == 0.0));
 }
 
@@ -156,5 +160,8 @@ fn a_stale_or_nan_sample_holds_the_rotation_and_never_reaches_the_command() {
         .filter(|r| r.t > 1.505 && r.t < 1.535)
         .map(|r| r.rotation)
         .collect();
-    assert!(held.len() >= 5 && held.windows(2).all(|w| w[0] == w[1]), "{held:?}");
+    assert!(
+        held.len() >= 5 && held.windows(2).all(|w| w[0] == w[1]),
+        "{held:?}"
+    );
 }
