@@ -83,7 +83,7 @@ fn every_curved_pass_meets_its_targets_on_p1_and_p2_and_misses_them_without_foll
                     // Along the normal only: the tool never turns, and the tilt stays the part's.
                     assert_eq!(m.max_rotation, 0.0, "{name} on {plant}");
                     assert!(
-                        !(m.tilt_error_max <= TWO_DEG),
+                        m.tilt_error_max > TWO_DEG,
                         "{name} on {plant} without following: tilt error {} rad is expected beyond 2°",
                         m.tilt_error_max
                     );

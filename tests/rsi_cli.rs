@@ -472,3 +472,41 @@ fn a_tight_rate_limit_does_not_drag_the_tool_back_at_start() {
         "RSI and in-process robots differ by {worst} m"
     );
 }
+
+#[test]
+fn rsi_config_with_orientation_following_writes_the_rotation_limits_of_the_tuning() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = forcecell(
+        &["rsi-config", "--tuning", "robust-curved", "--out", "curved"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let krl = std::fs::read_to_string(dir.path().join("curved/forcecell_rsi.src")).unwrap();
+    // POSCORR's rotation limit is the tuning's `poscorr` (0.26 rad), POSCORRMON's 20 % beyond it.
+    let poscorr = 0.26f64.to_degrees();
+    assert!(
+        krl.contains(&format!("MaxRotAngle {poscorr:.3} deg  <- RKorr.X..C")),
+        "{krl}"
+    );
+    assert!(
+        krl.contains("POSCORRMON MaxTrans")
+            && krl.contains(&format!("MaxRotAngle {:.3} deg", poscorr * 1.2)),
+        "{krl}"
+    );
+    // The rotational channels are in the config the robot reads.
+    let xml = std::fs::read_to_string(dir.path().join("curved/forcecell_rsi.xml")).unwrap();
+    for a in ["A", "B", "C"] {
+        assert!(xml.contains(&format!("RKorr.{a}")), "{a}: {xml}");
+    }
+    // Without orientation following: RSI's default 5°.
+    let o = forcecell(
+        &["rsi-config", "--tuning", "robust", "--out", "flat"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let krl = std::fs::read_to_string(dir.path().join("flat/forcecell_rsi.src")).unwrap();
+    assert!(
+        krl.contains("MaxRotAngle 5.000 deg  <- RKorr.X..C"),
+        "{krl}"
+    );
+}

@@ -82,9 +82,10 @@ impl OrientationParams {
         pos("min_force", self.min_force)?;
         pos("stiffness", self.stiffness)?;
         // Past 30° a pad is on its edge and the full-contact moment model means nothing.
-        if self.max_angle > 0.5236 || self.poscorr > 0.5236 {
+        let most = core::f64::consts::FRAC_PI_6;
+        if self.max_angle > most || self.poscorr > most {
             return Err(format!(
-                "orientation.max_angle {} and poscorr {} must be at most 0.5236 rad (30°)",
+                "orientation.max_angle {} and poscorr {} must be at most π/6 rad (30°)",
                 self.max_angle, self.poscorr
             ));
         }
@@ -302,7 +303,8 @@ mod tests {
     /// The wrench of a flat pad tilted by `psi` (rotation from tool axis to normal) at 20 N, with
     /// the lever of a sensor 0.1 m behind the TCP and friction `fx` along the feed.
     fn tilted(psi: [f64; 2], fx: f64) -> Wrench {
-        let big_k = 10_000.0 * 0.02 * 0.02 / 4.0;
+        let r: f64 = 0.02;
+        let big_k = 10_000.0 * r * r / 4.0;
         let phi = (psi[0] * psi[0] + psi[1] * psi[1]).sqrt();
         let scale = if phi > 0.0 {
             phi.sin() * phi.cos() / phi

@@ -41,7 +41,7 @@ use serde::{Deserialize, Serialize};
 use crate::inner::{InnerLoop, InnerLoopModel};
 
 /// The largest rotation of the part, of the program's tilt, accepted, rad (30°).
-pub const MAX_ANGLE: f64 = 0.5236;
+pub const MAX_ANGLE: f64 = core::f64::consts::FRAC_PI_6;
 
 /// The simulated sensor's torque imperfections are its force's times this arm, m (an F/T sensor's
 /// torque noise in N·m is about its force noise in N times a few centimetres).
@@ -472,7 +472,8 @@ mod tests {
             st.tilt
         );
         // Moment about the TCP: −K·ψ with K = k r²/4 (to first order in ψ).
-        let kr = 10_000.0 * 0.02 * 0.02 / 4.0;
+        let r: f64 = 0.02;
+        let kr = 10_000.0 * r * r / 4.0;
         let m = -kr * (0.05f64).sin() * (0.05f64).cos();
         assert!((st.torque.x - m).abs() < 0.01 * m.abs(), "{:?}", st.torque);
         assert!(st.torque.y.abs() < 1e-12);
