@@ -19,6 +19,7 @@ fn args(robot: RobotBackend) -> RsiArgs {
         external_robot: None,
         process_channels: false,
         ethernet_config: None,
+        sensor_link: None,
     }
 }
 

@@ -27,8 +27,10 @@ pub struct RsiArgs {
     /// Run the simulated controller on the wall clock (one datagram per period) instead of lockstep.
     #[arg(long)]
     pub realtime: bool,
-    /// Start no simulated controller: listen on ADDR:PORT for any RSI client (a real KRC, another
-    /// simulator); the simulated sensor computes force from the pose that client reports.
+    /// The dry run. RSI: start no simulated controller, listen on ADDR:PORT for any RSI client (a real
+    /// KRC, another simulator); the simulated sensor computes force from the pose that client reports.
+    /// With `--robot egm`: play the simulated IRC5 for an EGM client listening on ADDR:PORT (e.g.
+    /// `forcecell run` with a `kind = "abb-egm"` cell file), with a simulated FT 300 for its sensor.
     #[arg(long, value_name = "ADDR:PORT")]
     pub external_robot: Option<SocketAddr>,
     /// With `--external-robot`: the client runs its own robot program over the process channels
@@ -41,6 +43,11 @@ pub struct RsiArgs {
     /// what it says the robot sends and answers in its layout (default: `forcecell rsi-config`'s).
     #[arg(long, value_name = "FILE", requires = "external_robot")]
     pub ethernet_config: Option<std::path::PathBuf>,
+    /// With `--external-robot` and `--robot egm`: where the simulated FT 300 that measures the virtual
+    /// workpiece is linked (the client's `[sensor] port`); default: the pseudo-terminal's own path,
+    /// printed.
+    #[arg(long, value_name = "PATH", requires = "external_robot")]
+    pub sensor_link: Option<std::path::PathBuf>,
 }
 
 /// The default wire: the RSI driver against the simulated KUKA controller over loopback UDP, in lockstep.
@@ -52,6 +59,7 @@ impl Default for RsiArgs {
             external_robot: None,
             process_channels: false,
             ethernet_config: None,
+            sensor_link: None,
         }
     }
 }
@@ -334,6 +342,10 @@ pub struct EgmConfigArgs {
     /// The longest wait of the handshake (PRESSING, OFF), s.
     #[arg(long, default_value_t = 5.0)]
     pub max_wait: f64,
+    /// The path-correction range per axis, mm: the cell file's `robot.correction_mm` (forcecell's
+    /// envelope stays within 90 % of it).
+    #[arg(long, default_value_t = 5.0)]
+    pub correction_mm: f64,
     /// Output directory.
     #[arg(long, default_value = "out/egm")]
     pub out: PathBuf,

@@ -1,5 +1,6 @@
-//! `forcecell run`: the controller on a real cell, wired from one TOML file — the KUKA RSI link, the ATI
-//! sensor polled over SocketCAN, gravity compensation, a tuning — recorded to MCAP (CSV exported) and plotted.
+//! `forcecell run`: the controller on a real cell, wired from one TOML file — the robot link (KUKA RSI,
+//! or ABB EGM path correction with `kind = "abb-egm"`: [`crate::robot`]), the ATI sensor polled over
+//! SocketCAN, gravity compensation, a tuning — recorded to MCAP (CSV exported) and plotted.
 //!
 //! ```toml
 //! tuning = "robust"                 # built-in name or a tuning file
@@ -55,56 +56,7 @@ use crate::record::Row;
 use crate::recorder::{Record, Recorder, RecorderOptions};
 use crate::scenario::load_tuning;
 
-/// The robot side of a cell.
-#[derive(Clone, Debug, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct RobotConfig {
-    /// Where forcecell listens (the Ethernet config's `IP_NUMBER:PORT`).
-    pub listen: SocketAddr,
-    /// The robot controller's address: only its datagrams are accepted.
-    pub robot_ip: IpAddr,
-    /// The robot's Ethernet config file; default: the layout `forcecell rsi-config` writes.
-    #[serde(default)]
-    pub ethernet_config: Option<PathBuf>,
-    /// `absolute` (default) or `relative`.
-    #[serde(default)]
-    pub mode: ModeName,
-    /// Interpolation cycle, ms: 4 or 12.
-    #[serde(default = "default_cycle_ms")]
-    pub cycle_ms: u32,
-    /// Robot silent this many cycles → the run ends.
-    #[serde(default = "default_watchdog")]
-    pub watchdog_cycles: u32,
-    /// The robot's POSCORR translation limit, mm.
-    #[serde(default = "default_poscorr")]
-    pub poscorr_mm: f64,
-    /// The robot's POSCORRMON translation limit, mm.
-    #[serde(default = "default_poscorrmon")]
-    pub poscorrmon_mm: f64,
-    /// The fastest the tool moves while RSI runs, m/s: a reported pose jump beyond it is a counted
-    /// fault (`implausible`), never a control input.
-    #[serde(default = "default_max_speed")]
-    pub max_speed: f64,
-    /// The robot program commands the process over RSI's process channels (`FcCmd` in, `FcState`
-    /// out; docs/wire-rsi.md), as `forcecell rsi-config` configures a robot by default.
-    /// Used when `ethernet_config` is not given (a given file says it itself). `false`: force
-    /// control from the first cycle at the tuning's set-point.
-    #[serde(default)]
-    pub process: bool,
-    /// The robot's late-reply budget: the RSI ETHERNET object's `Timeout` (late replies tolerated
-    /// before RSI stops the robot; RSI's default 100, as `rsi-config` writes it). The status line and
-    /// the summary count the robot's late replies against it and warn at half.
-    #[serde(default = "default_timeout")]
-    pub timeout: u32,
-}
-
-fn default_timeout() -> u32 {
-    100
-}
-
-/// The largest late-reply budget accepted (`robot.timeout`): more than a minute of late replies at
-/// 4 ms is no budget.
-pub const MAX_TIMEOUT: u32 = 10_000;
+pub use crate::robot::{MAX_TIMEOUT, RobotConfig};
 
 /// Correction mode by name.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
@@ -115,22 +67,6 @@ pub enum ModeName {
     Absolute,
     /// `#RELATIVE`.
     Relative,
-}
-
-fn default_cycle_ms() -> u32 {
-    4
-}
-fn default_watchdog() -> u32 {
-    25
-}
-fn default_poscorr() -> f64 {
-    5.0
-}
-fn default_poscorrmon() -> f64 {
-    6.0
-}
-fn default_max_speed() -> f64 {
-    LinkConfig::DEFAULT_MAX_SPEED
 }
 
 /// The force sensor of a cell.
@@ -276,6 +212,19 @@ impl SensorConfig {
                     ),
                     None => println!("sensor: Robotiq FT 300, found streaming (identity not read)"),
                 }
+                // Start-up ends at the 410 write: the first frame follows within a frame or two.
+                // The loop must not begin (and hold, and fault) before it, however fast the robot's
+                // first cycles come: wait for it, bounded.
+                let t0 = std::time::Instant::now();
+                while ft.health() == robotiq::Health::Waiting && t0.elapsed() < FIRST_FRAME_WAIT {
+                    std::thread::sleep(Duration::from_millis(2));
+                }
+                if ft.health() == robotiq::Health::Waiting {
+                    eprintln!(
+                        "warning: the FT 300 sent no frame within {} ms of its start-up",
+                        FIRST_FRAME_WAIT.as_millis()
+                    );
+                }
                 if zero_at_start {
                     let bias = ft.zero(crate::robotiq::zero_config())?;
                     println!("zero taken (N, N·m): {:.3?}", bias.to_array());
@@ -351,6 +300,9 @@ impl ForceSensor for CellSensor {
         }
     }
 }
+
+/// How long opening an FT 300 waits for its first frame after start-up (ten frames of 10 ms).
+const FIRST_FRAME_WAIT: Duration = Duration::from_millis(100);
 
 /// The poll rates a cell's ATI sensor accepts, Hz (as `sensor ati read --rate`).
 pub const POLL_HZ: (f64, f64) = (1.0, 10_000.0);
@@ -443,17 +395,7 @@ impl CellConfig {
     fn validate(&self) -> Result<()> {
         self.realtime.validate().map_err(|e| anyhow!(e))?;
         let r = &self.robot;
-        if !(1..=crate::cell::MAX_TIMEOUT).contains(&r.timeout) {
-            bail!(
-                "robot.timeout is the RSI ETHERNET object's Timeout, 1..={} late replies (RSI's \
-                 default 100), got {}",
-                crate::cell::MAX_TIMEOUT,
-                r.timeout
-            );
-        }
-        if r.cycle_ms != 4 && r.cycle_ms != 12 {
-            bail!("robot.cycle_ms must be 4 or 12, got {}", r.cycle_ms);
-        }
+        r.validate()?;
         let cycle = f64::from(r.cycle_ms) * 1e-3;
         if let Some(d) = self.duration {
             if !(d.is_finite() && d > 0.0) {
@@ -462,31 +404,10 @@ impl CellConfig {
             let max = crate::scenario::MAX_STEPS as f64 * cycle;
             if d > max {
                 bail!(
-                    "duration {d} s is more than {max} s: at most {} cycles of {} ms are recorded in a run (omit duration to run until the robot ends RSI)",
+                    "duration {d} s is more than {max} s: at most {} cycles of {} ms are recorded in a run (omit duration to run until the robot ends its session)",
                     crate::scenario::MAX_STEPS,
                     r.cycle_ms
                 );
-            }
-        }
-        let max_watchdog = (MAX_WATCHDOG_S / cycle).round() as u32;
-        if !(1..=max_watchdog).contains(&r.watchdog_cycles) {
-            bail!(
-                "robot.watchdog_cycles must be 1..={max_watchdog} at a {} ms cycle, got {}: a robot silent for more than {MAX_WATCHDOG_S} s has stopped sending, and the run must end",
-                r.cycle_ms,
-                r.watchdog_cycles
-            );
-        }
-        if r.listen.port() == 0 {
-            bail!(
-                "robot.listen port 0 lets the OS choose one at random; the robot's Ethernet config needs the real port (1..=65535)"
-            );
-        }
-        for (n, v) in [
-            ("poscorr_mm", r.poscorr_mm),
-            ("poscorrmon_mm", r.poscorrmon_mm),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                bail!("robot.{n} must be > 0 mm, got {v}");
             }
         }
         self.sensor.validate()?;
@@ -535,63 +456,78 @@ impl CellConfig {
         }
     }
 
-    /// The RSI link's configuration: the robot's limits from the file, the driver's envelope inside them
-    /// (90 % of POSCORR, and never beyond the tuning's own envelope), the rate limit of the tuning.
+    /// The RSI link's configuration ([`rsi_link_config`]); an error for another robot kind.
     pub fn link_config(&self, tuning: &Tuning) -> Result<LinkConfig> {
-        let r = &self.robot;
-        let relative = r.mode == ModeName::Relative;
-        let ethernet = match &r.ethernet_config {
-            Some(p) => {
-                let text = crate::input::read_text(p, "Ethernet config", crate::input::MAX_CONFIG)?;
-                EthernetConfig::parse(&text).map_err(|e| anyhow!("{}: {e}", p.display()))?
-            }
-            None => {
-                let IpAddr::V4(ip) = r.listen.ip() else {
-                    bail!("robot.listen must be an IPv4 address (RSI is IPv4)");
-                };
-                let e = EthernetConfig::forcecell(ip, r.listen.port(), relative);
-                if r.process {
-                    e.with_process(kuka_rsi::ProcessChannels::default())
-                } else {
-                    e
-                }
-            }
-        };
-        // Before anything moves: a configuration the force control cannot work through is refused.
-        ethernet
-            .check_for_control(r.process)
-            .map_err(|e| match &r.ethernet_config {
-                Some(p) => anyhow!("{}: {e}", p.display()),
-                None => anyhow!("{e}"),
-            })?;
-        let mut lc = LinkConfig::new(ethernet, RobotFilter::Ip(r.robot_ip));
-        lc.bind = Some(r.listen);
-        lc.period = Duration::from_millis(u64::from(r.cycle_ms));
-        lc.watchdog_cycles = r.watchdog_cycles;
-        lc.max_speed = r.max_speed;
-        lc.mode = if relative {
-            CorrectionMode::Relative
-        } else {
-            CorrectionMode::Absolute
-        };
-        lc.poscorr = PoscorrLimits {
-            translation: r.poscorr_mm * 1e-3,
-            ..PoscorrLimits::default()
-        };
-        lc.poscorrmon = PoscorrLimits {
-            translation: r.poscorrmon_mm * 1e-3,
-            ..PoscorrLimits::MONITOR_DEFAULT
-        };
-        // Short waits for the first datagram, so a stop ends the wait (the loop waits again).
-        lc.first_contact_timeout = Some(Duration::from_millis(100));
-        lc.limits = Limits {
-            max_translation: (0.9 * lc.poscorr.translation).min(tuning.loop_cfg.max_offset),
-            max_translation_step: tuning.loop_cfg.max_step,
-            ..Limits::default()
-        };
-        lc.validate().map_err(|e| anyhow!("robot: {e}"))?;
-        Ok(lc)
+        rsi_link_config(&self.robot, tuning)
     }
+
+    /// The robot link's configuration, whichever kind, checked (the robot's files read).
+    pub fn robot_spec(&self, tuning: &Tuning) -> Result<crate::robot::RobotSpec> {
+        self.robot.spec(tuning)
+    }
+}
+
+/// The RSI link's configuration: the robot's limits from the file, the driver's envelope inside them
+/// (90 % of POSCORR, and never beyond the tuning's own envelope), the rate limit of the tuning.
+pub fn rsi_link_config(r: &RobotConfig, tuning: &Tuning) -> Result<LinkConfig> {
+    let Some(o) = r.rsi() else {
+        bail!(
+            "robot: kind = \"{}\" has no RSI link configuration",
+            r.kind_name()
+        );
+    };
+    let relative = o.mode == ModeName::Relative;
+    let ethernet = match &o.ethernet_config {
+        Some(p) => {
+            let text = crate::input::read_text(p, "Ethernet config", crate::input::MAX_CONFIG)?;
+            EthernetConfig::parse(&text).map_err(|e| anyhow!("{}: {e}", p.display()))?
+        }
+        None => {
+            let IpAddr::V4(ip) = r.listen.ip() else {
+                bail!("robot.listen must be an IPv4 address (RSI is IPv4)");
+            };
+            let e = EthernetConfig::forcecell(ip, r.listen.port(), relative);
+            if r.process {
+                e.with_process(kuka_rsi::ProcessChannels::default())
+            } else {
+                e
+            }
+        }
+    };
+    // Before anything moves: a configuration the force control cannot work through is refused.
+    ethernet
+        .check_for_control(r.process)
+        .map_err(|e| match &o.ethernet_config {
+            Some(p) => anyhow!("{}: {e}", p.display()),
+            None => anyhow!("{e}"),
+        })?;
+    let mut lc = LinkConfig::new(ethernet, RobotFilter::Ip(r.robot_ip));
+    lc.bind = Some(r.listen);
+    lc.period = Duration::from_millis(u64::from(r.cycle_ms));
+    lc.watchdog_cycles = r.watchdog_cycles;
+    lc.max_speed = r.max_speed;
+    lc.mode = if relative {
+        CorrectionMode::Relative
+    } else {
+        CorrectionMode::Absolute
+    };
+    lc.poscorr = PoscorrLimits {
+        translation: o.poscorr_mm * 1e-3,
+        ..PoscorrLimits::default()
+    };
+    lc.poscorrmon = PoscorrLimits {
+        translation: o.poscorrmon_mm * 1e-3,
+        ..PoscorrLimits::MONITOR_DEFAULT
+    };
+    // Short waits for the first datagram, so a stop ends the wait (the loop waits again).
+    lc.first_contact_timeout = Some(Duration::from_millis(100));
+    lc.limits = Limits {
+        max_translation: (0.9 * lc.poscorr.translation).min(tuning.loop_cfg.max_offset),
+        max_translation_step: tuning.loop_cfg.max_step,
+        ..Limits::default()
+    };
+    lc.validate().map_err(|e| anyhow!("robot: {e}"))?;
+    Ok(lc)
 }
 
 /// How a cell run ended and what it recorded.
@@ -681,7 +617,7 @@ where
     let law = tuning.law.build().map_err(|e| anyhow!(e))?;
     let mut lp =
         ControlLoop::new(robot, sensor, law, tuning.loop_config()).with_gravity(cfg.compensator());
-    let mut sink = RecordSink::new(recorder).with_status(cfg.robot.timeout);
+    let mut sink = RecordSink::new(recorder).with_status(cfg.robot.late_budget());
     let limits = RunLimits {
         duration: cfg.duration,
         stop: Some(stop),
@@ -695,6 +631,7 @@ where
     };
     let o = controller::run::run(&mut lp, limits, &mut sink);
     sink.end_status();
+    let session = cfg.robot.session_name();
     let (ended, end) = match &o.end {
         End::Done | End::Program(None) => (
             format!("{} s of robot time done", sink.last_t),
@@ -707,19 +644,19 @@ where
         End::RobotEnded(e) => match sink.last_phase {
             Some(hal::ProcessPhase::Off) => (
                 format!(
-                    "the robot ended RSI: the process was off when its program stopped sending ({e})"
+                    "the robot ended {session}: the process was off when its program stopped sending ({e})"
                 ),
                 CellEnd::Done,
             ),
             Some(phase) => (
                 format!(
-                    "the robot fell silent with the process still in {phase:?} (no orderly RSI end): {e}"
+                    "the robot fell silent with the process still in {phase:?} (no orderly {session} end): {e}"
                 ),
                 CellEnd::EndedEarly,
             ),
             None => (
                 format!(
-                    "the robot stopped sending: its RSI_OFF, or a lost link — without process channels the two look alike ({e})"
+                    "the robot stopped sending: the end of its {session} session, or a lost link — without process channels the two look alike ({e})"
                 ),
                 CellEnd::Done,
             ),
@@ -771,8 +708,8 @@ impl RecordSink {
 
     /// Say what the cell does while it runs ([`crate::status::Printer`]); late replies counted
     /// against `budget`. Without a thread for it, the run goes on silent.
-    fn with_status(mut self, budget: u32) -> Self {
-        self.status = crate::status::Printer::spawn(Some(budget)).ok();
+    fn with_status(mut self, budget: Option<u32>) -> Self {
+        self.status = crate::status::Printer::spawn(budget).ok();
         self
     }
 
@@ -811,17 +748,18 @@ impl Sink for RecordSink {
     }
 }
 
-/// Start the configured sensor (optionally taking a bias) and bind the robot link.
+/// Start the configured sensor (optionally taking a bias) and bind the robot link, whichever kind
+/// ([`crate::robot::RobotSpec::open`]).
 /// With `can_log`, the sensor's CAN traffic is logged there in candump `-L` format.
 fn open_devices(
     cfg: &CellConfig,
     tuning: &Tuning,
     zero_at_start: bool,
     can_log: Option<&Path>,
-) -> Result<(kuka_rsi::RsiLink, CellSensor)> {
-    let link_cfg = cfg.link_config(tuning)?;
+) -> Result<(crate::robot::CellRobot, CellSensor)> {
+    let spec = cfg.robot_spec(tuning)?;
     let sensor = cfg.sensor.open(zero_at_start, can_log)?;
-    let link = kuka_rsi::RsiLink::bind(link_cfg).context("RSI link")?;
+    let link = spec.open()?;
     Ok((link, sensor))
 }
 
@@ -832,8 +770,8 @@ fn open_devices(
 pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
     let cfg = CellConfig::load(path)?;
     let tuning = cfg.tuning()?;
-    // Every value checked (the Ethernet config read) before the recording directory is created.
-    cfg.link_config(&tuning)?;
+    // Every value checked (the robot's files read) before the recording directory is created.
+    cfg.robot_spec(&tuning)?;
     let live = match live {
         Some(addr) => {
             let server = crate::live::LiveServer::bind(addr)?;
@@ -866,11 +804,16 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
         }
     };
     println!(
-        "listening on {} for the robot at {} ({} ms cycle, tuning {}); start RSI on the robot now, Ctrl-C (or SIGTERM) ends with a clean Stop",
+        "listening on {} for the robot at {} ({}, {} ms cycle, tuning {}); start {} on the robot now, Ctrl-C (or SIGTERM) ends with a clean Stop",
         link.local_addr().map_or(cfg.robot.listen, |a| a),
         cfg.robot.robot_ip,
+        cfg.robot.kind_name(),
         cfg.robot.cycle_ms,
-        tuning.name
+        tuning.name,
+        match cfg.robot.kind {
+            crate::robot::RobotKind::KukaRsi(_) => "RSI",
+            crate::robot::RobotKind::AbbEgm(_) => "the RAPID program (EGMActMove)",
+        }
     );
     let mcap = stem.with_extension("mcap");
     // The cell file as the input rule reads it (a regular file, capped), once: hashed and attached.
@@ -894,25 +837,20 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
         eprintln!("warning: {r}");
     }
     let out = run_cell_recorded(&cfg, &tuning, robot, sensor, stop, Some(tx))?;
+    let late = match cfg.robot.late_budget() {
+        Some(budget) => format!("robot late replies {} of {budget}", out.late),
+        None => "the robot reports no late replies".to_string(),
+    };
     println!(
-        "{}; {} cycles, {} sensor faults, {} limited; robot late replies {} of {}; Stop {}",
-        out.ended,
-        out.stats.cycles,
-        out.stats.sensor_faults,
-        out.stats.limited,
-        out.late,
-        cfg.robot.timeout,
-        out.stop_note
+        "{}; {} cycles, {} sensor faults, {} limited; {late}; Stop {}",
+        out.ended, out.stats.cycles, out.stats.sensor_faults, out.stats.limited, out.stop_note
     );
-    crate::rsi::print_link(link.diagnostics());
     // What the first cycles showed that degrades control, at the stiffness the law estimated (the
     // paper's 50 kN/m when it estimated none).
-    for w in link.diagnostics().advisories(
+    link.print_diagnostics(
         f64::from(cfg.robot.cycle_ms) * 1e-3,
         out.kc_hat.unwrap_or(50e3),
-    ) {
-        println!("{w}");
-    }
+    );
     let recorded = recording.finish(Vec::new())?;
     println!("recorded {recorded}");
     prov.finish(&out.ended, out.stopped, out.stats.cycles);
@@ -941,10 +879,7 @@ fn provenance(
 ) -> Provenance {
     let mut p = Provenance::start(command, &cell_file.display().to_string(), cell);
     p.tuning = tuning.name.clone();
-    p.robot = format!(
-        "KUKA RSI, listening on {} for {}",
-        cfg.robot.listen, cfg.robot.robot_ip
-    );
+    p.robot = cfg.robot.describe();
     p.sensor = match &cfg.sensor {
         SensorConfig::Ati { can, base, .. } => format!("ATI NETCANOEM at base {base:#x} on {can}"),
         SensorConfig::Robotiq { port, slave, .. } => {

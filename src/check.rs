@@ -11,6 +11,7 @@ use anyhow::Result;
 use hal::ForceSensor;
 
 use crate::cell::{CellConfig, SensorConfig};
+use crate::robot::{EgmOptions, RobotKind, RsiOptions};
 
 /// Standard gravity, m/s².
 const G: f64 = 9.806_65;
@@ -119,8 +120,14 @@ fn addresses(cell: &CellConfig) -> Vec<Finding> {
         ))),
         Err(e) => out.push(Finding::fail(
             format!("listen {}: {e}", r.listen),
-            "robot.listen must be an address of this PC (`ip -br addr`) on the robot's network \
-             (the IP_NUMBER of the robot's Ethernet config), on a port nothing else uses",
+            format!(
+                "robot.listen must be an address of this PC (`ip -br addr`) on the robot's network \
+                 ({}), on a port nothing else uses",
+                match r.kind {
+                    RobotKind::KukaRsi(_) => "the IP_NUMBER of the robot's Ethernet config",
+                    RobotKind::AbbEgm(_) => "the -RemoteAddress of the robot's UDPUC entry",
+                }
+            ),
         )),
     }
     let local = UdpSocket::bind((r.robot_ip, 0)).is_ok();
@@ -132,8 +139,11 @@ fn addresses(cell: &CellConfig) -> Vec<Finding> {
     } else if local || r.robot_ip == r.listen.ip() {
         out.push(Finding::fail(
             format!("robot {} is this PC's own address", r.robot_ip),
-            "robot.robot_ip is the robot controller's address (its RSI network interface), \
-             not this PC's",
+            format!(
+                "robot.robot_ip is the robot controller's address (its {} network interface), \
+                 not this PC's",
+                r.session_name()
+            ),
         ));
     } else if r.robot_ip.is_unspecified() {
         out.push(Finding::fail(
@@ -149,52 +159,67 @@ fn addresses(cell: &CellConfig) -> Vec<Finding> {
     out
 }
 
-/// The robot's limits against the tuning's envelope, and the Ethernet config's layout.
+/// The robot's limits against the tuning's envelope, and the robot's own files: per robot kind.
 fn limits(cell: &CellConfig, t: &controller::Tuning) -> Vec<Finding> {
-    let mut out = Vec::new();
-    let r = &cell.robot;
+    match &cell.robot.kind {
+        RobotKind::KukaRsi(o) => rsi_limits(cell, o, t),
+        RobotKind::AbbEgm(o) => egm_limits(cell, o, t),
+    }
+}
+
+/// The tuning's envelope against the 90 % of a robot limit the driver keeps to.
+fn envelope(t: &controller::Tuning, limit_mm: f64, name: &str, fix: &str) -> Finding {
     let envelope = t.loop_cfg.max_offset;
-    let usable = 0.9 * r.poscorr_mm * 1e-3;
+    let usable = 0.9 * limit_mm * 1e-3;
     if envelope > usable {
-        out.push(Finding::warn(
+        Finding::warn(
             format!(
-                "the tuning's envelope ±{:.1} mm is cut to ±{:.1} mm by POSCORR {:.1} mm (90 %)",
+                "the tuning's envelope ±{:.1} mm is cut to ±{:.1} mm by {name} {:.1} mm (90 %)",
                 envelope * 1e3,
                 usable * 1e3,
-                r.poscorr_mm
+                limit_mm
             ),
-            "raise POSCORR on the robot (`forcecell rsi-config --tuning` writes it) and \
-             robot.poscorr_mm together, or accept the smaller envelope",
-        ));
+            fix,
+        )
     } else {
-        out.push(Finding::ok(format!(
-            "the tuning's envelope ±{:.1} mm lies within POSCORR {:.1} mm",
-            envelope * 1e3,
-            r.poscorr_mm
-        )));
+        Finding::ok(format!(
+            "the tuning's envelope ±{:.1} mm lies within {name} {limit_mm:.1} mm",
+            envelope * 1e3
+        ))
     }
-    if r.poscorrmon_mm < r.poscorr_mm {
+}
+
+/// KUKA RSI: POSCORR and POSCORRMON, the Ethernet config's layout, a `.rsix` beside it.
+fn rsi_limits(cell: &CellConfig, o: &RsiOptions, t: &controller::Tuning) -> Vec<Finding> {
+    let mut out = vec![envelope(
+        t,
+        o.poscorr_mm,
+        "POSCORR",
+        "raise POSCORR on the robot (`forcecell rsi-config --tuning` writes it) and \
+         robot.poscorr_mm together, or accept the smaller envelope",
+    )];
+    if o.poscorrmon_mm < o.poscorr_mm {
         out.push(Finding::fail(
             format!(
                 "POSCORRMON {:.1} mm is below POSCORR {:.1} mm: the monitor stops the robot \
                  inside the correction's own range",
-                r.poscorrmon_mm, r.poscorr_mm
+                o.poscorrmon_mm, o.poscorr_mm
             ),
             "set robot.poscorrmon_mm (and the robot's POSCORRMON) above robot.poscorr_mm",
         ));
     }
-    match cell.link_config(t) {
+    match cell.robot_spec(t) {
         Ok(_) => {
             out.push(Finding::ok(format!(
                 "the Ethernet config ({}) gives the driver what it needs",
-                r.ethernet_config
+                o.ethernet_config
                     .as_ref()
                     .map_or("forcecell's own layout".to_string(), |p| p
                         .display()
                         .to_string())
             )));
-            if let Some(p) = &r.ethernet_config {
-                out.extend(rsix_beside(p, r.poscorr_mm));
+            if let Some(p) = &o.ethernet_config {
+                out.extend(rsix_beside(p, o.poscorr_mm));
             }
         }
         Err(e) => out.push(Finding::fail(
@@ -202,6 +227,50 @@ fn limits(cell: &CellConfig, t: &controller::Tuning) -> Vec<Finding> {
             "write the robot's files with `forcecell rsi-config` and give that XML as \
              robot.ethernet_config",
         )),
+    }
+    out
+}
+
+/// ABB EGM: the correction range against the envelope, and the settings `egm-config` wrote (the
+/// UDPUC entry sends to `listen`, the same correction range).
+fn egm_limits(cell: &CellConfig, o: &EgmOptions, t: &controller::Tuning) -> Vec<Finding> {
+    let mut out = vec![envelope(
+        t,
+        o.correction_mm,
+        "the path-correction range",
+        "raise the robot's path-correction range and robot.correction_mm together \
+         (`forcecell egm-config --correction-mm`), or accept the smaller envelope",
+    )];
+    match cell.robot_spec(t) {
+        Ok(_) => match &o.egm_settings {
+            Some(p) => out.push(Finding::ok(format!(
+                "{}: the UDPUC entry sends to port {} and the path-correction range is {:.1} mm, \
+                 as the cell file says",
+                p.display(),
+                cell.robot.listen.port(),
+                o.correction_mm
+            ))),
+            None => out.push(Finding::warn(
+                "no robot.egm_settings: the robot's UDPUC entry and correction range are not checked \
+                 against the cell file",
+                "write the robot's files with `forcecell egm-config` and give its \
+                 NAME-settings.txt as robot.egm_settings",
+            )),
+        },
+        Err(e) => out.push(Finding::fail(
+            format!("{e:#}"),
+            "write the robot's files with `forcecell egm-config` (--host, --port, \
+             --correction-mm as in the cell file) and give its NAME-settings.txt as \
+             robot.egm_settings",
+        )),
+    }
+    if cell.robot.process {
+        out.push(Finding::warn(
+            "robot.process = true over EGM: the process state goes to robot.state_to, which only \
+             the simulated IRC5 receives (a real controller's transport, Robot Web Services, is not \
+             implemented)",
+            "on a real robot run with robot.process = false",
+        ));
     }
     out
 }

@@ -148,6 +148,7 @@ pub fn egm_cell_config(a: &crate::args::EgmConfigArgs) -> abb_egm::rapid::EgmCel
     c.tool = a.tool.clone();
     c.wobj = a.wobj.clone();
     c.max_wait = a.max_wait;
+    c.correction_mm = a.correction_mm;
     c
 }
 
@@ -195,4 +196,136 @@ pub fn egm_config(a: &crate::args::EgmConfigArgs) -> Result<Vec<std::path::PathB
         })?;
     }
     Ok(paths)
+}
+
+/// `forcecell sim --external-robot ADDR --robot egm`: the dry run for an EGM client — the external
+/// device, e.g. `forcecell run` with a `kind = "abb-egm"` cell file listening on `ADDR`. This side
+/// plays the robot: the simulated IRC5 sends `EgmRobot` to `ADDR` every period of wall-clock time and
+/// applies the path corrections it gets to the scenario's plant and workpiece; a simulated FT 300 on
+/// a pseudo-terminal (linked at `sensor_link`) measures that workpiece for the client's `[sensor]`;
+/// the scenario's robot program, if any, runs on the controller (its command in `RAPIDfromRobot`),
+/// and reads its state from a UDP port standing in for Robot Web Services (the client's
+/// `robot.state_to`). The controller starts once the client's sensor has started its stream (the
+/// client is then about to listen), and stops after the scenario's duration. Loopback only.
+/// Returns the exit status: 0 when the controller ran its course, 3 when it ended early.
+pub fn dry_run(
+    spec: &RunSpec,
+    client: SocketAddr,
+    sensor_link: Option<&std::path::Path>,
+) -> Result<u8> {
+    use std::sync::atomic::Ordering;
+    if !client.ip().is_loopback() {
+        anyhow::bail!(
+            "--external-robot {client} with --robot egm: the simulated IRC5 sends on loopback only; give the client's robot.listen as 127.0.0.1:PORT"
+        );
+    }
+    let ms = spec.plant.period * 1e3;
+    if !((ms / 4.0).round() >= 1.0 && ((ms / 4.0).round() * 4.0 - ms).abs() < 1e-9) {
+        anyhow::bail!(
+            "the EGM dry run runs at EGM's cycle, a multiple of 4 ms; plant {} has {ms} ms: give --plant p2 (4 ms)",
+            spec.plant_label
+        );
+    }
+    let world = spec.world();
+    let period = Duration::from_secs_f64(spec.plant.period);
+    let (_, range) = cell_limits(&spec.tuning.loop_cfg);
+    let process = spec.scenario.program.is_some().then(CommandSlots::default);
+    let mut kc = Irc5Config::new(client);
+    kc.period = period;
+    kc.range = range;
+    kc.process = process;
+    kc.timing = Timing::Realtime;
+    kc.cycles = Some(spec.steps());
+    let mut irc5 = Irc5::new(kc).context("simulated IRC5")?;
+    let device = sim::ft300::SimFt300::spawn(
+        sim::ft300::Ft300Config {
+            noise_force: 0.0,
+            noise_torque: 0.0,
+            link: sensor_link.map(std::path::Path::to_path_buf),
+            ..sim::ft300::Ft300Config::default()
+        },
+        sim::ati_node::WorldSource::measured(world.clone()),
+    )
+    .context("simulated FT 300")?;
+    let state_sock =
+        std::net::UdpSocket::bind((Ipv4Addr::LOCALHOST, 0)).context("the process state's port")?;
+    state_sock.set_read_timeout(Some(Duration::from_millis(50)))?;
+    let state_addr = state_sock.local_addr()?;
+    println!(
+        "simulated IRC5 ({} ms, path-correction range {:.1} mm) sending EgmRobot to {client} from {}",
+        period.as_millis(),
+        range.translation * 1e3,
+        irc5.local_addr()?
+    );
+    println!(
+        "sensor: simulated FT 300 measuring the virtual workpiece: [sensor] kind = \"robotiq\", port = \"{}\"",
+        device.link().unwrap_or(device.path()).display()
+    );
+    match process {
+        Some(_) => println!(
+            "robot program: {} (its command in RAPIDfromRobot.dnum); its state from robot.state_to = \"{state_addr}\"",
+            spec.scenario.name
+        ),
+        None => {
+            println!("robot program: none (the client runs force control from its first cycle)")
+        }
+    }
+    let stop = crate::stop::flag();
+    // The controller waits for the client's sensor to start its stream: the client binds its link
+    // right after (as a robot's program is started once the external device listens).
+    println!("waiting for the client to start its sensor (Ctrl-C ends)");
+    while device.stats().starts == 0 {
+        if stop.load(Ordering::Relaxed) {
+            println!("stopped before the client started");
+            device.stop().context("simulated FT 300")?;
+            return Ok(crate::stop::INTERRUPTED);
+        }
+        thread::sleep(Duration::from_millis(20));
+    }
+    thread::sleep(Duration::from_millis(500));
+    println!("client's sensor streaming: EGM starts");
+    let vars = irc5.rapid_variables();
+    let abort = irc5.abort_handle();
+    let done = Arc::new(AtomicBool::new(false));
+    let helper = {
+        let done = done.clone();
+        thread::Builder::new()
+            .name("sim-irc5-rws".into())
+            .spawn(move || {
+                let mut buf = [0u8; 64];
+                let mut states = 0u64;
+                while !done.load(Ordering::Relaxed) {
+                    if stop.load(Ordering::Relaxed) {
+                        abort.store(true, Ordering::Relaxed);
+                    }
+                    if let Ok((n, _)) = state_sock.recv_from(&mut buf)
+                        && let Some(v) = crate::robot::UdpState::decode(&buf[..n])
+                    {
+                        vars.write(v);
+                        states += 1;
+                    }
+                }
+                states
+            })?
+    };
+    let mut mech = world.clone();
+    let report = irc5.run(&mut mech);
+    done.store(true, Ordering::Relaxed);
+    let states = helper.join().unwrap_or(0);
+    let s = device.stats();
+    device.stop().context("simulated FT 300")?;
+    print_irc5(&report);
+    println!(
+        "  process states received: {states}; FT 300 frames sent: {}",
+        s.frames
+    );
+    let w = sim::world::lock(&world);
+    if let Some(why) = w.program().and_then(sim::program::ProgramRunner::aborted) {
+        println!("  the robot program aborted: {why}");
+    }
+    Ok(match report.end {
+        sim::irc5::Irc5End::Completed => crate::stop::OK,
+        sim::irc5::Irc5End::Aborted => crate::stop::INTERRUPTED,
+        _ => crate::stop::ENDED_EARLY,
+    })
 }

@@ -17,6 +17,7 @@ pub mod readout;
 pub mod recorder;
 pub mod report;
 pub mod rig;
+pub mod robot;
 pub mod robotiq;
 pub mod rsi;
 pub mod rt;

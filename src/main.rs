@@ -448,6 +448,20 @@ fn sim(mut a: SimArgs) -> Result<ExitCode> {
         },
         spec.steps()
     );
+    if let (Some(client), forcecell::args::RobotBackend::Egm) =
+        (a.robot.external_robot, a.robot.robot)
+    {
+        if a.robot.process_channels || a.robot.ethernet_config.is_some() {
+            anyhow::bail!(
+                "--process-channels and --ethernet-config are RSI options; with --robot egm the scenario's program runs on the simulated IRC5"
+            );
+        }
+        let code = forcecell::egm::dry_run(&spec, client, a.robot.sensor_link.as_deref())?;
+        return Ok(ExitCode::from(code));
+    }
+    if a.robot.sensor_link.is_some() {
+        anyhow::bail!("--sensor-link is the EGM dry run's (--external-robot with --robot egm)");
+    }
     let sensor = &spec.scenario.sensor;
     if sensor.bandwidth > 0.0 {
         println!(

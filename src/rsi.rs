@@ -28,6 +28,9 @@ impl RsiArgs {
     /// One line for the run's header.
     pub fn describe(&self) -> String {
         match (self.external_robot, self.robot) {
+            (Some(addr), RobotBackend::Egm) => {
+                format!("simulated IRC5 sending to an EGM client on {addr}")
+            }
             (Some(addr), _) => format!("KUKA RSI driver listening on {addr} for an external robot"),
             (None, RobotBackend::Inproc) => "in-process robot".to_string(),
             (None, RobotBackend::Egm) => format!(

@@ -142,3 +142,151 @@ fn each_broken_cell_file_is_not_ready_and_names_its_problem() {
     assert_eq!(code, Some(2), "{text}");
     assert!(text.starts_with("error: "), "{text}");
 }
+
+/// `examples/egm-cell.toml` on loopback (port `port`), the simulated FT 300 at `dir/ft300` as its
+/// sensor and, when given, `settings` (what `forcecell egm-config` wrote) as its `egm_settings`.
+fn egm_cell(
+    dir: &Path,
+    port: u16,
+    settings: Option<&Path>,
+    edit: impl Fn(String) -> String,
+) -> std::path::PathBuf {
+    let example = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/egm-cell.toml"),
+    )
+    .unwrap();
+    let mut out = String::new();
+    for line in example.lines() {
+        let key = line.split('=').next().unwrap_or("").trim();
+        let line = match key {
+            "listen" => format!("listen = \"127.0.0.1:{port}\""),
+            "robot_ip" => "robot_ip = \"127.0.0.1\"".into(),
+            "port" => format!("port = \"{}\"", dir.join("ft300").display()),
+            "# egm_settings" => match settings {
+                Some(p) => format!("egm_settings = \"{}\"", p.display()),
+                None => continue,
+            },
+            _ => line.to_string(),
+        };
+        out.push_str(&line);
+        out.push('\n');
+    }
+    let path = dir.join("egm-cell.toml");
+    std::fs::write(&path, edit(out)).unwrap();
+    path
+}
+
+/// `forcecell egm-config` for loopback port `port` into `dir/robot`, with `extra` options; the
+/// settings file it wrote.
+fn egm_config(dir: &Path, port: u16, extra: &[&str]) -> std::path::PathBuf {
+    let robot = dir.join("robot");
+    let port = port.to_string();
+    let mut args = vec![
+        "egm-config",
+        "--host",
+        "127.0.0.1",
+        "--port",
+        &port,
+        "--force",
+        "--out",
+        robot.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let (out, text) = run(&args);
+    assert!(out.status.success(), "{text}");
+    robot.join("FcEgm-settings.txt")
+}
+
+#[test]
+fn the_example_egm_cell_is_ready_with_the_settings_egm_config_wrote() {
+    let dir = tempfile::tempdir().unwrap();
+    let _sensor = ft300(dir.path(), "0.0");
+    let settings = egm_config(dir.path(), 49321, &[]);
+    let path = egm_cell(dir.path(), 49321, Some(&settings), |s| s);
+    let (code, text) = check(&path);
+    assert_eq!(code, Some(0), "{text}");
+    assert!(text.trim_end().ends_with("ready"), "{text}");
+    assert!(!text.contains("FAIL"), "{text}");
+    for line in [
+        "ok    listen 127.0.0.1:49321 is this PC's address",
+        "ok    robot 127.0.0.1 is on loopback",
+        "warn  the tuning's envelope ±50.0 mm is cut to ±4.5 mm by the path-correction range 5.0 mm",
+        "the UDPUC entry sends to port 49321 and the path-correction range is 5.0 mm",
+        "Robotiq FT 300 on",
+        "zeroed at start",
+    ] {
+        assert!(text.contains(line), "{line:?} in\n{text}");
+    }
+    // Without the settings the cell still runs, but what the robot was given is not checked.
+    let path = egm_cell(dir.path(), 49321, None, |s| s);
+    let (code, text) = check(&path);
+    assert_eq!(code, Some(0), "{text}");
+    assert!(text.contains("warn  no robot.egm_settings"), "{text}");
+}
+
+#[test]
+fn each_broken_egm_cell_is_not_ready_and_names_its_problem() {
+    let dir = tempfile::tempdir().unwrap();
+    let _sensor = ft300(dir.path(), "0.0");
+    let other_port = egm_config(dir.path(), 49323, &[]);
+    let moved = dir.path().join("other-port-settings.txt");
+    std::fs::rename(&other_port, &moved).unwrap();
+    let settings = egm_config(dir.path(), 49322, &["--correction-mm", "4.0"]);
+    type EgmCase = (
+        &'static str,
+        Option<std::path::PathBuf>,
+        Box<dyn Fn(String) -> String>,
+        &'static str,
+    );
+    let cases: Vec<EgmCase> = vec![
+        (
+            "a UDPUC entry that sends to another port",
+            Some(moved.clone()),
+            Box::new(|s| s.replace("correction_mm = 5.0", "correction_mm = 4.0")),
+            "the UDPUC entry sends to port 49323, robot.listen is 127.0.0.1:49322",
+        ),
+        (
+            "a correction range that is not the robot's",
+            Some(settings.clone()),
+            Box::new(|s| s),
+            "the path-correction range is 4 mm, robot.correction_mm says 5 mm",
+        ),
+        (
+            "a listen address that is not this PC's",
+            Some(settings.clone()),
+            Box::new(|s| {
+                s.replace("127.0.0.1:49322", "192.0.2.1:49322")
+                    .replace("correction_mm = 5.0", "correction_mm = 4.0")
+            }),
+            "FAIL  listen 192.0.2.1:49322",
+        ),
+    ];
+    for (what, settings, edit, want) in cases {
+        let path = egm_cell(dir.path(), 49322, settings.as_deref(), edit);
+        let (code, text) = check(&path);
+        assert!(text.contains(want), "{what}: {want:?} in\n{text}");
+        assert!(text.contains("fix: "), "{what}: {text}");
+        assert_eq!(code, Some(1), "{what}: {text}");
+        assert!(text.contains("not ready: "), "{what}: {text}");
+    }
+    // An option of the other robot kind is refused as a file error, in one line.
+    let path = egm_cell(dir.path(), 49322, None, |s| {
+        s.replace("[robot]\n", "[robot]\nposcorr_mm = 5.0\n")
+    });
+    let (code, text) = check(&path);
+    assert_eq!(code, Some(2), "{text}");
+    assert!(
+        text.contains(
+            "robot.poscorr_mm is a kuka-rsi option, and this [robot] is kind = \"abb-egm\""
+        ),
+        "{text}"
+    );
+    assert_eq!(text.trim_end().lines().count(), 1, "{text}");
+    // The process command over EGM with nowhere to send the state back: refused before anything.
+    let path = egm_cell(dir.path(), 49322, None, |s| {
+        s.replace("process = false", "process = true")
+    });
+    let (code, text) = check(&path);
+    assert_eq!(code, Some(2), "{text}");
+    assert!(text.contains("needs robot.state_to"), "{text}");
+}

@@ -1,7 +1,8 @@
 //! The `abb-robot-client` Python package (PyPI, its `EGM` class: the external-device side, written by
 //! others) against the simulated IRC5 over loopback UDP: it reads valid feedback and its path
-//! corrections move the simulated robot. Needs `python3 -m pip install abb-robot-client`; installs
-//! nothing itself, hence ignored: `cargo test --release --test egm_abb_robot_client -- --ignored`.
+//! corrections move the simulated robot. Installs `abb-robot-client` from PyPI into `target/egm-venv`
+//! (`scripts/egm-venv.sh`), hence ignored:
+//! `cargo test --release --test egm_abb_robot_client -- --ignored`.
 
 use std::net::{SocketAddr, UdpSocket};
 use std::process::{Command, Stdio};
@@ -33,20 +34,44 @@ print("last", seen[-1])
 print("planned", state.cartesian_planned[0][2])
 "#;
 
+const SCRIPT_PATH: &str = "scripts/egm-venv.sh";
+
+/// The python of `target/egm-venv` with `packages` installed from PyPI (`scripts/egm-venv.sh`).
+fn venv_python(packages: &[&str]) -> String {
+    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(SCRIPT_PATH);
+    let out = Command::new("bash")
+        .arg(&script)
+        .args(packages)
+        .output()
+        .expect("run scripts/egm-venv.sh");
+    assert!(
+        out.status.success(),
+        "{} failed (python3 with venv and pip, and PyPI, are needed):\n{}",
+        script.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .last()
+        .expect("the venv's python")
+        .to_string()
+}
+
 #[test]
-#[ignore = "needs python3 with abb-robot-client (pip install abb-robot-client)"]
+#[ignore = "installs abb-robot-client from PyPI into target/egm-venv (python3 with venv, network)"]
 fn abb_robot_client_runs_a_path_correction_session_against_the_simulated_irc5() {
     let port = UdpSocket::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
         .unwrap()
         .port();
-    let client = Command::new("python3")
+    let python = venv_python(&["abb-robot-client"]);
+    let client = Command::new(&python)
         .args(["-c", SCRIPT, &port.to_string()])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .expect("python3");
+        .expect("the venv's python");
     thread::sleep(Duration::from_millis(500)); // the client binds its port
     let mut cfg = Irc5Config::new(SocketAddr::from(([127, 0, 0, 1], port)));
     cfg.cycles = Some(40);

@@ -45,6 +45,8 @@ fn writes_the_module_and_settings_with_the_port_the_link_binds() {
             &port.to_string(),
             "--tool",
             "tPad",
+            "--correction-mm",
+            "7.5",
             "--out",
             "egm",
         ],
@@ -54,7 +56,15 @@ fn writes_the_module_and_settings_with_the_port_the_link_binds() {
     let module = std::fs::read_to_string(dir.path().join("egm/FcEgm.mod")).unwrap();
     let settings = std::fs::read_to_string(dir.path().join("egm/FcEgm-settings.txt")).unwrap();
     assert!(settings.contains("-Type \"UDPUC\" -RemoteAddress \"192.168.125.7\""));
-    assert!(module.contains("EGMActMove fc_egm_id, tPad.tframe \\SampleRate:=4;"));
+    assert!(
+        module
+            .contains("EGMActMove fc_egm_id, tPad.tframe \\SampleRate:=4 \\DataToSensor:=fc_cmd;")
+    );
+    // The correction range given is the one a cell file's robot.correction_mm is checked against.
+    assert_eq!(
+        abb_egm::rapid::SettingsFacts::parse(&settings).correction_mm,
+        Some(7.5)
+    );
     assert!(module.contains(&format!("192.168.125.7:{port}")));
     // The robot is told to send where forcecell's EGM link listens: the link binds that port.
     let told = remote_port(&settings);

@@ -25,7 +25,7 @@ fuzz_target!(|data: &[u8]| {
             if let Ok(c) = forcecell::cell::CellConfig::from_toml(text, "fuzz.toml")
                 && let Ok(t) = forcecell::scenario::load_tuning("robust")
             {
-                let _ = c.link_config(&t);
+                let _ = c.robot_spec(&t);
                 let _ = c.compensator();
             }
         }

@@ -3,6 +3,8 @@
 //! run (the application's runner adds wires, recording and progress around the same pieces). The
 //! controller's closed-loop tests use this, so a scenario file and a metric mean the same thing in both.
 
+use std::time::{Duration, Instant};
+
 use anyhow::{Result, anyhow};
 use controller::run::{End, Program, RunLimits, Sink};
 use controller::{CellLaw, CellParams, ControlLoop, CycleReport, EventCounts, LoopStats, Tuning};
@@ -148,6 +150,12 @@ pub fn resolve_tuning(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuni
     tuning
 }
 
+/// The longest a [`WorldSink`] waits for the robot to take the world's step after a reply: longer
+/// than any lockstep deadline of the simulated KRC, short beside a run.
+const PROGRAM_WAIT: Duration = Duration::from_millis(100);
+/// How often it looks meanwhile.
+const PROGRAM_POLL: Duration = Duration::from_micros(20);
+
 /// The sink of a simulated run: one [`Row`] per answered cycle, the simulated robot program's end,
 /// and whatever else the caller hands each cycle to (a recorder, a progress bar).
 pub struct WorldSink<'a> {
@@ -159,6 +167,8 @@ pub struct WorldSink<'a> {
     pub after: Vec<Row>,
     world: &'a SharedWorld,
     has_program: bool,
+    /// Robot time of the last cycle answered, s.
+    last_t: f64,
     also: &'a mut dyn FnMut(&CycleReport, &Row),
 }
 
@@ -176,6 +186,7 @@ impl<'a> WorldSink<'a> {
             after: Vec::new(),
             world,
             has_program,
+            last_t: f64::NEG_INFINITY,
             also,
         }
     }
@@ -193,6 +204,7 @@ impl<'a> WorldSink<'a> {
 
 impl Sink for WorldSink<'_> {
     fn record(&mut self, report: &CycleReport) -> bool {
+        self.last_t = report.cycle.t;
         let row = Row::from_report(report, report.set_point);
         (self.also)(report, &row);
         self.rows.push(row);
@@ -209,8 +221,26 @@ impl Sink for WorldSink<'_> {
         if !self.has_program {
             return Program::Running;
         }
-        match sim::world::lock(self.world).program() {
-            Some(p) if p.done() => match p.aborted() {
+        // The program's end as of the world's step after the cycle answered last: a robot on another
+        // thread (the simulated KRC) takes that step once it has the reply, so wait for it (bounded:
+        // a robot that never takes it, silent or ended, is answered with the world as it is).
+        // Whether the robot had taken the step when the loop looks was a race that ended the run
+        // one cycle sooner or later from run to run; the program's end time makes it none.
+        let deadline = Instant::now() + PROGRAM_WAIT;
+        let mut w = sim::world::lock(self.world);
+        while self.last_t.is_finite()
+            && w.time() < self.last_t + w.period() / 2.0
+            && Instant::now() < deadline
+        {
+            drop(w);
+            std::thread::sleep(PROGRAM_POLL);
+            w = sim::world::lock(self.world);
+        }
+        let seen = w
+            .program_done_at()
+            .is_some_and(|t| t <= self.last_t + 1.5 * w.period());
+        match w.program() {
+            Some(p) if seen => match p.aborted() {
                 Some(why) => Program::Aborted(why.to_string()),
                 None => Program::Done,
             },

@@ -36,6 +36,8 @@ pub struct World {
     /// A curved part's geometry, pad and tool rotation (`None`: the 1-DOF plant, as ever), and the
     /// torque's sensor model.
     curved: Option<(Contact, SensorModel)>,
+    /// World time at which the program was first done, s.
+    program_done_at: Option<f64>,
 }
 
 /// The true state of the cell at one cycle, logged by [`World::advance`] for recording and metrics.
@@ -83,6 +85,7 @@ impl World {
             program: None,
             s: 0.0,
             curved: None,
+            program_done_at: None,
         }
     }
 
@@ -344,6 +347,16 @@ impl World {
             }
         }
         self.k += 1;
+        if self.program_done_at.is_none() && self.program.as_ref().is_some_and(|p| p.done()) {
+            self.program_done_at = Some(self.time());
+        }
+    }
+
+    /// World time at which the program was first done, s (`None`: not done, or no program). A peer
+    /// that answers cycles on another thread compares it with the time of the cycle it answered last:
+    /// the world may already have advanced past that cycle.
+    pub fn program_done_at(&self) -> Option<f64> {
+        self.program_done_at
     }
 }
 
@@ -445,6 +458,42 @@ mod tests {
         let mut sensor = InProcSensor::new(world);
         let s = sensor.read().unwrap();
         assert!((s.wrench.force.z - 7.0).abs() < 1e-6, "{:?}", s.wrench);
+    }
+
+    #[test]
+    fn the_program_end_is_stamped_with_the_world_time_it_happened() {
+        use crate::program::{Program, Segment, SegmentMode};
+        // A PRESS that never sees PRESSING: the program aborts after its wait (20 ms).
+        let program = Program {
+            segments: vec![Segment {
+                mode: SegmentMode::Press,
+                force: 10.0,
+                ramp: 0.2,
+                segment: 1,
+                feed: 0.01,
+                length: 0.01,
+                dwell: 0.0,
+            }],
+            wait_timeout: 0.02,
+        };
+        let mut w = World::new(
+            ContactPlant::spring(70_000.0, 0.01),
+            InnerLoopModel::P0,
+            SensorParams::default(),
+            0.0,
+        )
+        .with_program(program);
+        let mut at = None;
+        for _ in 0..100 {
+            assert_eq!(w.program_done_at(), at, "stamped once, when it ends");
+            w.advance(None);
+            if at.is_none() && w.program().is_some_and(|p| p.done()) {
+                at = Some(w.time());
+            }
+        }
+        let at = at.expect("the program ended");
+        assert!(at >= 0.02, "not before its wait: {at}");
+        assert_eq!(w.program_done_at(), Some(at));
     }
 
     #[test]

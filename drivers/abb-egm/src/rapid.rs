@@ -38,6 +38,46 @@ pub struct EgmCellConfig {
     pub sample_rate_ms: u32,
     /// The longest wait for forcecell's answer in the handshake, s (`WaitUntil \MaxTime`).
     pub max_wait: f64,
+    /// The largest path correction per axis the cell runs with, mm: the robot's correction range
+    /// that forcecell's cell file names as `correction_mm` (its envelope stays within 90 % of it).
+    pub correction_mm: f64,
+}
+
+/// What a cell file can be checked against in the settings file [`EgmCellConfig::settings`] wrote:
+/// where the UDPUC entry sends and the correction range it names. Read back by
+/// [`SettingsFacts::parse`], the one reader of the one writer.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SettingsFacts {
+    /// The UDPUC entry's `-RemoteAddress`.
+    pub host: Option<Ipv4Addr>,
+    /// The UDPUC entry's `-RemotePortNumber`.
+    pub port: Option<u16>,
+    /// The path-correction range, mm.
+    pub correction_mm: Option<f64>,
+}
+
+/// The line of the settings file that names the correction range (its number follows, in mm).
+const CORRECTION_LINE: &str = "path-correction range per axis (cell file robot.correction_mm):";
+
+impl SettingsFacts {
+    /// The facts in a settings file's text; a fact not found is `None`.
+    pub fn parse(text: &str) -> Self {
+        let after = |key: &str| {
+            text.split(key)
+                .nth(1)
+                .map(|rest| rest.trim_start().trim_start_matches('"'))
+        };
+        let host = after("-RemoteAddress").and_then(|r| r.split('"').next()?.parse().ok());
+        let port = after("-RemotePortNumber")
+            .and_then(|r| r.split(|c: char| !c.is_ascii_digit()).next()?.parse().ok());
+        let correction_mm =
+            after(CORRECTION_LINE).and_then(|r| r.split_whitespace().next()?.parse().ok());
+        Self {
+            host,
+            port,
+            correction_mm,
+        }
+    }
 }
 
 impl EgmCellConfig {
@@ -54,6 +94,7 @@ impl EgmCellConfig {
             wobj: "wobj0".into(),
             sample_rate_ms: 4,
             max_wait: 5.0,
+            correction_mm: 5.0,
         }
     }
 
@@ -82,6 +123,13 @@ impl EgmCellConfig {
             return Err(format!(
                 "sample rate {} ms: EGM's cycle is a multiple of 4 ms",
                 self.sample_rate_ms
+            ));
+        }
+        if !(self.correction_mm.is_finite() && (0.1..=100.0).contains(&self.correction_mm)) {
+            return Err(format!(
+                "correction range {} mm: must be in [0.1, 100] mm (a path correction bounds a small \
+                 deviation from the programmed path)",
+                self.correction_mm
             ));
         }
         if !(self.max_wait.is_finite() && (0.1..=60.0).contains(&self.max_wait)) {
@@ -147,8 +195,17 @@ impl EgmCellConfig {
         );
         let _ = writeln!(
             s,
+            "\n   The {CORRECTION_LINE} {mm} mm\n   \
+             Whatever the controller uses to bound a path correction must allow this much per axis;\n   \
+             forcecell keeps its envelope within 90 % of it (*unverified* which EGM setting bounds a\n   \
+             path correction: none public was found; the simulated IRC5 clamps to it per axis).",
+            mm = self.correction_mm
+        );
+        let _ = writeln!(
+            s,
             "\n3. The RAPID module {m}.mod: load it into the motion task of {r}; teach fc_start and\n   \
-             fc_end (the pass's start and end, in {w}); call FcPass. The names to match are listed\n   \
+             fc_end (the pass's start and end, in {w}; fc_via too for an arc); call FcPass (a line)\n   \
+             or FcArcPass (an arc through fc_via). The names to match are listed\n   \
              in its header.",
             m = self.module,
             r = self.robot,
@@ -156,10 +213,15 @@ impl EgmCellConfig {
         );
         let _ = writeln!(
             s,
-            "\n4. RobotWare: the EGM option; a RobotWare whose EGM message carries RAPIDfromRobot\n   \
-             (field 13, the newer layout) for the process command (*unverified which versions*); and\n   \
-             a way for forcecell to write the PERS numbers fc_phase, fc_force, fc_fault (the state\n   \
-             channel: Robot Web Services is intended; its transport is not implemented yet)."
+            "\n4. RobotWare: the EGM option, and RobotWare 7 (OmniCore) for the process command: the module\n   \
+             hands fc_cmd to EGM with EGMActMove \\DataToSensor (a PERS dnum array, sent in\n   \
+             EgmRobot.RAPIDfromRobot.dnum). Public RAPID shows \\DataToSensor on EGMActPose and\n   \
+             EGMActJoint; that EGMActMove takes it is *unverified*: if the module does not load, the\n   \
+             argument is refused, and the pass can only run without the process command (cell file\n   \
+             robot.process = false). RobotWare 6 (IRC5) has no RAPIDfromRobot at all. The state\n   \
+             (fc_phase, fc_force, fc_fault) has no way back in a path correction (EgmSensorPathCorr\n   \
+             carries no RAPID data): Robot Web Services writing those PERS numbers is intended and\n   \
+             not implemented, so on a real controller the handshake's bounded waits time out."
         );
         s
     }
@@ -178,17 +240,19 @@ impl EgmCellConfig {
     !   UDPUC device "{device}"  (SIO.cfg COM_TRP -Name; sends to {host}:{port}, forcecell's EGM port)
     !   External Motion Interface Data "{ext}"  (MOC.cfg EXT_MOTION_DATA instance)
     !   mechanical unit {robot}, tool {tool}, work object {wobj}
-    !   robtargets fc_start, fc_end  (teach them: the pass runs from fc_start to fc_end)
+    !   robtargets fc_start, fc_end  (teach them: FcPass runs a line from fc_start to fc_end)
+    !   robtarget fc_via  (teach it: FcArcPass runs a circle from fc_start through fc_via to fc_end)
     !   PERS num fc_phase, fc_force, fc_fault  (written by forcecell: the process state)
-    !   fc_cmd{{4}}  (the command forcecell reads from RAPIDfromRobot.dnum[1..4]:
-    !     mode 0 OFF / 1 PRESS / 2 RELEASE, force N, ramp s, segment number)
+    !   PERS dnum fc_cmd{{4}}  (the command, handed to EGM by EGMActMove \DataToSensor; forcecell
+    !     reads it from RAPIDfromRobot.dnum[1..4]: mode 0 OFF / 1 PRESS / 2 RELEASE, force N, ramp s,
+    !     segment number)
     ! Phases (fc_phase): 0 OFF, 1 APPROACH, 2 RAMP, 3 PRESSING, 4 RELEASE, 9 FAULT.
     ! Faults (fc_fault): 0 none, 1 sensor lost, 2 force limit, 3 correction limit, 4 bad command,
     !   5 contact lost, 6 hold timeout; a fault is latched until the command goes back to OFF.
     !
-    ! *Unverified*: how RAPID fills RAPIDfromRobot.dnum (FcSetCmd below keeps the command in fc_cmd;
-    ! the step that hands it to EGM depends on the RobotWare release and is left to the integrator),
-    ! and how forcecell writes fc_phase/fc_force/fc_fault (Robot Web Services is intended).
+    ! RobotWare 7: \DataToSensor fills RAPIDfromRobot.dnum from fc_cmd every EGM cycle. *Unverified*
+    ! that EGMActMove takes \DataToSensor (public RAPID shows it on EGMActPose and EGMActJoint), and
+    ! how forcecell writes fc_phase/fc_force/fc_fault (Robot Web Services is intended, not implemented).
 
     CONST num FC_OFF := 0;
     CONST num FC_PRESS := 1;
@@ -202,11 +266,12 @@ impl EgmCellConfig {
     PERS num fc_phase := 0;
     PERS num fc_force := 0;
     PERS num fc_fault := 0;
-    VAR num fc_cmd{{4}} := [0, 0, 0, 0];
+    PERS dnum fc_cmd{{4}} := [0, 0, 0, 0];
     VAR egmident fc_egm_id;
     VAR bool fc_timed_out := FALSE;
     PERS robtarget fc_start := [[0, 0, 0], [1, 0, 0, 0], [0, 0, 0, 0], [9E9, 9E9, 9E9, 9E9, 9E9, 9E9]];
     PERS robtarget fc_end := [[0, 0, 0], [1, 0, 0, 0], [0, 0, 0, 0], [9E9, 9E9, 9E9, 9E9, 9E9, 9E9]];
+    PERS robtarget fc_via := [[0, 0, 0], [1, 0, 0, 0], [0, 0, 0, 0], [9E9, 9E9, 9E9, 9E9, 9E9, 9E9]];
 
     ! One pass: to the start (a fine point), EGM on, press, the corrected segment, release, EGM off.
     PROC FcPass()
@@ -219,18 +284,29 @@ impl EgmCellConfig {
         FcEgmEnd;
     ENDPROC
 
+    ! One circular pass: to the start, EGM on, press, the corrected arc through fc_via, release, EGM off.
+    PROC FcArcPass()
+        MoveL fc_start, v100, fine, {tool} \WObj:={wobj};
+        FcEgmStart;
+        IF FcPress(20, 0.5, 1) THEN
+            EGMMoveC fc_egm_id, fc_via, fc_end, v100, fine, {tool} \WObj:={wobj};
+            FcRelease 0.5, 1;
+        ENDIF
+        FcEgmEnd;
+    ENDPROC
+
     ! EGM path correction from UDPUC device "{device}", settings "{ext}", every {rate} ms.
     PROC FcEgmStart()
         EGMReset fc_egm_id;
         EGMGetId fc_egm_id;
         EGMSetupUC {robot}, fc_egm_id, "{ext}", "{device}" \PathCorr \APTR;
-        EGMActMove fc_egm_id, {tool}.tframe \SampleRate:={rate};
+        EGMActMove fc_egm_id, {tool}.tframe \SampleRate:={rate} \DataToSensor:=fc_cmd;
     ENDPROC
 
     ! The command for forcecell.
     PROC FcSetCmd(num mode, num force, num ramp, num segment)
-        fc_cmd := [mode, force, ramp, segment];
-        ! *Unverified*: hand fc_cmd to EGM here so that it goes out in RAPIDfromRobot.dnum.
+        ! EGM sends fc_cmd in RAPIDfromRobot.dnum from the next cycle on (\DataToSensor above).
+        fc_cmd := [NumToDnum(mode), NumToDnum(force), NumToDnum(ramp), NumToDnum(segment)];
     ENDPROC
 
     ! PRESS and wait (bounded) for PRESSING; FALSE on a fault or no answer.
@@ -336,8 +412,11 @@ mod tests {
             }
         }
         assert!(declared.len() >= 20, "{declared:?}");
-        // FcPass is the entry point the integrator's own main calls.
-        for name in declared.iter().filter(|n| *n != "FcPass") {
+        // FcPass and FcArcPass are the entry points the integrator's own main calls.
+        for name in declared
+            .iter()
+            .filter(|n| *n != "FcPass" && *n != "FcArcPass")
+        {
             let uses: usize = lines.iter().map(|l| count_word(l, name)).sum();
             assert!(uses >= 2, "{name} is declared and never used");
         }
@@ -398,8 +477,11 @@ mod tests {
         assert!(
             m.contains("EGMSetupUC ROB_1, fc_egm_id, \"MyCorr\", \"MyDev\" \\PathCorr \\APTR;")
         );
-        assert!(m.contains("EGMActMove fc_egm_id, tPad.tframe \\SampleRate:=4;"));
+        assert!(
+            m.contains("EGMActMove fc_egm_id, tPad.tframe \\SampleRate:=4 \\DataToSensor:=fc_cmd;")
+        );
         assert!(m.contains("EGMMoveL fc_egm_id, fc_end, v100, fine, tPad \\WObj:=wPart;"));
+        assert!(m.contains("EGMMoveC fc_egm_id, fc_via, fc_end, v100, fine, tPad \\WObj:=wPart;"));
         assert!(m.contains("EGMStop fc_egm_id, EGM_STOP_HOLD;"));
         let e = c.udpuc_entry();
         assert!(e.contains("-Name \"MyDev\" -Type \"UDPUC\" -RemoteAddress \"192.168.125.100\""));
@@ -422,6 +504,8 @@ mod tests {
             (|c| c.sample_rate_ms = 6, "sample rate"),
             (|c| c.max_wait = f64::NAN, "max wait"),
             (|c| c.max_wait = 0.0, "max wait"),
+            (|c| c.correction_mm = 0.0, "correction range"),
+            (|c| c.correction_mm = f64::INFINITY, "correction range"),
         ];
         for (bad, what) in cases {
             let mut c = cfg();
@@ -430,5 +514,49 @@ mod tests {
             assert!(e.contains(what), "{e}");
         }
         assert!(cfg().render().is_ok());
+    }
+
+    #[test]
+    fn the_settings_facts_read_back_what_the_settings_wrote() {
+        let mut c = cfg();
+        c.port = 6611;
+        c.correction_mm = 7.5;
+        let f = SettingsFacts::parse(&c.settings());
+        assert_eq!(f.host, Some(Ipv4Addr::new(192, 168, 125, 100)));
+        assert_eq!(f.port, Some(6611));
+        assert_eq!(f.correction_mm, Some(7.5));
+        let none = SettingsFacts::parse("nothing here");
+        assert_eq!(
+            (none.host, none.port, none.correction_mm),
+            (None, None, None)
+        );
+    }
+
+    #[test]
+    fn both_corrected_moves_run_between_press_and_release_with_the_data_exchange_on() {
+        let lines = code(&cfg().rapid_module());
+        for (entry, mv) in [
+            ("PROC FcPass()", "EGMMoveL"),
+            ("PROC FcArcPass()", "EGMMoveC"),
+        ] {
+            let start = lines.iter().position(|l| l == entry).unwrap();
+            let body: Vec<&String> = lines[start..]
+                .iter()
+                .take_while(|l| *l != "ENDPROC")
+                .collect();
+            let at = |w: &str| {
+                body.iter()
+                    .position(|l| l.starts_with(w))
+                    .unwrap_or_else(|| panic!("{w} in {entry}"))
+            };
+            assert!(at("FcEgmStart") < at("IF FcPress("), "{entry}");
+            assert!(at("IF FcPress(") < at(mv), "{entry}");
+            assert!(at(mv) < at("FcRelease"), "{entry}");
+            assert!(at("ENDIF") < at("FcEgmEnd"), "{entry}");
+        }
+        // The command goes out in RAPIDfromRobot: fc_cmd is a PERS dnum array handed to EGMActMove.
+        assert!(lines.iter().any(|l| l.starts_with("PERS dnum fc_cmd{4}")));
+        let act = lines.iter().find(|l| l.starts_with("EGMActMove")).unwrap();
+        assert!(act.contains("\\DataToSensor:=fc_cmd"), "{act}");
     }
 }

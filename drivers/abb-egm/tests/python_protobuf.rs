@@ -1,8 +1,8 @@
 //! Google's protobuf runtime (Python) against forcecell's codec: Python classes generated at test time
 //! from the project's own `proto/egm.proto` (`grpc_tools.protoc`) decode forcecell's path correction
-//! and robot message, and encode an `EgmRobot` that forcecell's session turns into a cycle. Needs
-//! `python3 -m pip install protobuf grpcio-tools`; installs nothing itself, hence ignored:
-//! `cargo test --release -p forcecell-abb-egm --test python_protobuf -- --ignored`.
+//! and robot message, and encode an `EgmRobot` that forcecell's session turns into a cycle. Installs
+//! `protobuf` and `grpcio-tools` from PyPI into `target/egm-venv` (`scripts/egm-venv.sh`), hence
+//! ignored: `cargo test --release -p forcecell-abb-egm --test python_protobuf -- --ignored`.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -107,18 +107,42 @@ fn hex(b: &[u8]) -> String {
     b.iter().map(|x| format!("{x:02x}")).collect()
 }
 
+const SCRIPT_PATH: &str = "../../scripts/egm-venv.sh";
+
+/// The python of `target/egm-venv` with `packages` installed from PyPI (`scripts/egm-venv.sh`).
+fn venv_python(packages: &[&str]) -> String {
+    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(SCRIPT_PATH);
+    let out = Command::new("bash")
+        .arg(&script)
+        .args(packages)
+        .output()
+        .expect("run scripts/egm-venv.sh");
+    assert!(
+        out.status.success(),
+        "{} failed (python3 with venv and pip, and PyPI, are needed):\n{}",
+        script.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .last()
+        .expect("the venv's python")
+        .to_string()
+}
+
 #[test]
-#[ignore = "needs python3 with protobuf and grpcio-tools (pip install protobuf grpcio-tools)"]
+#[ignore = "installs protobuf and grpcio-tools from PyPI into target/egm-venv (python3 with venv, network)"]
 fn googles_protobuf_runtime_reads_and_writes_what_forcecell_does() {
+    let python = venv_python(&["protobuf", "grpcio-tools"]);
     let out = dir();
     let proto = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("proto");
-    let st = Command::new("python3")
+    let st = Command::new(&python)
         .args(["-m", "grpc_tools.protoc", "-I"])
         .arg(&proto)
         .arg(format!("--python_out={}", out.display()))
         .arg("egm.proto")
         .status()
-        .expect("python3");
+        .expect("the venv's python");
     assert!(st.success(), "grpc_tools.protoc failed on proto/egm.proto");
 
     // forcecell's bytes: a path correction from the session, and a robot message from the codec.
@@ -138,13 +162,13 @@ fn googles_protobuf_runtime_reads_and_writes_what_forcecell_does() {
         .unwrap()
         .unwrap();
 
-    let py = Command::new("python3")
+    let py = Command::new(&python)
         .args(["-c", SCRIPT])
         .arg(&out)
         .arg(hex(&buf[..o.len]))
         .arg(hex(&ours))
         .output()
-        .expect("python3");
+        .expect("the venv's python");
     let text = String::from_utf8_lossy(&py.stdout);
     assert!(
         py.status.success(),
