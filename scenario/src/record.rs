@@ -322,10 +322,13 @@ mod tests {
         assert!(back[0].f.is_nan());
         assert_eq!(back[0].x_cmd, 0.0102);
         assert_eq!(back[1].condition, 1);
-        // NaN is not equal to itself: the missing `f` and the simulation-only `s` compared as 0.
+        // NaN is not equal to itself: the missing `f` and the simulation-only `s`, `tilt_error` and
+        // `rotation` compared as 0.
         let without_f = |r: &Row| Row {
             f: 0.0,
             s: 0.0,
+            tilt_error: 0.0,
+            rotation: 0.0,
             ..*r
         };
         assert_eq!(
