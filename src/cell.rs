@@ -549,7 +549,16 @@ pub struct CellOutcome {
     pub late: u32,
     /// Which way it ended.
     pub end: CellEnd,
+    /// The re-zeros of the sensor between passes and the refusals (`[loop.process] rezero`), the
+    /// first [`REZERO_LOG`] of them.
+    pub rezeros: Vec<controller::RezeroEvent>,
+    /// Re-zero decisions beyond those.
+    pub rezeros_more: u64,
 }
+
+/// How many re-zero decisions a cell run keeps for its summary (kept without allocating in the
+/// cycle; the recording has every one).
+pub const REZERO_LOG: usize = 256;
 
 /// Which way a cell run ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -674,6 +683,8 @@ where
         kc_hat: sink.kc_hat,
         late: sink.late,
         end,
+        rezeros: sink.rezeros,
+        rezeros_more: sink.rezeros_more,
     })
 }
 
@@ -691,6 +702,9 @@ struct RecordSink {
     status: Option<crate::status::Printer>,
     /// The robot's own late-reply count last seen.
     late: u32,
+    /// Re-zero decisions, room for [`REZERO_LOG`] made before the run (no allocation in the cycle).
+    rezeros: Vec<controller::RezeroEvent>,
+    rezeros_more: u64,
 }
 
 impl RecordSink {
@@ -703,6 +717,8 @@ impl RecordSink {
             last_phase: None,
             status: None,
             late: 0,
+            rezeros: Vec::with_capacity(REZERO_LOG),
+            rezeros_more: 0,
         }
     }
 
@@ -737,6 +753,13 @@ impl Sink for RecordSink {
         }
         if r.cycle.process.is_some() {
             self.last_phase = Some(r.command.process.phase);
+        }
+        if let Some(e) = r.rezero {
+            if self.rezeros.len() < self.rezeros.capacity() {
+                self.rezeros.push(e);
+            } else {
+                self.rezeros_more += 1;
+            }
         }
         match &mut self.recorder {
             Some(tx) => {
@@ -815,6 +838,7 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
             crate::robot::RobotKind::AbbEgm(_) => "the RAPID program (EGMActMove)",
         }
     );
+    link.say_stamps();
     let mcap = stem.with_extension("mcap");
     // The cell file as the input rule reads it (a regular file, capped), once: hashed and attached.
     let cell = crate::input::read(path, "cell config", crate::input::MAX_CONFIG).ok();
@@ -845,6 +869,9 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
         "{}; {} cycles, {} sensor faults, {} limited; {late}; Stop {}",
         out.ended, out.stats.cycles, out.stats.sensor_faults, out.stats.limited, out.stop_note
     );
+    for line in crate::report::rezeros(&out.rezeros, out.rezeros_more) {
+        println!("{line}");
+    }
     // What the first cycles showed that degrades control, at the stiffness the law estimated (the
     // paper's 50 kN/m when it estimated none).
     link.print_diagnostics(

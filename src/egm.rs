@@ -108,7 +108,7 @@ pub fn print_link(d: &Diagnostics) {
     let c = d.counters;
     let l = &d.latency;
     println!(
-        "EGM link: {} received, {} answered, {} late, {} skipped, {} stale, {} foreign, {} malformed, {} oversized, {} implausible, {} rotations dropped, {} states published",
+        "EGM link: {} received, {} answered, {} late after arrival, {} skipped, {} stale, {} foreign, {} malformed, {} oversized, {} implausible, {} rotations dropped, {} states published",
         c.received,
         c.answered,
         c.late,
@@ -120,6 +120,22 @@ pub fn print_link(d: &Diagnostics) {
         c.implausible,
         c.rotation_dropped,
         c.states_published
+    );
+    let a = &d.from_arrival;
+    println!(
+        "  arrival→send: p50 {:?}, p99 {:?}, p99.9 {:?}, max {:?}{}",
+        a.quantile(0.5),
+        a.quantile(0.99),
+        a.quantile(0.999),
+        a.max(),
+        if c.unstamped > 0 {
+            format!(
+                " ({} replies without a kernel receive stamp: measured from the receive call)",
+                c.unstamped
+            )
+        } else {
+            String::new()
+        }
     );
     println!(
         "  receive→send: p50 {:?}, p99 {:?}, p99.9 {:?}, max {:?}",

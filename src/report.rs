@@ -5,8 +5,51 @@ use std::path::Path;
 
 use anyhow::Result;
 
+use controller::{RezeroEvent, RezeroOutcome};
+
 use crate::plot;
 use crate::runner::{RunResult, RunSpec};
+
+/// The summary's lines about re-zeroing the sensor between passes (`[process] rezero`): a count,
+/// then each re-zero with the offset it removed and each refusal with why (the old zero kept);
+/// `more` decisions that were not kept (a run's log is bounded). Nothing when there was none.
+pub fn rezeros(events: &[RezeroEvent], more: u64) -> Vec<String> {
+    if events.is_empty() && more == 0 {
+        return Vec::new();
+    }
+    let done = events
+        .iter()
+        .filter(|e| e.outcome == RezeroOutcome::Done)
+        .count();
+    let mut out = vec![format!(
+        "{:<20} {done} done, {} refused{}",
+        "sensor re-zeros",
+        events.len() - done,
+        if more > 0 {
+            format!(" ({more} more not listed)")
+        } else {
+            String::new()
+        }
+    )];
+    let v = |v: &hal::Vector3<f64>| format!("({:+.3}, {:+.3}, {:+.3})", v.x, v.y, v.z);
+    for e in events {
+        out.push(match e.outcome {
+            RezeroOutcome::Done => format!(
+                "  at {:>8.3} s  re-zeroed: removed F {} N, T {} N·m (zero now F {} N)",
+                e.t,
+                v(&e.offset.force),
+                v(&e.offset.torque),
+                v(&e.zero.force)
+            ),
+            why => format!(
+                "  at {:>8.3} s  refused ({why}): the old zero kept (F {} N over the window)",
+                e.t,
+                v(&e.offset.force)
+            ),
+        });
+    }
+    out
+}
 
 /// Print the summary of a simulated run (speed, how it ended, the metrics, every target's verdict),
 /// write its CSV and plots into `out`, and return the exit status ([`crate::stop`]): an interrupted or
@@ -111,6 +154,9 @@ pub fn sim(spec: &RunSpec, run: &RunResult, out: &Path, check: bool) -> Result<u
     println!();
     for (k, v) in table {
         println!("  {k:<20} {v}");
+    }
+    for line in rezeros(&run.rezeros, 0) {
+        println!("  {line}");
     }
     let verdicts = run.verdicts(&spec.scenario.targets);
     if !verdicts.is_empty() {

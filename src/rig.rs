@@ -69,6 +69,7 @@ impl RobotLink for SpringRobot {
             programmed: Pose::identity(),
             late_replies: 0,
             missed: 0,
+            replied_late: 0,
             new_session: false,
             process: None,
         })

@@ -592,6 +592,15 @@ impl CellRobot {
         }
     }
 
+    /// Say once (at the start) when the kernel gives the link's socket no receive timestamps: its late
+    /// replies are then measured from the receive call's return.
+    pub fn say_stamps(&self) {
+        match self {
+            Self::Rsi(l) => crate::rsi::say_stamps(l.kernel_stamps(), "RSI"),
+            Self::Egm(l) => crate::rsi::say_stamps(l.kernel_stamps(), "EGM"),
+        }
+    }
+
     /// Print the link's counters and latency, and (RSI) what its first cycles showed that degrades
     /// control at the stiffness `kc` N/m, for a `cycle` s loop.
     pub fn print_diagnostics(&self, cycle: f64, kc: f64) {

@@ -95,13 +95,25 @@ impl WireSummary {
     }
 }
 
-/// Print the RSI link's counters (received, answered, late, skipped, stale, foreign, malformed,
-/// oversized, implausible) and its receive→send latency.
+/// Say once, when a robot link is bound, that the kernel gives its socket no receive timestamps
+/// (`stamps` false): late replies are then measured from the receive call's return, blind to a
+/// datagram's wait in the socket.
+pub fn say_stamps(stamps: bool, link: &str) {
+    if !stamps {
+        eprintln!(
+            "warning: the kernel refused receive timestamps (SO_TIMESTAMPNS) on the {link} socket: late replies \
+             are measured from the receive call's return, blind to the time a datagram waited in the socket"
+        );
+    }
+}
+
+/// Print the RSI link's counters (received, answered, late after arrival, skipped, stale, missed,
+/// foreign, malformed, oversized, implausible), its arrival→send and receive→send latencies.
 pub fn print_link(d: &Diagnostics) {
     let c = d.counters;
     let l = &d.latency;
     println!(
-        "RSI link: {} received, {} answered, {} late, {} skipped, {} stale, {} missed, {} foreign, {} malformed, {} oversized, {} implausible",
+        "RSI link: {} received, {} answered, {} late after arrival, {} skipped, {} stale, {} missed, {} foreign, {} malformed, {} oversized, {} implausible",
         c.received,
         c.answered,
         c.late,
@@ -113,6 +125,22 @@ pub fn print_link(d: &Diagnostics) {
         c.oversized,
         c.implausible
     );
+    // `late` judges the time from the datagram's arrival (the kernel's stamp) to the reply's send;
+    // `missed` counts the robot's cycles that never arrived (IPOC gaps).
+    let a = &d.from_arrival;
+    println!(
+        "  arrival→send: p50 {:?}, p99 {:?}, p99.9 {:?}, max {:?}",
+        a.quantile(0.5),
+        a.quantile(0.99),
+        a.quantile(0.999),
+        a.max()
+    );
+    if c.unstamped > 0 {
+        println!(
+            "  note: {} of the replies had no kernel receive stamp: their lateness was measured from the receive call's return",
+            c.unstamped
+        );
+    }
     println!(
         "  receive→send: p50 {:?}, p99 {:?}, p99.9 {:?}, max {:?}",
         l.quantile(0.5),
@@ -302,6 +330,7 @@ impl RobotSide {
         // 1 s: lockstep pauses whenever the loop does.
         lc.watchdog_cycles = ((1.0 / spec.plant.period).ceil() as u32).max(25);
         let mut link = RsiLink::bind(lc).context("RSI driver")?;
+        say_stamps(link.kernel_stamps(), "RSI");
         let mut kc = KrcConfig::new(ethernet, link.local_addr()?);
         kc.period = period_of(&spec.plant);
         kc.ipoc_step = ((spec.plant.period * 1000.0).round() as u64).max(1);
@@ -410,6 +439,7 @@ impl RobotSide {
             "listening for an RSI client on {} (SENTYPE {sentype}; `forcecell rsi-config` writes its files)",
             link.local_addr()?
         );
+        say_stamps(link.kernel_stamps(), "RSI");
         Ok(Self {
             spec,
             world,

@@ -115,6 +115,8 @@ pub struct RunResult {
     pub interrupted: Option<bool>,
     /// `sent`, or `not sent` and the real reason ([`controller::run::Outcome::stop_note`]).
     pub stop_note: String,
+    /// Every re-zero of the sensor between passes, and every refusal (`[process] rezero`).
+    pub rezeros: Vec<controller::RezeroEvent>,
 }
 
 /// A scenario target checked against a run (the same check as the controller's scenario tests).
@@ -180,7 +182,11 @@ where
     let started = Instant::now();
     let every = (steps / 200).max(1);
     let mut k = 0u64;
+    let mut rezeros = Vec::new();
     let mut also = |r: &controller::CycleReport, _: &Row| {
+        if let Some(e) = r.rezero {
+            rezeros.push(e);
+        }
         if let Some(tx) = &mut recorder {
             tx.push(Record::from_report(r, r.set_point));
         }
@@ -229,6 +235,7 @@ where
         fault,
         interrupted,
         stop_note: outcome.stop_note(),
+        rezeros,
     })
 }
 

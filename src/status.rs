@@ -1,6 +1,7 @@
 //! What `run` says while it runs ([`Printer`], on its own thread): a status line a few times a second — the process phase (or the law's
 //! contact state), the force against the commanded force, `k̂_c`, the robot's late replies against its
-//! budget, and the cycles that met a condition. On a terminal the line is rewritten in place; elsewhere
+//! budget, the robot cycles that never arrived, the replies this side sent late after their datagram
+//! arrived, and the cycles that met a condition. On a terminal the line is rewritten in place; elsewhere
 //! (a log, a pipe) a plain line is written every few seconds. Paced on the robot's own time, so a
 //! recording replayed or a test gets the same lines.
 
@@ -89,14 +90,22 @@ impl Status {
             let _ = write!(s, "  k̂_c {:6.1} kN/m", r.out.kc_hat * 1e-3);
         }
         let _ = write!(s, "  x {:6.2} mm", r.command.translation.z * 1e3);
+        // The robot's own count (RSI `Delay`) against its Timeout; then what the link saw: cycles the
+        // robot sent that never arrived (IPOC gaps), and replies that left late after their datagram
+        // arrived (the kernel's receive stamp).
         match self.budget {
             Some(b) => {
-                let _ = write!(s, "  late {} of {b}", r.cycle.late_replies);
+                let _ = write!(s, "  robot late {} of {b}", r.cycle.late_replies);
             }
             None => {
-                let _ = write!(s, "  late {}", r.cycle.late_replies);
+                let _ = write!(s, "  robot late {}", r.cycle.late_replies);
             }
         }
+        let _ = write!(
+            s,
+            "  missed {}  replied late {}",
+            r.cycle.missed, r.cycle.replied_late
+        );
         let _ = write!(s, "  conditions {} of {}", self.conditions, self.cycles);
         if r.command.process.phase == hal::ProcessPhase::Fault {
             let _ = write!(s, "  FAULT {}", r.command.process.fault.name());
@@ -190,6 +199,10 @@ mod tests {
     use hal::{Correction, Cycle, Pose};
 
     fn report(t: f64, f: Option<f64>, late: u32) -> CycleReport {
+        counted(t, f, late, 0, 0)
+    }
+
+    fn counted(t: f64, f: Option<f64>, late: u32, missed: u64, replied_late: u64) -> CycleReport {
         CycleReport {
             cycle: Cycle {
                 seq: (t * 250.0) as u64,
@@ -198,7 +211,8 @@ mod tests {
                 actual: Pose::identity(),
                 programmed: Pose::identity(),
                 late_replies: late,
-                missed: 0,
+                missed,
+                replied_late,
                 new_session: false,
                 process: None,
             },
@@ -215,6 +229,7 @@ mod tests {
             command: Correction::along_z(0.0011),
             set_point: 5.0,
             fault: None,
+            rezero: None,
         }
     }
 
@@ -236,12 +251,28 @@ mod tests {
             "F   5.01 /   5.00 N",
             "k̂_c   70.0 kN/m",
             "x   1.10 mm",
-            "late 0 of 100",
+            "robot late 0 of 100",
+            "missed 0",
+            "replied late 0",
         ] {
             assert!(l.contains(part), "{part:?} in {l:?}");
         }
         let held = s.line(&report(1.0, None, 0));
         assert!(held.contains("F    —"), "{held}");
+    }
+
+    /// The three counts side by side, each named for who counted what.
+    #[test]
+    fn the_line_shows_the_robots_late_count_the_missed_cycles_and_the_late_replies() {
+        let s = Status::new(0.25, Some(100));
+        let l = s.line(&counted(2.0, Some(5.0), 3, 17, 42));
+        assert!(
+            l.contains("robot late 3 of 100  missed 17  replied late 42"),
+            "{l}"
+        );
+        let s = Status::new(0.25, None);
+        let l = s.line(&counted(2.0, Some(5.0), 3, 0, 5));
+        assert!(l.contains("robot late 3  missed 0  replied late 5"), "{l}");
     }
 
     #[test]

@@ -99,3 +99,138 @@ sensor_priority = 10
     assert!(summary["started"].as_str().unwrap().ends_with('Z'));
     assert!(summary["ended"].as_str().unwrap() >= summary["started"].as_str().unwrap());
 }
+
+/// The value of `name="…"` in the first `<tag …>` of `xml`.
+fn attr(xml: &str, tag: &str, name: &str) -> Option<f64> {
+    let start = xml.find(&format!("<{tag} "))?;
+    let el = &xml[start..start + xml[start..].find('>')?];
+    let at = el.find(&format!(" {name}=\""))? + name.len() + 3;
+    el[at..at + el[at..].find('"')?].parse().ok()
+}
+
+/// Issue 35, item 12: a robot whose every 25th datagram never arrives (an IPOC gap of one cycle, as the
+/// network would lose it). `run` counts each as missed, in its end summary and in the recording, and
+/// prints the late replies measured from each datagram's arrival beside it.
+#[test]
+fn run_counts_the_robot_cycles_that_never_arrived_in_the_summary_and_the_recording() {
+    use std::net::UdpSocket;
+    use std::time::Duration;
+    let dir = tempfile::tempdir().unwrap();
+    let _sensor = common::ft300(&dir.path().join("ft300"), "0.0");
+    let port = free_port();
+    let cell = format!(
+        r#"tuning = "robust-100hz"
+duration = 1.0
+record = "rec"
+
+[robot]
+listen = "127.0.0.1:{port}"
+robot_ip = "127.0.0.1"
+poscorr_mm = 55.0
+poscorrmon_mm = 60.0
+
+[sensor]
+kind = "robotiq"
+port = "ft300"
+"#
+    );
+    std::fs::write(dir.path().join("cell.toml"), cell).unwrap();
+    let mut child = spawn(&["run", "--config", "cell.toml"], dir.path());
+    let (seen, r) = read_until(&mut child, "listening on");
+    // The robot stand-in: a plain UDP socket sending <Rob> in the forcecell layout on a 4 ms real-time
+    // cycle as a robot does (a faster one outruns the FT 300's 10 ms frames: the loop would see its
+    // sensor stale and fault), the tool pointing down (A 180, C 180) and following the correction
+    // along its z.
+    let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+    sock.connect(("127.0.0.1", port)).unwrap();
+    sock.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    let mut ipoc = 7_000_000u64;
+    let mut z_corr = 0.0;
+    let mut skipped = Vec::new();
+    let mut stop_ipoc = None;
+    let mut buf = [0u8; 2048];
+    let start = std::time::Instant::now();
+    for i in 0..2_000u32 {
+        // Pacing only (the robot's clock); nothing here asserts a time.
+        let tick = start + Duration::from_millis(4 * u64::from(i));
+        std::thread::sleep(tick.saturating_duration_since(std::time::Instant::now()));
+        if i % 25 == 24 {
+            skipped.push(ipoc); // sent by the robot, lost on the way
+            ipoc += 4;
+        }
+        let z_sol = 890.0;
+        let z_ist = z_sol - z_corr;
+        let rob = format!(
+            "<Rob Type=\"KUKA\"><RIst X=\"445.0000\" Y=\"0.0000\" Z=\"{z_ist:.4}\" A=\"180.0000\" B=\"0.0000\" C=\"180.0000\"/>\
+             <RSol X=\"445.0000\" Y=\"0.0000\" Z=\"{z_sol:.4}\" A=\"180.0000\" B=\"0.0000\" C=\"180.0000\"/>\
+             <AIPos A1=\"0.0000\" A2=\"-90.0000\" A3=\"90.0000\" A4=\"0.0000\" A5=\"90.0000\" A6=\"0.0000\"/>\
+             <ASPos A1=\"0.0000\" A2=\"-90.0000\" A3=\"90.0000\" A4=\"0.0000\" A5=\"90.0000\" A6=\"0.0000\"/>\
+             <Delay D=\"0\"/><IPOC>{ipoc}</IPOC></Rob>"
+        );
+        sock.send(rob.as_bytes()).unwrap();
+        let n = sock.recv(&mut buf).expect("every datagram is answered");
+        let sen = String::from_utf8_lossy(&buf[..n]).into_owned();
+        z_corr = attr(&sen, "RKorr", "Z").expect("every reply corrects");
+        if sen.contains("<Stop>1</Stop>") {
+            stop_ipoc = Some(ipoc);
+            break;
+        }
+        ipoc += 4;
+    }
+    let (code, text) = finish(child, seen, r);
+    assert_eq!(code, 0, "{text}");
+    let stop_ipoc = stop_ipoc.expect("the run ends with Stop");
+    // Every gap before the Stop cycle is a missed cycle, said in the summary beside the late replies
+    // measured from the datagrams' arrival.
+    let expected = skipped.iter().filter(|&&s| s < stop_ipoc).count() as u64;
+    assert!(expected >= 9, "{expected} of {skipped:?}");
+    let link = text
+        .lines()
+        .find(|l| l.starts_with("RSI link: "))
+        .unwrap_or_else(|| panic!("no link summary: {text}"));
+    assert!(link.contains(&format!(", {expected} missed,")), "{link}");
+    assert!(link.contains(" late after arrival,"), "{link}");
+    assert!(text.contains("  arrival→send: p50 "), "{text}");
+    // The status line names the three counts.
+    assert!(text.contains("  missed 0  replied late "), "{text}");
+    // The recording: each cycle carries the count so far, the last one all of them but a gap just
+    // before the Stop cycle (not recorded).
+    let mcap = std::fs::read_dir(dir.path().join("rec"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "mcap"))
+        .expect("a recording");
+    let bytes = std::fs::read(&mcap).unwrap();
+    let mut recs = Vec::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        if m.channel.topic == scenario::telemetry::CYCLE_TOPIC {
+            let mut rec = forcecell::recorder::Record::unknown();
+            scenario::telemetry::decode(&scenario::telemetry::CYCLE, &m.data, &mut rec).unwrap();
+            recs.push(rec);
+        }
+    }
+    let last = recs.last().expect("records");
+    let before_last = skipped.iter().filter(|&&s| s < last.robot_seq).count() as u64;
+    assert_eq!(
+        last.missed, before_last,
+        "{skipped:?} last seq {}",
+        last.robot_seq
+    );
+    assert!(before_last + 1 >= expected, "{before_last} vs {expected}");
+    // The count rises at each gap, never elsewhere.
+    for w in recs.windows(2) {
+        let gaps = skipped
+            .iter()
+            .filter(|&&s| s > w[0].robot_seq && s < w[1].robot_seq)
+            .count() as u64;
+        assert_eq!(
+            w[1].missed - w[0].missed,
+            gaps,
+            "{} → {}",
+            w[0].robot_seq,
+            w[1].robot_seq
+        );
+        assert!(w[1].replied_late >= w[0].replied_late);
+    }
+}

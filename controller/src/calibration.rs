@@ -241,6 +241,7 @@ impl<R: RobotLink, S: ForceSensor> Cycler for Collecting<'_, R, S> {
             command,
             set_point: 0.0,
             fault: None,
+            rezero: None,
         })
     }
 
@@ -357,6 +358,7 @@ mod tests {
                 programmed: Pose::identity(),
                 late_replies: 0,
                 missed: 0,
+                replied_late: 0,
                 new_session: self.k == 0,
                 process: None,
             })

@@ -12,12 +12,14 @@ mod error;
 mod guard;
 mod process;
 mod process_cycle;
+mod rezero;
 pub use config::LoopConfig;
 use error::Ending;
 pub use error::{Fault, LoopError};
 use guard::Guard;
 use process::Process;
 pub use process::{ProcessConfig, Refusal};
+pub use rezero::{Rezero, RezeroEvent, RezeroInput, RezeroOutcome, RezeroParams};
 
 /// Counters of the loop, for diagnostics.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -56,7 +58,8 @@ pub struct CycleReport {
     /// where the loop compensates gravity ([`ControlLoop::with_gravity`]); `None` when there was none
     /// usable (no sample, not finite, not compensable).
     pub wrench: Option<Wrench>,
-    /// True when the loop compensates gravity (then `wrench` differs from the raw `sample`).
+    /// True when the loop compensates gravity or re-zeroes the sensor (then `wrench` differs from
+    /// the raw `sample`).
     pub compensated: bool,
     /// The law's output (on a held cycle, the last output).
     pub out: Output,
@@ -67,6 +70,9 @@ pub struct CycleReport {
     pub set_point: f64,
     /// What went wrong in this cycle, if anything.
     pub fault: Option<Fault>,
+    /// A re-zero of the sensor in this cycle, or a refusal to (`[process] rezero`; its zero applies
+    /// from the next cycle on).
+    pub rezero: Option<RezeroEvent>,
 }
 
 /// One sensor read, classified.
@@ -117,6 +123,8 @@ pub struct ControlLoop<R, S: ForceSensor, L> {
     /// The law's last correction off the tool normal (tangential translation, rotation), limited;
     /// held while the loop backs off along the normal.
     side: Correction,
+    /// The sensor's zero, re-taken in free air between passes where `[process] rezero` asks.
+    rezero: Rezero,
 }
 
 impl<R: RobotLink, S: ForceSensor, L: ForceLaw> ControlLoop<R, S, AlongNormal<L>> {
@@ -146,6 +154,7 @@ impl<R: RobotLink, S: ForceSensor, L: CellLaw> ControlLoop<R, S, L> {
             guard: Guard::default(),
             gravity: None,
             side: Correction::default(),
+            rezero: Rezero::new(cfg.process.rezero, cfg.process.zeroing),
         }
     }
 
@@ -166,6 +175,12 @@ impl<R: RobotLink, S: ForceSensor, L: CellLaw> ControlLoop<R, S, L> {
     /// The law.
     pub fn law(&self) -> &L {
         &self.law
+    }
+
+    /// The zero the loop removes from every wrench (after gravity compensation), N and N·m: zero
+    /// unless `[process] rezero` re-took it between passes.
+    pub fn sensor_zero(&self) -> Wrench {
+        self.rezero.zero()
     }
 
     /// The robot link.
@@ -281,11 +296,12 @@ impl<R: RobotLink, S: ForceSensor, L: CellLaw> ControlLoop<R, S, L> {
             f,
             sample,
             wrench,
-            compensated: self.gravity.is_some(),
+            compensated: self.compensates(),
             out,
             command,
             set_point: self.law.set_point(),
             fault,
+            rezero: None,
         })
     }
 
@@ -411,12 +427,20 @@ impl<R: RobotLink, S: ForceSensor, L: CellLaw> ControlLoop<R, S, L> {
         }
     }
 
-    /// The wrench with gravity removed where the loop compensates (`None`: it cannot be, now).
+    /// Whether the wrench the loop uses may differ from the raw sample: it compensates gravity, or
+    /// re-zeroes the sensor.
+    pub(super) fn compensates(&self) -> bool {
+        self.gravity.is_some() || self.rezero.enabled()
+    }
+
+    /// The wrench with gravity removed where the loop compensates and the sensor's zero removed
+    /// (`None`: it cannot be compensated, now).
     fn compensate(&self, raw: &Wrench) -> Option<Wrench> {
-        match &self.gravity {
-            Some(g) => g.apply(raw).ok(),
-            None => Some(*raw),
-        }
+        let w = match &self.gravity {
+            Some(g) => g.apply(raw).ok()?,
+            None => *raw,
+        };
+        Some(self.rezero.apply(&w))
     }
 
     /// The law's step: the robot time since its last step (held and skipped cycles included), from
@@ -616,11 +640,12 @@ impl<R: RobotLink, S: ForceSensor, L: CellLaw> ControlLoop<R, S, L> {
             f,
             sample,
             wrench,
-            compensated: self.gravity.is_some(),
+            compensated: self.compensates(),
             out: self.last_out,
             command,
             set_point: self.law.set_point(),
             fault: Some(Fault::Retracting),
+            rezero: None,
         })
     }
 

@@ -29,7 +29,8 @@ pub mod tune;
 
 pub use config::{LawConfig, Overrides, TunedLaw, Tuning};
 pub use control_loop::{
-    ControlLoop, CycleReport, Fault, LoopConfig, LoopError, LoopStats, ProcessConfig,
+    ControlLoop, CycleReport, Fault, LoopConfig, LoopError, LoopStats, ProcessConfig, RezeroEvent,
+    RezeroOutcome, RezeroParams,
 };
 pub use law::{
     AdaptiveParams, AlongNormal, CellLaw, ContactState, EventCounts, Events, ForceLaw,

@@ -415,6 +415,7 @@ mod tests {
                 programmed: Pose::identity(),
                 late_replies: 0,
                 missed: 0,
+                replied_late: 0,
                 new_session: k == 0,
                 process: process.then_some(ProcessCommand {
                     mode: ProcessMode::Press,
@@ -432,6 +433,7 @@ mod tests {
             command: Correction::default(),
             set_point: 0.0,
             fault: None,
+            rezero: None,
         }
     }
 

@@ -15,6 +15,8 @@ fn flatten(t: &toml::Table, prefix: &str, out: &mut Vec<(String, f64)>) {
             toml::Value::Table(t) => flatten(t, &name, out),
             toml::Value::Float(f) => out.push((key, *f)),
             toml::Value::Integer(i) => out.push((key, *i as f64)),
+            // A switch: 0 off, 1 on (the table writes `false`, `true`).
+            toml::Value::Boolean(b) => out.push((key, f64::from(u8::from(*b)))),
             // The law's kind, the tuning's name and description: not parameters.
             toml::Value::String(_) => {}
             v => panic!("{name}: {v}"),
@@ -53,10 +55,14 @@ fn the_docs_parameter_table_is_the_shipped_tuning() {
         match rows.iter().find(|(k, _)| k == key) {
             None => wrong.push(format!("{key} = {value} has no row")),
             Some((_, written)) => {
-                let v: f64 = written
-                    .replace('−', "-")
-                    .parse()
-                    .unwrap_or_else(|_| panic!("{key}: shipped {written:?} is not a number"));
+                let v: f64 = match written.as_str() {
+                    "false" => 0.0,
+                    "true" => 1.0,
+                    w => w
+                        .replace('−', "-")
+                        .parse()
+                        .unwrap_or_else(|_| panic!("{key}: shipped {written:?} is not a number")),
+                };
                 if v != *value {
                     wrong.push(format!(
                         "{key}: the table says {written}, the tuning {value}"

@@ -208,6 +208,10 @@ pub struct Cycle {
     /// Robot cycles lost before this one in the session so far (gaps in the robot's cycle stamps, as the
     /// driver counts them); 0 where the link cannot tell.
     pub missed: u64,
+    /// Replies the link sent later than its late bound after the robot's datagram arrived (RSI: from
+    /// the kernel's receive stamp), so far, up to the reply before this cycle's; 0 where the link
+    /// cannot tell.
+    pub replied_late: u64,
     /// True on the first cycle of a new robot session: references captured from earlier cycles are void.
     pub new_session: bool,
     /// The robot program's process command, when the link carries process channels (RSI: `FcCmd`).
@@ -366,6 +370,7 @@ mod tests {
             programmed,
             late_replies: 0,
             missed: 0,
+            replied_late: 0,
             new_session: false,
             process: None,
         };

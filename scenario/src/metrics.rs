@@ -35,6 +35,10 @@
 //! * `max_rotation` — largest magnitude of the correction's rotation in the window, rad;
 //! * `final_rotation` — its magnitude in the window's last row, rad;
 //! * `max_correction` — largest `|x_cmd|` in the window, m.
+//!
+//! Per pass ([`pass_force_errors`]): a pass is a maximal stretch of rows reported `PRESSING`; its
+//! mean force error is `mean(f − f_r)` over it, N (`f` the true force where the trace has it), signed:
+//! a sensor bias that reads high makes it negative.
 
 use crate::record::Row;
 
@@ -388,6 +392,47 @@ impl Metrics {
     }
 }
 
+/// One pass of a trace: a maximal stretch of rows reported `PRESSING`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PassError {
+    /// Its first row's time, s.
+    pub start: f64,
+    /// Its last row's time, s.
+    pub end: f64,
+    /// `mean(f − f_r)` over it, N (the true force where the trace has it).
+    pub mean_error: f64,
+}
+
+/// Every pass of `rows` with its mean force error, in order (see the module's definitions).
+pub fn pass_force_errors(rows: &[Row]) -> Vec<PassError> {
+    let force = |r: &Row| if r.f_true.is_finite() { r.f_true } else { r.f };
+    let mut out = Vec::new();
+    let mut run: Option<(f64, f64, f64, f64)> = None; // start, end, sum, n
+    for r in rows {
+        let e = force(r) - r.f_r;
+        if r.phase == Some(phase::PRESSING) && e.is_finite() {
+            let (start, _, sum, n) = run.unwrap_or((r.t, r.t, 0.0, 0.0));
+            run = Some((start, r.t, sum + e, n + 1.0));
+        } else if r.phase != Some(phase::PRESSING)
+            && let Some((start, end, sum, n)) = run.take()
+        {
+            out.push(PassError {
+                start,
+                end,
+                mean_error: sum / n,
+            });
+        }
+    }
+    if let Some((start, end, sum, n)) = run {
+        out.push(PassError {
+            start,
+            end,
+            mean_error: sum / n,
+        });
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -461,6 +506,32 @@ mod tests {
             "{}",
             m.force_std_detrended
         );
+    }
+
+    #[test]
+    fn passes_are_the_pressing_stretches_with_their_mean_error() {
+        let row = |t: f64, f: f64, phase: u8| Row {
+            t,
+            f,
+            f_r: 10.0,
+            phase: Some(phase),
+            ..Row::unknown()
+        };
+        let rows = vec![
+            row(0.0, 0.0, 1),
+            row(0.1, 9.0, 3),
+            row(0.2, 11.0, 3),
+            row(0.3, 8.0, 3),
+            row(0.4, 2.0, 4),
+            row(0.5, 0.0, 0),
+            row(0.6, 12.0, 3),
+        ];
+        let p = pass_force_errors(&rows);
+        assert_eq!(p.len(), 2, "{p:?}");
+        assert_eq!((p[0].start, p[0].end), (0.1, 0.3));
+        assert!((p[0].mean_error - (-2.0 / 3.0)).abs() < 1e-12);
+        assert!((p[1].mean_error - 2.0).abs() < 1e-12);
+        assert!(pass_force_errors(&rows[..1]).is_empty());
     }
 
     #[test]

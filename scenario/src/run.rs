@@ -146,6 +146,7 @@ pub fn world(scenario: &Scenario, plant: &InnerLoopModel) -> SharedWorld {
 pub fn resolve_tuning(scenario: &Scenario, plant: &InnerLoopModel, tuning: &Tuning) -> Tuning {
     let mut tuning = tuning.clone();
     tuning.law.apply(&scenario.controller);
+    scenario.process.apply(&mut tuning.loop_cfg.process);
     tuning.law.set_cell(cell_model(plant, &scenario.sensor));
     tuning
 }

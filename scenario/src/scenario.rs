@@ -152,6 +152,9 @@ pub struct Scenario {
     /// Overrides of the tuning's values.
     #[serde(default)]
     pub controller: Overrides,
+    /// Overrides of the tuning's force process (`[loop.process]`).
+    #[serde(default)]
+    pub process: ProcessOverrides,
     /// Targets.
     #[serde(default)]
     pub targets: Vec<Target>,
@@ -159,6 +162,23 @@ pub struct Scenario {
     /// the run ends when it does (within `duration`), with `Stop`.
     #[serde(default)]
     pub program: Option<Program>,
+}
+
+/// Values of the tuning's force process (`[loop.process]`) a scenario may override.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ProcessOverrides {
+    /// Re-zero the sensor in free air between passes (`loop.process.rezero`; docs/rezero.md).
+    pub rezero: Option<bool>,
+}
+
+impl ProcessOverrides {
+    /// Apply to a loop's process configuration.
+    pub fn apply(&self, p: &mut controller::ProcessConfig) {
+        if let Some(r) = self.rezero {
+            p.rezero = r;
+        }
+    }
 }
 
 /// The tuning a scenario that names none runs: the shipped robust law (the paper's law faults where

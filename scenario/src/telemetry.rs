@@ -15,7 +15,7 @@
 //! input, a limited step; [`Condition`]); a **fault** is only ever the force process's latched fault
 //! ([`hal::ProcessFault`], the number the robot program reads in `FcState.Fault`).
 
-use controller::{ContactState, CycleReport, Events};
+use controller::{ContactState, CycleReport, Events, RezeroOutcome};
 use hal::{ProcessFault, ProcessMode, ProcessPhase};
 
 use crate::record::Row;
@@ -212,6 +212,19 @@ impl Coded for ProcessFault {
     }
 }
 
+/// What a re-zero check of the sensor decided (the control loop's own codes and names).
+impl Coded for RezeroOutcome {
+    fn code(self) -> i64 {
+        RezeroOutcome::code(self)
+    }
+    fn name(self) -> &'static str {
+        RezeroOutcome::name(self)
+    }
+    fn all() -> Vec<Self> {
+        RezeroOutcome::ALL.to_vec()
+    }
+}
+
 /// One of the law's event flags.
 #[derive(Clone, Copy, Debug)]
 pub struct EventFlag {
@@ -310,6 +323,9 @@ pub struct Record {
     pub late_replies: u64,
     /// Robot cycles lost so far (gaps in the robot's cycle stamps).
     pub missed: u64,
+    /// Replies sent later than the link's late bound after the robot's datagram arrived (the kernel's
+    /// receive stamp), so far (to the reply before this cycle's).
+    pub replied_late: u64,
     /// The robot's measured tool pose (RSI `RIst`), base frame: position x, y, z (m) and orientation as
     /// a rotation vector (rad); NaN where unknown.
     pub pose: [f64; 6],
@@ -321,6 +337,12 @@ pub struct Record {
     pub state: u8,
     /// The law's events of this step, one bit each in [`EVENTS`] order.
     pub events: u16,
+    /// A re-zero of the sensor in this cycle, or a refusal to: its [`RezeroOutcome`] code (`None`:
+    /// no decision this cycle).
+    pub rezero: Option<u8>,
+    /// That re-zero's offset removed (a refusal: the window's mean over the old zero), sensor frame,
+    /// `[Fx, Fy, Fz, Tx, Ty, Tz]` in N and N·m; NaN without one.
+    pub rezero_offset: [f64; 6],
 }
 
 const NAN6: [f64; 6] = [f64::NAN; 6];
@@ -355,6 +377,7 @@ impl Record {
             period: r.cycle.period,
             late_replies: u64::from(r.cycle.late_replies),
             missed: r.cycle.missed,
+            replied_late: r.cycle.replied_late,
             pose: pose6(&r.cycle.actual),
             correction: [
                 r.command.translation.x,
@@ -366,6 +389,8 @@ impl Record {
             ],
             state: r.out.state.map_or(NO_STATE, ContactState::code),
             events: event_bits(&r.out.events),
+            rezero: r.rezero.map(|e| e.outcome.code() as u8),
+            rezero_offset: r.rezero.map_or(NAN6, |e| e.offset.to_array()),
         }
     }
 
@@ -381,10 +406,13 @@ impl Record {
             period: f64::NAN,
             late_replies: 0,
             missed: 0,
+            replied_late: 0,
             pose: NAN6,
             correction: NAN6,
             state: NO_STATE,
             events: 0,
+            rezero: None,
+            rezero_offset: NAN6,
         }
     }
 
@@ -836,6 +864,18 @@ pub const ROBOT: MessageType = MessageType {
             "the measured tool pose (absent: unknown)",
             |r| r.pose.iter().all(|v| v.is_finite())
         ),
+        Field {
+            name: "replied_late",
+            number: 6,
+            ty: Type::Uint64,
+            optional: false,
+            unit: "",
+            description: "replies sent later than the link's late bound (RSI: late_after, 2 ms) after \
+                          the robot's datagram arrived, from the kernel's receive stamp, so far",
+            label: "replied late",
+            get: |r| Value::U64(r.replied_late),
+            set: |r, v| r.replied_late = v.u64(),
+        },
     ],
 };
 
@@ -1014,6 +1054,55 @@ pub const PROCESS: MessageType = MessageType {
     fields: &[SEGMENT, MODE, F_CMD, PHASE, FAULT, MODE_CODE],
 };
 
+// Re-zero ----------------------------------------------------------------------------------------
+
+/// `forcecell.RezeroOutcome.Code`.
+pub const REZERO_CODES: EnumType = EnumType {
+    name: "RezeroOutcome",
+    values: values_of::<RezeroOutcome>,
+    description: "what a re-zero check of the sensor in free air decided",
+};
+
+/// The re-zero's outcome.
+pub const REZERO_OUTCOME: Field = Field {
+    name: "outcome",
+    number: 1,
+    ty: Type::Enum(&REZERO_CODES),
+    optional: true,
+    unit: "",
+    description: "re-zeroed, or why the re-zero was refused (the old zero kept)",
+    label: "re-zero",
+    get: |r| opt_i64(r.rezero.map(i64::from)),
+    set: |r, v| r.rezero = v.code_u8(),
+};
+
+const REZERO_FORCE: MessageType = vector3!(
+    "RezeroForce",
+    "force offset, sensor frame",
+    "N",
+    rezero_offset,
+    0
+);
+const REZERO_TORQUE: MessageType = vector3!(
+    "RezeroTorque",
+    "torque offset, sensor frame",
+    "N·m",
+    rezero_offset,
+    3
+);
+
+/// `forcecell.Rezero`: a re-zero of the sensor in free air between passes, or a refusal; its time is
+/// the cycle's.
+pub const REZERO: MessageType = MessageType {
+    name: "Rezero",
+    description: "a re-zero of the force sensor between passes (or a refusal): the outcome and the offset removed (a refusal: measured, not removed)",
+    fields: &[
+        REZERO_OUTCOME,
+        message!("force", 2, &REZERO_FORCE, "force offset", |_r| true),
+        message!("torque", 3, &REZERO_TORQUE, "torque offset", |_r| true),
+    ],
+};
+
 // Cycle, truth -----------------------------------------------------------------------------------
 
 /// `forcecell.Cycle`: one control cycle, on [`CYCLE_TOPIC`].
@@ -1045,6 +1134,13 @@ pub const CYCLE: MessageType = MessageType {
             &CORRECTION,
             "the correction sent (absent: unknown)",
             |r| r.correction.iter().all(|v| v.is_finite())
+        ),
+        message!(
+            "rezero",
+            12,
+            &REZERO,
+            "a re-zero of the sensor, or a refusal (absent: no decision this cycle)",
+            |r| r.rezero.is_some()
         ),
     ],
 };
@@ -1663,6 +1759,8 @@ mod tests {
         rec.late_replies = 2;
         rec.state = 2;
         rec.events = 0b1000_0101;
+        rec.rezero = Some(RezeroOutcome::Moving.code() as u8);
+        rec.rezero_offset = [0.5, -0.25, 1.5, 0.0, 0.125, -0.0625];
         rec
     }
 
@@ -1711,6 +1809,19 @@ mod tests {
             (300, u64::MAX, 2, 2, 0b1000_0101)
         );
         assert!(same(back.period, f64::from(0.004f32)));
+        assert_eq!(back.rezero, Some(RezeroOutcome::Moving.code() as u8));
+        for (x, y) in back.rezero_offset.iter().zip(rec.rezero_offset) {
+            assert!(same(*x, y), "re-zero offset {x} vs {y}");
+        }
+        // A cycle without a re-zero sends none, and reads back without one.
+        let mut none = rec;
+        none.rezero = None;
+        let mut buf = Vec::new();
+        encode(&CYCLE, &none, &mut buf);
+        let mut back = Record::unknown();
+        decode(&CYCLE, &buf, &mut back).unwrap();
+        assert_eq!(back.rezero, None);
+        assert!(back.rezero_offset.iter().all(|v| v.is_nan()));
         // A mode beyond 32 bits travels in its own field; one within, in the enum.
         let mut small = rec;
         small.row.mode = Some(-7);
@@ -1743,13 +1854,14 @@ mod tests {
     fn the_pose_the_correction_and_the_missed_cycles_round_trip() {
         let mut rec = sample();
         rec.missed = 7;
+        rec.replied_late = 11;
         rec.pose = [0.5, -0.125, 0.3, std::f64::consts::PI, 0.0, 0.0];
         rec.correction = [0.0, 0.0, 0.001, 0.0, -0.01, 0.0];
         let mut buf = Vec::new();
         encode(&CYCLE, &rec, &mut buf);
         let mut back = Record::unknown();
         decode(&CYCLE, &buf, &mut back).unwrap();
-        assert_eq!(back.missed, 7);
+        assert_eq!((back.missed, back.replied_late), (7, 11));
         for (x, y) in back.pose.iter().zip(rec.pose) {
             assert!(same(*x, f64::from(y as f32)), "pose {x} vs {y}");
         }

@@ -290,6 +290,7 @@ impl World {
             programmed: p,
             late_replies: 0,
             missed: 0,
+            replied_late: 0,
             new_session: false,
             process: self.process_command(),
         }

@@ -8,6 +8,7 @@ use hal::{ProcessCommand, ProcessFault, ProcessMode, ProcessPhase, ProcessState}
 use serde::{Deserialize, Serialize};
 
 use super::guard::{Guard, Touch, Tripped, back_off_target};
+use super::rezero::RezeroParams;
 use crate::law::Output;
 
 /// The default of [`ProcessConfig::search_depth`], m: the lost surface is searched for a few
@@ -39,6 +40,11 @@ pub struct ProcessConfig {
     /// that runs off the part's edge or over a hole otherwise follows the surface that is not there,
     /// at search speed, until `contact_loss_time` ends it (18 mm in 0.5 s at 36 mm/s).
     pub search_depth: f64,
+    /// Re-zero the force sensor in free air between passes (OFF, tool still, out of contact), when
+    /// the check of `zeroing` passes ([`super::rezero`]; docs/rezero.md).
+    pub rezero: bool,
+    /// The re-zero check's parameters.
+    pub zeroing: RezeroParams,
 }
 
 impl Default for ProcessConfig {
@@ -51,6 +57,8 @@ impl Default for ProcessConfig {
             contact_loss_time: 0.5,
             force_filter: 0.01,
             search_depth: SEARCH_DEPTH,
+            rezero: false,
+            zeroing: RezeroParams::default(),
         }
     }
 }
@@ -88,7 +96,7 @@ impl ProcessConfig {
                 self.search_depth * 1e3
             ));
         }
-        Ok(())
+        self.zeroing.validate()
     }
 
     /// Why the program's command is refused, if it is: an undefined mode, or a PRESS whose force or

@@ -2,10 +2,14 @@
 //! drives the process ([`super::process`]), which decides whether the law controls or the command
 //! moves to a target.
 
-use hal::{Correction, Cycle, ForceSensor, ProcessCommand, ProcessFault, RobotLink, Wrench};
+use hal::{
+    Correction, Cycle, ForceSensor, ProcessCommand, ProcessFault, ProcessMode, ProcessPhase,
+    RobotLink, Wrench,
+};
 
 use super::error::{hold_code, hold_reason};
 use super::process::Act;
+use super::rezero::RezeroInput;
 use super::{ControlLoop, CycleReport, Fault, LoopError, Reading, guard, pose_ok};
 use crate::law::{CellLaw, Output};
 
@@ -23,6 +27,7 @@ impl<R: RobotLink, S: ForceSensor, L: CellLaw> ControlLoop<R, S, L> {
         let pose_ok = pose_ok(&cycle, x);
         if self.begin_session(&cycle, pose_ok, x) {
             self.process = self.cfg.new_process();
+            self.rezero.reset();
         }
         let Reading {
             f,
@@ -43,6 +48,16 @@ impl<R: RobotLink, S: ForceSensor, L: CellLaw> ControlLoop<R, S, L> {
         if let Some(f) = f {
             self.process.back_off_further(f, self.last_cmd);
         }
+        // Only at OFF, with the program commanding OFF: the law is not stepped, and the PRESS that
+        // starts the next pass restarts it on the new zero.
+        let rezero = self.rezero.observe(&RezeroInput {
+            t: cycle.t,
+            off: self.process.phase == ProcessPhase::Off && pc.mode == ProcessMode::Off,
+            wrench: if fault.is_none() { wrench } else { None },
+            f,
+            pose: pose_ok.then_some(cycle.actual),
+            contact_force: self.cfg.process.entry_force,
+        });
         let (out, cmd, controlling) = match self.process.act() {
             Act::MoveTo { target } => {
                 let cmd = self.move_to(target, &cycle, &mut fault);
@@ -72,11 +87,12 @@ impl<R: RobotLink, S: ForceSensor, L: CellLaw> ControlLoop<R, S, L> {
             f,
             sample,
             wrench,
-            compensated: self.gravity.is_some(),
+            compensated: self.compensates(),
             out,
             command,
             set_point: self.process.recorded_set_point(),
             fault,
+            rezero,
         })
     }
 

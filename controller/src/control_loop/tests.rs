@@ -15,6 +15,7 @@ fn cycle_at(seq: u64, x: f64) -> Cycle {
         programmed: Pose::identity(),
         late_replies: 0,
         missed: 0,
+        replied_late: 0,
         new_session: false,
         process: None,
     }
@@ -758,4 +759,97 @@ fn the_normal_adapter_steps_the_1dof_law_on_the_tool_offset_and_the_signed_force
     let got = adapted.step(&cycle, &w, 0.004);
     assert_eq!((got.out.x_cmd, got.out.x_r), (want.x_cmd, want.x_r));
     assert_eq!(got.correction, Correction::along_z(want.x_cmd));
+}
+
+/// A loop with process channels and `rezero`: `n_off` cycles at OFF, then PRESS; the sensor reads a
+/// 1.2 N offset (a sensor error on every cycle `bad` picks) and the robot's pose moves along the
+/// normal at `speed` (m/s). Every report.
+fn rezero_run(n_off: u64, bad: fn(u64) -> bool, speed: f64) -> (Vec<CycleReport>, Wrench) {
+    let off = hal::ProcessCommand {
+        mode: hal::ProcessMode::Off,
+        force: 0.0,
+        ramp: 0.0,
+        segment: 1,
+    };
+    let press = hal::ProcessCommand {
+        mode: hal::ProcessMode::Press,
+        force: 20.0,
+        ramp: 0.0,
+        segment: 2,
+    };
+    let mut robot = MockRobot::new();
+    let mut k = 0;
+    robot.expect_next_cycle().returning(move || {
+        k += 1;
+        let c = cycle_at(k, 0.0);
+        Ok(Cycle {
+            process: Some(if k <= n_off { off } else { press }),
+            actual: Pose::from_position(Vector3::new(0.0, 0.0, speed * c.t)),
+            ..c
+        })
+    });
+    robot.expect_reply().returning(|_| Ok(()));
+    let mut sensor = MockSensor::new();
+    let mut n = 0;
+    sensor.expect_read().returning(move || {
+        n += 1;
+        if bad(n) {
+            Err(ErrorKind::Timeout)
+        } else {
+            Ok(sample(1.2))
+        }
+    });
+    let mut cfg = LoopConfig::default();
+    cfg.process.rezero = true;
+    let mut lp = ControlLoop::new(robot, sensor, fixed_law(0.002), cfg);
+    let reports = (0..n_off + 20).map(|_| lp.cycle().unwrap()).collect();
+    (reports, lp.sensor_zero())
+}
+
+#[test]
+fn the_loop_rezeroes_at_off_in_free_air_and_the_next_pass_sees_the_new_zero() {
+    let (reports, zero) = rezero_run(500, |_| false, 0.0);
+    let events: Vec<(usize, RezeroEvent)> = reports
+        .iter()
+        .enumerate()
+        .filter_map(|(i, r)| r.rezero.map(|e| (i, e)))
+        .collect();
+    assert_eq!(events.len(), 1, "{events:?}");
+    let (at, e) = events[0];
+    assert_eq!(e.outcome, RezeroOutcome::Done);
+    assert!(at < 500, "at OFF: cycle {at}");
+    assert!((zero.force.z - 1.2).abs() < 1e-9, "{zero:?}");
+    // Before it the loop used the offset; after it, nothing; the pass that follows starts on it.
+    assert!((reports[at].f.unwrap() - 1.2).abs() < 1e-9);
+    assert!(reports[at + 1].f.unwrap().abs() < 1e-9);
+    assert!(reports[510].f.unwrap().abs() < 1e-9);
+    assert_eq!(
+        reports[510].command.process.phase,
+        hal::ProcessPhase::Approach
+    );
+    assert!(
+        reports[at + 1].compensated,
+        "the recorded wrench is the zeroed one"
+    );
+}
+
+#[test]
+fn the_loop_refuses_a_rezero_while_moving_or_unhealthy_and_keeps_its_zero() {
+    // 10 mm/s along the normal through the whole OFF stretch.
+    let (reports, zero) = rezero_run(500, |_| false, 0.01);
+    let outcomes: Vec<RezeroOutcome> = reports
+        .iter()
+        .filter_map(|r| r.rezero.map(|e| e.outcome))
+        .collect();
+    assert_eq!(outcomes, [RezeroOutcome::Moving]);
+    assert_eq!(zero, Wrench::default());
+    // A sensor timeout every 40th read.
+    let (reports, zero) = rezero_run(500, |n| n.is_multiple_of(40), 0.0);
+    let outcomes: Vec<RezeroOutcome> = reports
+        .iter()
+        .filter_map(|r| r.rezero.map(|e| e.outcome))
+        .collect();
+    assert_eq!(outcomes, [RezeroOutcome::Unhealthy]);
+    assert_eq!(zero, Wrench::default());
+    assert!((reports[499].f.unwrap_or(1.2) - 1.2).abs() < 1e-9);
 }

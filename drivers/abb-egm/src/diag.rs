@@ -11,8 +11,13 @@ pub struct Counters {
     pub received: u64,
     /// Path corrections sent.
     pub answered: u64,
-    /// Replies whose receive→send turnaround exceeded the configured `late_after`.
+    /// Replies sent more than the configured `late_after` after their datagram arrived (the kernel's
+    /// receive stamp, `SO_TIMESTAMPNS`); from the receive call's return where the kernel gave no stamp
+    /// (those are also counted in [`unstamped`](Self::unstamped)).
     pub late: u64,
+    /// Replies whose lateness was measured from the receive call's return, the kernel having given no
+    /// arrival stamp for their datagram.
+    pub unstamped: u64,
     /// Good `EgmRobot` datagrams superseded by a newer one in the socket backlog and never answered.
     pub skipped: u64,
     /// Datagrams from a source other than the robot: dropped, never answered.
@@ -74,4 +79,7 @@ pub struct Diagnostics {
     pub last_malformed: Option<Malformed>,
     /// Receive→send turnaround of every reply sent.
     pub latency: Latency,
+    /// Arrival→send time of every reply sent: from the kernel's receive stamp (where there is none,
+    /// the receipt) to the return of the send call; what [`Counters::late`] judges.
+    pub from_arrival: Latency,
 }

@@ -155,6 +155,8 @@ struct Accepted {
     cycle: Cycle,
     peer: SocketAddr,
     rx_at: Instant,
+    /// When the datagram arrived (the kernel's receive stamp), when the shell knows it.
+    arrived: Option<Instant>,
 }
 
 /// The external-device side of one EGM path-correction link without I/O; see the [module docs](self).
@@ -164,7 +166,7 @@ pub struct EgmSession {
     track: Option<Track>,
     candidate: Option<Accepted>,
     pending: Option<Accepted>,
-    in_flight: Option<(Instant, bool)>,
+    in_flight: Option<(Instant, Option<Instant>, bool)>,
     shaper: Shaper,
     tx_seqno: u32,
     stopped: bool,
@@ -272,10 +274,25 @@ impl EgmSession {
         from: SocketAddr,
         rx_at: Instant,
     ) -> Result<(), Rejected> {
+        self.offer_arrived(datagram, from, rx_at, None)
+    }
+
+    /// [`offer`](Self::offer) a datagram that `arrived` at the socket before it was read at `rx_at`
+    /// (the kernel's receive stamp on the caller's clock; `None` when the kernel gave none). A reply's
+    /// lateness is measured from its datagram's arrival; without one, from `rx_at` (counted as
+    /// `unstamped`). An arrival after `rx_at` (a clock step) is taken as `rx_at`.
+    pub fn offer_arrived(
+        &mut self,
+        datagram: &[u8],
+        from: SocketAddr,
+        rx_at: Instant,
+        arrived: Option<Instant>,
+    ) -> Result<(), Rejected> {
         if self.stopped {
             return Err(Rejected::Stopped);
         }
         let mut a = self.accept(datagram, from, rx_at)?;
+        a.arrived = arrived.map(|t| t.min(rx_at));
         if let Some(old) = self.candidate.take() {
             self.diag.counters.skipped += 1;
             a.cycle.new_session |= old.cycle.new_session;
@@ -457,6 +474,7 @@ impl EgmSession {
             programmed,
             late_replies: 0,
             missed: 0,
+            replied_late: c.late,
             new_session,
             process,
         };
@@ -481,6 +499,7 @@ impl EgmSession {
             cycle,
             peer: from,
             rx_at,
+            arrived: None,
         })
     }
 
@@ -521,22 +540,29 @@ impl EgmSession {
             need: len,
             have: out.len(),
         })?;
-        self.in_flight = Some((p.rx_at, correction.stop));
+        self.in_flight = Some((p.rx_at, p.arrived, correction.stop));
         Ok(Some(Outgoing { len, to: p.peer }))
     }
 
-    /// The reply written last left at `now`: its turnaround is recorded (late above `late_after`);
-    /// a reply carrying `stop` finishes the session.
+    /// The reply written last left at `now`: its receive→send turnaround is recorded, and its
+    /// arrival→send time, late above `late_after` (from the receive time where the arrival is unknown:
+    /// counted `unstamped`); a reply carrying `stop` finishes the session.
     pub fn sent(&mut self, now: Instant) {
-        let Some((rx_at, stop)) = self.in_flight.take() else {
+        let Some((rx_at, arrived, stop)) = self.in_flight.take() else {
             return;
         };
         self.stopped |= stop;
-        let turnaround = now.saturating_duration_since(rx_at);
-        self.diag.latency.record(turnaround);
+        self.diag
+            .latency
+            .record(now.saturating_duration_since(rx_at));
+        let since_arrival = now.saturating_duration_since(arrived.unwrap_or(rx_at));
+        self.diag.from_arrival.record(since_arrival);
         let c = &mut self.diag.counters;
         c.answered += 1;
-        if turnaround > self.cfg.late_after {
+        if arrived.is_none() {
+            c.unstamped += 1;
+        }
+        if since_arrival > self.cfg.late_after {
             c.late += 1;
         }
     }
@@ -759,6 +785,34 @@ mod tests {
         m.rapid_from_robot.as_mut().unwrap().dnum[0] = 7.0;
         let c = s.receive(&m.encode_to_vec(), robot(), t0).unwrap();
         assert_eq!(c.process.unwrap().mode, ProcessMode::Unknown(7));
+    }
+
+    /// Lateness runs from the datagram's arrival (the kernel's stamp), not from when it was read.
+    #[test]
+    fn late_replies_are_measured_from_the_arrival() {
+        let mut s = session(false);
+        let t0 = Instant::now();
+        let mut out = [0u8; 256];
+        let us = Duration::from_micros;
+        // Arrived at t0, read 10 ms later, answered 100 µs after the read: late.
+        s.offer_arrived(&rob(1, 0, 300.0, None), robot(), t0 + us(10_000), Some(t0))
+            .unwrap();
+        assert_eq!(s.take_cycle().unwrap().replied_late, 0);
+        s.reply(&Correction::default(), t0 + us(10_050), &mut out)
+            .unwrap();
+        s.sent(t0 + us(10_100));
+        let c = s.diagnostics().counters;
+        assert_eq!((c.answered, c.late, c.unstamped), (1, 1, 0));
+        assert_eq!(s.diagnostics().latency.max(), us(100), "read→send");
+        assert_eq!(s.diagnostics().from_arrival.max(), us(10_100));
+        // No arrival: from the read, counted unstamped; the cycle carries the late count so far.
+        let read = t0 + us(20_000);
+        let c = s.receive(&rob(2, 4, 300.0, None), robot(), read).unwrap();
+        assert_eq!(c.replied_late, 1);
+        s.reply(&Correction::default(), read, &mut out).unwrap();
+        s.sent(read + us(500));
+        let c = s.diagnostics().counters;
+        assert_eq!((c.answered, c.late, c.unstamped), (2, 1, 1));
     }
 
     #[test]

@@ -11,8 +11,14 @@ pub struct Counters {
     pub received: u64,
     /// `<Sen>` replies sent.
     pub answered: u64,
-    /// Replies whose receive→send turnaround exceeded the configured `late_after`.
+    /// Replies sent more than the configured `late_after` after their datagram arrived: measured from
+    /// the kernel's receive stamp (`SO_TIMESTAMPNS`), so a datagram that waited in the socket while
+    /// the loop was busy counts; from the receive call's return where the kernel gave no stamp
+    /// (those replies are also counted in [`unstamped`](Self::unstamped)).
     pub late: u64,
+    /// Replies whose lateness was measured from the receive call's return, the kernel having given no
+    /// arrival stamp for their datagram.
+    pub unstamped: u64,
     /// Good `<Rob>` datagrams superseded by a newer one in the socket backlog and never answered.
     pub skipped: u64,
     /// Datagrams from a source other than the robot: dropped, never answered.
@@ -59,6 +65,9 @@ pub struct Diagnostics {
     /// Receive→send turnaround of every reply sent: from the datagram's receipt to the return of the
     /// send call.
     pub latency: Latency,
+    /// Arrival→send time of every reply sent: from the kernel's receive stamp of the datagram (where
+    /// there is none, its receipt) to the return of the send call; what [`Counters::late`] judges.
+    pub from_arrival: Latency,
     /// The part of [`latency`](Self::latency) before the send call: parsing, the application's cycle
     /// and the reply's encoding, all in user space. The rest is the send call itself, which on
     /// loopback also delivers the datagram to the peer and wakes it (an idle peer on another CPU of

@@ -6,10 +6,13 @@ use core::time::Duration;
 use std::io::{self, IoSliceMut};
 use std::net::{IpAddr, SocketAddr, UdpSocket};
 use std::os::fd::AsRawFd;
-use std::time::Instant;
+use std::time::{Instant, SystemTime};
 
 use hal::{Correction, Cycle, ErrorKind, RobotLink};
-use nix::sys::socket::{MsgFlags, MultiHeaders, SockaddrStorage, recvmmsg};
+use nix::sys::socket::{
+    ControlMessageOwned, MsgFlags, MultiHeaders, SockaddrStorage, recvmmsg, setsockopt, sockopt,
+};
+use nix::sys::time::TimeSpec;
 
 use crate::codec::{Schema, WriteError};
 use crate::config::EthernetConfig;
@@ -73,7 +76,8 @@ pub struct LinkConfig {
     pub session_jump: u64,
     /// Decimals written in `<Sen>`.
     pub precision: u8,
-    /// A receive→send turnaround above this counts as a late reply.
+    /// A reply sent more than this after its datagram arrived (the kernel's receive stamp) counts as
+    /// late.
     pub late_after: Duration,
     /// The fastest the robot's tool can move, m/s: a reported pose (`RIst` or `RSol`) further from
     /// the last plausible one than this speed allows in the IPOC time between them is a counted fault
@@ -247,12 +251,20 @@ const BATCH: usize = 16;
 /// (`MSG_WAITFORONE`: it waits for the first datagram, then also takes whatever else is queued, so a
 /// backlog is drained in the same call), and one `sendto`. The socket stays blocking; the watchdog is
 /// its receive timeout (`SO_RCVTIMEO`), set only when its value changes.
+///
+/// The socket asks the kernel for each datagram's arrival time (`SO_TIMESTAMPNS`: a software stamp
+/// taken when the datagram reaches the network stack, delivered in the same `recvmmsg` as a control
+/// message, no extra system call). The session measures a reply's lateness from it, so a datagram
+/// that waited in the socket while the loop was busy counts. Where the kernel gives no stamp
+/// ([`kernel_stamps`](Self::kernel_stamps) is false, or a datagram came without one) lateness is
+/// measured from the receive call's return, counted as `unstamped`.
 pub struct RsiLink {
     session: RsiSession,
     sock: UdpSocket,
     rx: RxBatch,
     tx: Box<[u8]>,
     timeout_set: Option<Duration>,
+    stamps: bool,
 }
 
 impl fmt::Debug for RsiLink {
@@ -265,9 +277,39 @@ impl fmt::Debug for RsiLink {
 }
 
 /// Receive buffers for `recvmmsg`, allocated once.
-struct RxBatch {
+pub(crate) struct RxBatch {
     bufs: [Box<[u8]>; BATCH],
-    got: [(usize, Option<SocketAddr>); BATCH],
+    /// Length, source and the kernel's arrival stamp (`CLOCK_REALTIME`) of each datagram read.
+    got: [Got; BATCH],
+}
+
+/// One datagram read: its length, its source and the kernel's arrival stamp (`CLOCK_REALTIME`).
+type Got = (usize, Option<SocketAddr>, Option<SystemTime>);
+
+/// Ask the kernel to stamp every datagram's arrival (`SO_TIMESTAMPNS`, nanoseconds, `CLOCK_REALTIME`).
+/// `SO_TIMESTAMPING` would offer hardware stamps too, which no NIC on a robot cell's PC is set up
+/// for, at the cost of a flag set and a three-stamp control message; the software receive stamp is
+/// the same in both. Returns false where the kernel refuses (the link then measures from the
+/// receive call).
+pub(crate) fn enable_stamps(sock: &UdpSocket) -> bool {
+    setsockopt(sock, sockopt::ReceiveTimestampns, &true).is_ok()
+}
+
+/// A kernel stamp (`CLOCK_REALTIME`) on the monotonic clock: `read_at` and `wall` are the two clocks
+/// read together just after the receive call returned. `None` for a stamp after `wall` or more than
+/// a second before it (the wall clock was stepped in between: no arrival is better than a wrong one).
+pub(crate) fn arrival(stamp: SystemTime, wall: SystemTime, read_at: Instant) -> Option<Instant> {
+    let waited = wall.duration_since(stamp).ok()?;
+    if waited > Duration::from_secs(1) {
+        return None;
+    }
+    read_at.checked_sub(waited)
+}
+
+fn system_time(ts: &TimeSpec) -> Option<SystemTime> {
+    let secs = u64::try_from(ts.tv_sec()).ok()?;
+    let nanos = u32::try_from(ts.tv_nsec()).ok()?;
+    SystemTime::UNIX_EPOCH.checked_add(Duration::new(secs, nanos))
 }
 
 thread_local! {
@@ -282,13 +324,19 @@ impl RxBatch {
         Self {
             // One byte more than the largest accepted datagram: a longer one shows as oversized.
             bufs: core::array::from_fn(|_| vec![0; max_datagram + 1].into_boxed_slice()),
-            got: [(0, None); BATCH],
+            got: [(0, None, None); BATCH],
         }
     }
 
     /// One `recvmmsg`: `wait` blocks (up to the socket's timeout) for the first datagram, then takes
-    /// what is queued; otherwise nothing blocks. Returns how many were read into `got`.
-    fn recv(&mut self, sock: &UdpSocket, wait: bool) -> io::Result<usize> {
+    /// what is queued; otherwise nothing blocks. Returns how many were read into `got`, with the
+    /// kernel's arrival stamps where the socket has them (`stamped`: [`enable_stamps`] succeeded).
+    pub(crate) fn recv(
+        &mut self,
+        sock: &UdpSocket,
+        wait: bool,
+        stamped: bool,
+    ) -> io::Result<usize> {
         let flags = if wait {
             MsgFlags::MSG_WAITFORONE
         } else {
@@ -297,21 +345,39 @@ impl RxBatch {
         let (bufs, got) = (&mut self.bufs, &mut self.got);
         HEADERS.with(|cell| {
             let mut iovs = bufs.each_mut().map(|b| [IoSliceMut::new(&mut b[..])]);
-            let mut headers = cell.borrow_mut();
-            let headers = headers.get_or_insert_with(|| MultiHeaders::preallocate(BATCH, None));
+            let mut held = cell.borrow_mut();
+            // Room for one SCM_TIMESTAMPNS per datagram (allocated once per thread).
+            let headers = held.get_or_insert_with(|| {
+                MultiHeaders::preallocate(BATCH, Some(nix::cmsg_space!(TimeSpec)))
+            });
             let results = recvmmsg(sock.as_raw_fd(), headers, &mut iovs, flags, None)
                 .map_err(io::Error::from)?;
             let mut n = 0;
+            let mut unstamped = false;
             for (slot, r) in got.iter_mut().zip(results) {
                 let from = r.address.and_then(|a: SockaddrStorage| {
                     a.as_sockaddr_in()
                         .map(|v4| SocketAddr::from(*v4))
                         .or_else(|| a.as_sockaddr_in6().map(|v6| SocketAddr::from(*v6)))
                 });
+                // A truncated control message (MSG_CTRUNC) reads as no stamp.
+                let stamp = r.cmsgs().ok().and_then(|mut cm| {
+                    cm.find_map(|m| match m {
+                        ControlMessageOwned::ScmTimestampns(ts) => system_time(&ts),
+                        _ => None,
+                    })
+                });
                 // The buffers hold one byte more than the largest accepted datagram: a longer one is cut
                 // there and still reads as oversized.
-                *slot = (r.bytes, from);
+                *slot = (r.bytes, from, stamp);
+                unstamped |= stamp.is_none();
                 n += 1;
+            }
+            // The kernel writes each header's used control length back into it: a datagram read
+            // without a stamp would leave its header no room for the next one. Fresh headers then
+            // (an allocation only in that odd case, never in the steady state).
+            if stamped && unstamped {
+                *held = None;
             }
             Ok(n)
         })
@@ -326,13 +392,21 @@ impl RsiLink {
         let addr = cfg.bind_addr();
         // std's bind sets no SO_REUSEADDR / SO_REUSEPORT: a held port fails here, loudly.
         let sock = UdpSocket::bind(addr).map_err(|source| LinkError::Bind { addr, source })?;
+        let stamps = enable_stamps(&sock);
         Ok(Self {
             rx: RxBatch::new(cfg.max_datagram),
             tx: vec![0; TX_BUFFER].into_boxed_slice(),
             sock,
             session,
             timeout_set: None,
+            stamps,
         })
+    }
+
+    /// True when the kernel stamps each datagram's arrival (`SO_TIMESTAMPNS` accepted): replies'
+    /// lateness is measured from it. False: from the receive call's return (say so once).
+    pub fn kernel_stamps(&self) -> bool {
+        self.stamps
     }
 
     /// The address actually bound (useful after binding port 0).
@@ -379,14 +453,16 @@ impl RsiLink {
         Ok(())
     }
 
-    /// Hand the `n` datagrams just read to the session, oldest first.
-    fn offer_batch(&mut self, n: usize, rx_at: Instant) {
+    /// Hand the `n` datagrams just read to the session, oldest first, each with its arrival on the
+    /// monotonic clock (from the kernel's stamp; `wall` is the wall clock read with `rx_at`).
+    fn offer_batch(&mut self, n: usize, rx_at: Instant, wall: SystemTime) {
         for k in 0..n {
-            let (len, from) = self.rx.got[k];
+            let (len, from, stamp) = self.rx.got[k];
             let Some(from) = from else { continue };
             let bytes = &self.rx.bufs[k][..len.min(self.rx.bufs[k].len())];
+            let arrived = stamp.and_then(|s| arrival(s, wall, rx_at));
             // Rejected datagrams are counted by the session; nothing else to do here.
-            let _ = self.session.offer(bytes, from, rx_at);
+            let _ = self.session.offer_arrived(bytes, from, rx_at, arrived);
         }
     }
 }
@@ -435,9 +511,12 @@ impl RobotLink for RsiLink {
             // batch means there may be more queued, read without waiting.
             let mut wait = true;
             loop {
-                match self.rx.recv(&self.sock, wait) {
+                match self.rx.recv(&self.sock, wait, self.stamps) {
                     Ok(n) => {
-                        self.offer_batch(n, Instant::now());
+                        // Both clocks read together (vDSO: no system call): the kernel stamps are
+                        // on the wall clock, the session's times on the monotonic one.
+                        let (rx_at, wall) = (Instant::now(), SystemTime::now());
+                        self.offer_batch(n, rx_at, wall);
                         if n < BATCH {
                             break;
                         }
@@ -477,6 +556,62 @@ impl RobotLink for RsiLink {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The kernel's stamp is the datagram's arrival: after the peer's clock read before its `send`,
+    /// and before the one after it (both `CLOCK_REALTIME`, the clock `SO_TIMESTAMPNS` stamps with).
+    #[test]
+    fn the_socket_returns_the_kernel_arrival_stamp() {
+        let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+        assert!(enable_stamps(&sock), "SO_TIMESTAMPNS refused");
+        sock.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+        let peer = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let mut rx = RxBatch::new(1024);
+        // The first socket in the system to ask for stamps switches the kernel's stamping on through a
+        // deferred work item; until it has run, datagrams are stamped when read. Wait for it (bounded).
+        let mut on = false;
+        for _ in 0..500 {
+            peer.send_to(&[0; 40], sock.local_addr().unwrap()).unwrap();
+            let after = SystemTime::now();
+            assert_eq!(rx.recv(&sock, true, true).unwrap(), 1);
+            if rx.got[0].2.is_some_and(|s| s <= after) {
+                on = true;
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        assert!(on, "the kernel never stamped a datagram on arrival");
+        for k in 0..3u8 {
+            let before = SystemTime::now();
+            peer.send_to(&[k; 40], sock.local_addr().unwrap()).unwrap();
+            let after = SystemTime::now();
+            assert_eq!(rx.recv(&sock, true, true).unwrap(), 1);
+            let (len, from, stamp) = rx.got[0];
+            assert_eq!((len, from), (40, Some(peer.local_addr().unwrap())));
+            let stamp = stamp.expect("a kernel stamp");
+            assert!(
+                before <= stamp && stamp <= after,
+                "{before:?} <= {stamp:?} <= {after:?}"
+            );
+        }
+        // Without the option, no stamp (the link then measures from the receive call).
+        let plain = UdpSocket::bind("127.0.0.1:0").unwrap();
+        plain
+            .set_read_timeout(Some(Duration::from_secs(5)))
+            .unwrap();
+        peer.send_to(&[1; 40], plain.local_addr().unwrap()).unwrap();
+        assert_eq!(rx.recv(&plain, true, false).unwrap(), 1);
+        assert_eq!(rx.got[0].2, None);
+    }
+
+    #[test]
+    fn a_stamp_becomes_an_arrival_on_the_monotonic_clock_or_none() {
+        let (wall, now) = (SystemTime::now(), Instant::now());
+        let ms = Duration::from_millis;
+        assert_eq!(arrival(wall - ms(3), wall, now), Some(now - ms(3)));
+        assert_eq!(arrival(wall, wall, now), Some(now));
+        assert_eq!(arrival(wall + ms(1), wall, now), None, "after the read");
+        assert_eq!(arrival(wall - ms(1500), wall, now), None, "a stepped clock");
+    }
 
     #[test]
     fn link_and_session_can_move_to_another_thread() {

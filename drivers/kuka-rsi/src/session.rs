@@ -10,7 +10,8 @@
 //! One round, as the shell does it:
 //! 1. [`RsiSession::wait_budget`] before blocking: how long the shell may wait (the watchdog), or
 //!    [`LinkError::LinkLost`].
-//! 2. [`RsiSession::offer`] for every datagram read (a burst: all of them, oldest first), then
+//! 2. [`RsiSession::offer_arrived`] for every datagram read (a burst: all of them, oldest first), with
+//!    the kernel's arrival stamp when it has one (what late replies are measured from), then
 //!    [`RsiSession::take_cycle`] for the newest good one. ([`RsiSession::receive`] does both for one.)
 //! 3. [`RsiSession::reply`] writes `<Sen>`; the shell sends it to [`Outgoing::to`] and reports the
 //!    time with [`RsiSession::sent`] (or [`RsiSession::send_failed`]).
@@ -127,6 +128,16 @@ struct Accepted {
     ipoc: Ipoc,
     peer: SocketAddr,
     rx_at: Instant,
+    /// When the datagram arrived (the kernel's receive stamp), when the shell knows it.
+    arrived: Option<Instant>,
+}
+
+#[derive(Clone, Copy)]
+struct InFlight {
+    rx_at: Instant,
+    arrived: Option<Instant>,
+    stop: bool,
+    handed: Option<Instant>,
 }
 
 /// The PC side of one RSI link without I/O; see the [module docs](self).
@@ -145,9 +156,10 @@ pub struct RsiSession {
     candidate: Option<Accepted>,
     /// The cycle handed out and not yet answered.
     pending: Option<Accepted>,
-    /// Receive time of the reply just written, whether it carries `Stop`, and when the shell handed
-    /// it to the socket, until the shell says it left (or failed).
-    in_flight: Option<(Instant, bool, Option<Instant>)>,
+    /// The datagram's receive time and arrival (when known) of the reply just written, whether it
+    /// carries `Stop`, and when the shell handed it to the socket, until the shell says it left (or
+    /// failed).
+    in_flight: Option<InFlight>,
     shaper: Shaper,
     last_wire: [f64; 6],
     stopped: bool,
@@ -298,10 +310,25 @@ impl RsiSession {
         from: SocketAddr,
         rx_at: Instant,
     ) -> Result<(), Rejected> {
+        self.offer_arrived(datagram, from, rx_at, None)
+    }
+
+    /// [`offer`](Self::offer) a datagram that `arrived` at the socket before it was read at `rx_at`
+    /// (the kernel's receive stamp on the caller's clock; `None` when the kernel gave none). A reply's
+    /// lateness is measured from its datagram's arrival; without one, from `rx_at` (counted as
+    /// `unstamped`). An arrival after `rx_at` (a clock step) is taken as `rx_at`.
+    pub fn offer_arrived(
+        &mut self,
+        datagram: &[u8],
+        from: SocketAddr,
+        rx_at: Instant,
+        arrived: Option<Instant>,
+    ) -> Result<(), Rejected> {
         if self.stopped {
             return Err(Rejected::Stopped);
         }
         let mut a = self.accept(datagram, from, rx_at)?;
+        a.arrived = arrived.map(|t| t.min(rx_at));
         if let Some(old) = self.candidate.take() {
             self.diag.counters.skipped += 1;
             a.cycle.new_session |= old.cycle.new_session;
@@ -466,6 +493,7 @@ impl RsiSession {
             programmed: wire::pose_from_wire(f.get6(self.rob_slots.rsol)),
             late_replies: delay,
             missed: c.missed,
+            replied_late: c.late,
             new_session,
             process: self.rob_slots.process.map(|p| p.decode(f)),
         };
@@ -502,6 +530,7 @@ impl RsiSession {
             ipoc,
             peer: from,
             rx_at,
+            arrived: None,
         })
     }
 
@@ -552,36 +581,48 @@ impl RsiSession {
             .sen
             .write(&self.tx_frame, out)
             .map_err(LinkError::Encode)?;
-        self.in_flight = Some((p.rx_at, correction.stop, None));
+        self.in_flight = Some(InFlight {
+            rx_at: p.rx_at,
+            arrived: p.arrived,
+            stop: correction.stop,
+            handed: None,
+        });
         Ok(Some(Outgoing { len, to: p.peer }))
     }
 
     /// The shell hands the reply written last to the socket at `now` (optional: it splits the
     /// turnaround [`sent`](Self::sent) records into the time before the send call and the call).
     pub fn sending(&mut self, now: Instant) {
-        if let Some((_, _, handed)) = &mut self.in_flight {
-            *handed = Some(now);
+        if let Some(f) = &mut self.in_flight {
+            f.handed = Some(now);
         }
     }
 
-    /// The reply written last left at `now`: its receive→send turnaround is recorded (late above
-    /// `late_after`), and the part of it before the send call when the shell said
-    /// ([`sending`](Self::sending)); a reply carrying `Stop` finishes the session.
+    /// The reply written last left at `now`: its receive→send turnaround is recorded, and the part
+    /// of it before the send call when the shell said ([`sending`](Self::sending)); its
+    /// arrival→send time too, late above `late_after` (from the receive time where the arrival is
+    /// unknown: counted `unstamped`). A reply carrying `Stop` finishes the session.
     pub fn sent(&mut self, now: Instant) {
-        let Some((rx_at, stop, handed)) = self.in_flight.take() else {
+        let Some(f) = self.in_flight.take() else {
             return;
         };
-        self.stopped |= stop;
-        let turnaround = now.saturating_duration_since(rx_at);
-        self.diag.latency.record(turnaround);
-        if let Some(h) = handed {
+        self.stopped |= f.stop;
+        self.diag
+            .latency
+            .record(now.saturating_duration_since(f.rx_at));
+        if let Some(h) = f.handed {
             self.diag
                 .before_send
-                .record(h.saturating_duration_since(rx_at));
+                .record(h.saturating_duration_since(f.rx_at));
         }
+        let since_arrival = now.saturating_duration_since(f.arrived.unwrap_or(f.rx_at));
+        self.diag.from_arrival.record(since_arrival);
         let c = &mut self.diag.counters;
         c.answered += 1;
-        if turnaround > self.cfg.late_after {
+        if f.arrived.is_none() {
+            c.unstamped += 1;
+        }
+        if since_arrival > self.cfg.late_after {
             c.late += 1;
         }
     }
@@ -997,6 +1038,61 @@ mod tests {
             .receive(&rob(&s, 1008, 300.0, None), robot(), t0 + ms(150))
             .unwrap();
         assert!(c.new_session);
+    }
+
+    /// Lateness runs from the datagram's arrival (the kernel's stamp), not from when the shell read
+    /// it: a datagram that waited in the socket while the loop was busy makes a late reply even when
+    /// the loop answered it at once. Without an arrival, from the read (counted `unstamped`).
+    #[test]
+    fn late_replies_are_measured_from_the_arrival() {
+        let mut s = session(false);
+        let t0 = Instant::now();
+        let mut out = [0u8; 1024];
+        let us = Duration::from_micros;
+        // Arrived at t0, read 10 ms later (the loop was stalled), answered 100 µs after the read.
+        let d = rob(&s, 1000, 300.0, None);
+        s.offer_arrived(&d, robot(), t0 + ms(10), Some(t0)).unwrap();
+        assert_eq!(s.take_cycle().unwrap().replied_late, 0);
+        s.reply(&Correction::default(), &mut out).unwrap();
+        s.sent(t0 + ms(10) + us(100));
+        let c = s.diagnostics().counters;
+        assert_eq!((c.answered, c.late, c.unstamped), (1, 1, 0));
+        assert_eq!(s.diagnostics().from_arrival.max(), ms(10) + us(100));
+        assert_eq!(
+            s.diagnostics().latency.max(),
+            us(100),
+            "read→send: the old measure, which saw nothing late"
+        );
+        // Arrived 1.5 ms before the read, answered 0.4 ms after: 1.9 ms, within late_after (2 ms).
+        let d = rob(&s, 1004, 300.0, None);
+        let read = t0 + ms(20);
+        s.offer_arrived(&d, robot(), read, Some(read - us(1500)))
+            .unwrap();
+        let cycle = s.take_cycle().unwrap();
+        assert_eq!(cycle.replied_late, 1, "the cycle carries the count so far");
+        s.reply(&Correction::default(), &mut out).unwrap();
+        s.sent(read + us(400));
+        assert_eq!(s.diagnostics().counters.late, 1);
+        // No arrival (no kernel stamp): measured from the read, and counted as such.
+        let d = rob(&s, 1008, 300.0, None);
+        let read = t0 + ms(30);
+        s.offer(&d, robot(), read).unwrap();
+        s.take_cycle().unwrap();
+        s.reply(&Correction::default(), &mut out).unwrap();
+        s.sent(read + ms(3));
+        let c = s.diagnostics().counters;
+        assert_eq!((c.answered, c.late, c.unstamped), (3, 2, 1));
+        // An arrival after the read (a clock step between the two clocks) counts from the read.
+        let d = rob(&s, 1012, 300.0, None);
+        let read = t0 + ms(40);
+        s.offer_arrived(&d, robot(), read, Some(read + ms(50)))
+            .unwrap();
+        s.take_cycle().unwrap();
+        s.reply(&Correction::default(), &mut out).unwrap();
+        s.sent(read + us(100));
+        let c = s.diagnostics().counters;
+        assert_eq!((c.answered, c.late, c.unstamped), (4, 2, 1));
+        assert_eq!(s.diagnostics().from_arrival.count(), 4);
     }
 
     #[test]
