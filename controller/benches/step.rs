@@ -63,6 +63,7 @@ fn robust_oriented_step(bencher: Bencher) {
         programmed: Pose::identity(),
         late_replies: 0,
         missed: 0,
+        replied_late: 0,
         new_session: false,
         process: None,
     };

@@ -295,6 +295,7 @@ mod tests {
             programmed: Pose::identity(),
             late_replies: 0,
             missed: 0,
+            replied_late: 0,
             new_session: false,
             process: None,
         }

@@ -113,6 +113,7 @@ fn oriented_step_does_not_allocate() {
         programmed: Pose::identity(),
         late_replies: 0,
         missed: 0,
+        replied_late: 0,
         new_session: false,
         process: None,
     };
