@@ -9,7 +9,7 @@ use std::thread;
 use std::time::Duration;
 
 use anyhow::{Context, Result, anyhow, bail};
-use controller::LoopConfig;
+use controller::{LoopConfig, Tuning};
 use hal::{Correction, Cycle, ForceSensor, RobotLink};
 use kuka_rsi::{
     CorrectionMode, Diagnostics, EthernetConfig, Limits, LinkConfig, LinkError, PoscorrLimits,
@@ -164,21 +164,29 @@ pub fn print_link(d: &Diagnostics) {
 /// Robot-side limits wide enough for a tuning's own loop limits, so the driver never acts before the
 /// loop does: the envelope is the loop's `max_offset`, the rate limit its `max_step`, POSCORR 10 % and
 /// POSCORRMON 20 % beyond the envelope. (The scenarios work in absolute normal positions around 10 mm,
-/// beyond RSI's default ±5 mm.)
-pub fn cell_limits(loop_cfg: &LoopConfig) -> (Limits, PoscorrLimits, PoscorrLimits) {
-    let limits = Limits {
+/// beyond RSI's default ±5 mm.) With orientation following (`[orientation]` in the tuning) the
+/// rotation's POSCORR limit is the tuning's `poscorr`, POSCORRMON's 20 % beyond it, and the driver's
+/// envelope 90 % of it (the law's own envelope, `max_angle`, faults first); without it, RSI's defaults.
+pub fn cell_limits(tuning: &Tuning) -> (Limits, PoscorrLimits, PoscorrLimits) {
+    let loop_cfg: &LoopConfig = &tuning.loop_cfg;
+    let mut limits = Limits {
         max_translation: loop_cfg.max_offset,
         max_translation_step: loop_cfg.max_step,
         ..Limits::default()
     };
-    let poscorr = PoscorrLimits {
+    let mut poscorr = PoscorrLimits {
         translation: loop_cfg.max_offset * 1.1,
         ..PoscorrLimits::default()
     };
-    let mon = PoscorrLimits {
+    let mut mon = PoscorrLimits {
         translation: loop_cfg.max_offset * 1.2,
         ..PoscorrLimits::MONITOR_DEFAULT
     };
+    if let Some(o) = &tuning.orientation {
+        poscorr.rotation = o.poscorr;
+        mon.rotation = o.poscorr * 1.2;
+        limits.max_rotation = 0.9 * o.poscorr;
+    }
     (limits, poscorr, mon)
 }
 
@@ -310,7 +318,7 @@ impl RobotSide {
         if spec.scenario.program.is_some() {
             ethernet = ethernet.with_process(ProcessChannels::default());
         }
-        let (limits, poscorr, poscorrmon) = cell_limits(&spec.tuning.loop_cfg);
+        let (limits, poscorr, poscorrmon) = cell_limits(&spec.tuning);
         let mut lc = LinkConfig::new(ethernet.clone(), RobotFilter::Any);
         lc.bind = Some(local);
         lc.period = period_of(&spec.plant);
@@ -419,7 +427,7 @@ impl RobotSide {
             }
         };
         let sentype = ethernet.sentype.clone();
-        let (limits, poscorr, poscorrmon) = cell_limits(&spec.tuning.loop_cfg);
+        let (limits, poscorr, poscorrmon) = cell_limits(&spec.tuning);
         let mut lc = LinkConfig::new(ethernet, RobotFilter::Any);
         lc.bind = Some(addr);
         lc.limits = limits;
@@ -613,7 +621,18 @@ impl RobotLink for ExternalRobot<'_> {
             }
         }
         if let Some(at) = at {
-            w.advance(Some(&Correction::along_z(at)));
+            // The reported rotation from the programmed pose turns the world's tool too (on a curved
+            // part, docs/curved-parts.md; the 1-DOF plant has no rotation and ignores it).
+            let turned = (c.programmed.orientation.inverse() * c.actual.orientation).scaled_axis();
+            let rotation = if turned.iter().all(|v| v.is_finite()) {
+                turned
+            } else {
+                hal::Vector3::zeros()
+            };
+            w.advance(Some(&Correction {
+                rotation,
+                ..Correction::along_z(at)
+            }));
         }
         // A client that sends no `FcCmd` gets the scenario's program (if it has one) run on its
         // behalf; one that does runs its own.
@@ -704,14 +723,17 @@ pub fn rsi_target(a: &RsiConfigArgs) -> Result<RsiTarget> {
     };
     let ip = a.ip.or(cell_ip);
     let robot_ip = a.robot_ip.or(cell.as_ref().map(|r| r.robot_ip));
-    let tuning_limits = match &a.tuning {
+    // A tuning gives the limits its loop needs: the translation (unless the flags say), and the
+    // rotation of an orientation-following tuning (RSI's 5° otherwise).
+    let tuning_poscorr = match &a.tuning {
         Some(t) => {
             let t = crate::scenario::load_tuning(t)?;
-            let (_, p, m) = cell_limits(&t.loop_cfg);
-            Some((p.translation * 1e3, m.translation * 1e3))
+            let (_, p, m) = cell_limits(&t);
+            Some((p, m))
         }
         None => None,
     };
+    let tuning_limits = tuning_poscorr.map(|(p, m)| (p.translation * 1e3, m.translation * 1e3));
     let poscorr_mm = a
         .poscorr_mm
         .or(rsi.as_ref().map(|r| r.poscorr_mm))
@@ -761,11 +783,11 @@ pub fn rsi_target(a: &RsiConfigArgs) -> Result<RsiTarget> {
             .unwrap_or(49152),
         poscorr: PoscorrLimits {
             translation: poscorr_mm * 1e-3,
-            ..PoscorrLimits::default()
+            ..tuning_poscorr.map_or(PoscorrLimits::default(), |t| t.0)
         },
         poscorrmon: PoscorrLimits {
             translation: poscorrmon_mm * 1e-3,
-            ..PoscorrLimits::MONITOR_DEFAULT
+            ..tuning_poscorr.map_or(PoscorrLimits::MONITOR_DEFAULT, |t| t.1)
         },
         relative: mode == Some(ModeArg::Relative),
         ipo_fast: !(a.ipo12 || cell.as_ref().is_some_and(|r| r.cycle_ms == 12)),

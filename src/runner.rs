@@ -176,8 +176,8 @@ where
     R::Error: Send + Sync + 'static,
     S::Error: Send + Sync + 'static,
 {
-    let law = spec.tuning.law.build().map_err(|e| anyhow!(e))?;
-    let mut lp = ControlLoop::new(robot, sensor, law, spec.tuning.loop_config());
+    let law = spec.tuning.cell_law().map_err(|e| anyhow!(e))?;
+    let mut lp = ControlLoop::with_law(robot, sensor, law, spec.tuning.loop_config());
     let steps = spec.steps();
     let started = Instant::now();
     let every = (steps / 200).max(1);

@@ -53,6 +53,8 @@ fn record(k: u64) -> Record {
         }),
         fault: Some(if (1000..1500).contains(&k) { 4 } else { 0 }),
         s: f64::NAN,
+        tilt_error: f64::NAN,
+        rotation: f64::NAN,
     });
     rec.wrench = [0.1, -0.2, 5.0 + k as f64, 0.01, 0.02, -0.03];
     rec.wrench_raw = [0.1, -0.2, 25.0, 0.01, 0.02, -0.03];

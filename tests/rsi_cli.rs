@@ -709,3 +709,41 @@ fn rsi_config_takes_the_cell_file_or_refuses_and_overwrites_nothing_unasked() {
             .contains("192.168.1.100")
     );
 }
+
+#[test]
+fn rsi_config_with_orientation_following_writes_the_rotation_limits_of_the_tuning() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = forcecell(
+        &["rsi-config", "--tuning", "robust-curved", "--ip", "192.168.1.100", "--robot-ip", "192.168.1.10", "--out", "curved"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let krl = std::fs::read_to_string(dir.path().join("curved/forcecell_rsi.src")).unwrap();
+    // POSCORR's rotation limit is the tuning's `poscorr` (0.26 rad), POSCORRMON's 20 % beyond it.
+    let poscorr = 0.26f64.to_degrees();
+    assert!(
+        krl.contains(&format!("MaxRotAngle {poscorr:.3} deg  <- RKorr.X..C")),
+        "{krl}"
+    );
+    assert!(
+        krl.contains("POSCORRMON MaxTrans")
+            && krl.contains(&format!("MaxRotAngle {:.3} deg", poscorr * 1.2)),
+        "{krl}"
+    );
+    // The rotational channels are in the config the robot reads.
+    let xml = std::fs::read_to_string(dir.path().join("curved/forcecell_rsi.xml")).unwrap();
+    for a in ["A", "B", "C"] {
+        assert!(xml.contains(&format!("RKorr.{a}")), "{a}: {xml}");
+    }
+    // Without orientation following: RSI's default 5°.
+    let o = forcecell(
+        &["rsi-config", "--tuning", "robust", "--ip", "192.168.1.100", "--robot-ip", "192.168.1.10", "--out", "flat"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let krl = std::fs::read_to_string(dir.path().join("flat/forcecell_rsi.src")).unwrap();
+    assert!(
+        krl.contains("MaxRotAngle 5.000 deg  <- RKorr.X..C"),
+        "{krl}"
+    );
+}

@@ -112,7 +112,7 @@ fn a_million_lockstep_cycles_with_faults_on_both_wires() {
     // RSI: driver ↔ simulated controller, lockstep, faults on the wire.
     let eth = EthernetConfig::forcecell([127, 0, 0, 1].into(), 0, false);
     let tuning = forcecell::scenario::load_tuning("robust").unwrap();
-    let (limits, poscorr, poscorrmon) = forcecell::rsi::cell_limits(&tuning.loop_cfg);
+    let (limits, poscorr, poscorrmon) = forcecell::rsi::cell_limits(&tuning);
     let mut lc = LinkConfig::new(eth.clone(), RobotFilter::Any);
     lc.bind = Some("127.0.0.1:0".parse().unwrap());
     lc.limits = limits;

@@ -4,7 +4,8 @@
 use serde::{Deserialize, Serialize};
 
 use crate::control_loop::LoopConfig;
-use crate::law::{AdaptiveParams, ForceLaw, ImpedanceLaw, ImpedanceParams, Reference};
+use crate::law::{AdaptiveParams, AlongNormal, ForceLaw, ImpedanceLaw, ImpedanceParams, Reference};
+use crate::orientation::{OrientationParams, Oriented};
 use crate::robust::{RobustLaw, RobustParams};
 
 /// Which law runs, with its parameters.
@@ -44,7 +45,15 @@ pub struct Tuning {
     /// Limits of the loop.
     #[serde(default, rename = "loop")]
     pub loop_cfg: LoopConfig,
+    /// Orientation following on curved parts (`docs/curved-parts.md`); absent: off, the law acts
+    /// along the tool normal only.
+    #[serde(default)]
+    pub orientation: Option<OrientationParams>,
 }
+
+/// The law a tuning runs over a cell: the 1-DOF law along the tool normal, with orientation
+/// following around it where the tuning turns it on.
+pub type TunedLaw = Oriented<AlongNormal<Box<dyn ForceLaw + Send>>>;
 
 impl Tuning {
     /// The loop's configuration, with the process's force limit and set-point rate taken from the
@@ -139,9 +148,26 @@ impl LawConfig {
 }
 
 impl Tuning {
+    /// The law this tuning runs over a cell (built and validated), with the loop's force sign.
+    pub fn cell_law(&self) -> Result<TunedLaw, String> {
+        if let Some(o) = &self.orientation {
+            o.validate()?;
+        }
+        let law = self.law.build()?;
+        let sign = self.loop_cfg.force_sign;
+        Ok(Oriented::new(
+            AlongNormal::new(law, sign),
+            self.orientation,
+            sign,
+        ))
+    }
+
     /// Validate the law's parameters and the loop's limits.
     pub fn validate(&self) -> Result<(), String> {
         self.loop_cfg.validate()?;
+        if let Some(o) = &self.orientation {
+            o.validate()?;
+        }
         self.law.build().map(|_| ())
     }
 }
@@ -194,6 +220,7 @@ mod tests {
                 x_r: 0.0,
             },
             loop_cfg: LoopConfig::default(),
+            orientation: None,
         };
         t.law.apply(&Overrides {
             f_r: Some(-1.0),

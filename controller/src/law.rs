@@ -189,6 +189,16 @@ pub struct Events {
     pub estimator_bound: bool,
     /// A non-finite input or step reached the law; it held its command.
     pub bad_input: bool,
+    /// Orientation following: the rotation's rate was limited.
+    pub orientation_rate: bool,
+    /// Orientation following: the rotation was held at the robot's POSCORR rotation limit.
+    pub orientation_limit: bool,
+    /// Orientation following: the moment was not usable (saturated, out of range, not finite);
+    /// the rotation held.
+    pub orientation_hold: bool,
+    /// Orientation following: the rotation would have reached its envelope (a fault: the loop
+    /// backs off).
+    pub orientation_envelope: bool,
 }
 
 impl Events {
@@ -200,6 +210,10 @@ impl Events {
             || self.deviation_limit
             || self.estimator_bound
             || self.bad_input
+            || self.orientation_rate
+            || self.orientation_limit
+            || self.orientation_hold
+            || self.orientation_envelope
     }
 }
 
@@ -222,6 +236,14 @@ pub struct EventCounts {
     pub estimator_bounds: u64,
     /// Steps with non-finite input held.
     pub bad_inputs: u64,
+    /// Steps with the rotation's rate limited.
+    pub orientation_rates: u64,
+    /// Steps with the rotation held at POSCORR.
+    pub orientation_limits: u64,
+    /// Steps with the rotation held on an unusable moment.
+    pub orientation_holds: u64,
+    /// Steps where the rotation reached its envelope.
+    pub orientation_envelopes: u64,
 }
 
 impl EventCounts {
@@ -235,6 +257,10 @@ impl EventCounts {
         self.deviation_limits += u64::from(e.deviation_limit);
         self.estimator_bounds += u64::from(e.estimator_bound);
         self.bad_inputs += u64::from(e.bad_input);
+        self.orientation_rates += u64::from(e.orientation_rate);
+        self.orientation_limits += u64::from(e.orientation_limit);
+        self.orientation_holds += u64::from(e.orientation_hold);
+        self.orientation_envelopes += u64::from(e.orientation_envelope);
     }
 }
 

@@ -60,6 +60,7 @@ fn robust_step_does_not_allocate() {
         "the step allocated: {change:?}"
     );
     paper_and_fixed_laws_step_without_allocating();
+    oriented_step_does_not_allocate();
     assert_eq!(
         states & 0b111,
         0b111,
@@ -86,4 +87,51 @@ fn paper_and_fixed_laws_step_without_allocating() {
     });
     assert_eq!(change.allocations + change.reallocations, 0, "{change:?}");
     assert!(x.is_finite());
+}
+
+/// The robust law with orientation following around it (tunings/robust-curved.toml's stage), on a
+/// cycle and a tilted wrench; called from the one test above.
+fn oriented_step_does_not_allocate() {
+    use controller::{CellLaw, OrientationParams, Oriented};
+    use hal::{Correction, Cycle, Pose, Vector3, Wrench};
+    let t: Tuning = toml::from_str(include_str!("../../tunings/robust.toml")).unwrap();
+    let o: OrientationParams = toml::from_str(
+        "tool_length = 0.1\npad_radius = 0.02\ngain = 15.0\nmax_rate = 1.0\nmax_angle = 0.21\n\
+         poscorr = 0.26\nmax_moment = 3.0\nmin_force = 2.0\nstiffness = 10000.0\n",
+    )
+    .unwrap();
+    let mut law = Oriented::new(
+        controller::AlongNormal::new(t.law.build().unwrap(), 1.0),
+        Some(o),
+        1.0,
+    );
+    let mut cycle = Cycle {
+        seq: 0,
+        t: 0.0,
+        period: 0.004,
+        actual: Pose::identity(),
+        programmed: Pose::identity(),
+        late_replies: 0,
+        missed: 0,
+        replied_late: 0,
+        new_session: false,
+        process: None,
+    };
+    let mut turned = 0.0;
+    let change = allocations(|| {
+        law.start(&cycle, &Correction::default());
+        for k in 0..5_000 {
+            cycle.seq = k;
+            cycle.t = k as f64 * 0.004;
+            let w = Wrench {
+                force: Vector3::new(1.0, -0.5, 20.0),
+                torque: Vector3::new(0.1, -0.05, 0.0),
+            };
+            turned = law.step(&cycle, &w, 0.004).correction.rotation.norm();
+        }
+        let bad = Wrench::from_array([0.0, 0.0, 20.0, f64::NAN, 0.0, 0.0]);
+        std::hint::black_box(law.step(&cycle, &bad, 0.004));
+    });
+    assert_eq!(change.allocations + change.reallocations, 0, "{change:?}");
+    assert!(turned > 0.0, "the stage turned the tool");
 }

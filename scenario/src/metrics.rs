@@ -27,6 +27,15 @@
 //! * `final_correction` — `|x_cmd|` of the window's last row, m;
 //! * `press_contact_losses` — drops of the force to zero while ramping or pressing.
 //!
+//! Of a pass on a curved part (rows with `tilt_error`, see docs/curved-parts.md; `f_true` is then
+//! the force normal to the surface):
+//! * `tilt_error_max` — largest angle between the tool axis and the surface normal, less the
+//!   program's tilt, while `PRESSING`, rad (NaN without a curved part or without pressing);
+//! * `tilt_error_settled` — the same from [`TILT_SETTLE`] after each entry into `PRESSING` on, rad;
+//! * `max_rotation` — largest magnitude of the correction's rotation in the window, rad;
+//! * `final_rotation` — its magnitude in the window's last row, rad;
+//! * `max_correction` — largest `|x_cmd|` in the window, m.
+//!
 //! Per pass ([`pass_force_errors`]): a pass is a maximal stretch of rows reported `PRESSING`; its
 //! mean force error is `mean(f − f_r)` over it, N (`f` the true force where the trace has it), signed:
 //! a sensor bias that reads high makes it negative.
@@ -57,7 +66,15 @@ pub const METRIC_NAMES: &[&str] = &[
     "release_excess",
     "final_correction",
     "press_contact_losses",
+    "tilt_error_max",
+    "tilt_error_settled",
+    "max_rotation",
+    "final_rotation",
+    "max_correction",
 ];
+
+/// How long after entering `PRESSING` the tilt has to settle before `tilt_error_settled` counts, s.
+pub const TILT_SETTLE: f64 = 0.3;
 
 /// The process phase codes of a row (`FcState.State`).
 mod phase {
@@ -115,6 +132,16 @@ pub struct Metrics {
     pub final_correction: f64,
     /// Count.
     pub press_contact_losses: f64,
+    /// rad.
+    pub tilt_error_max: f64,
+    /// rad.
+    pub tilt_error_settled: f64,
+    /// rad.
+    pub max_rotation: f64,
+    /// rad.
+    pub final_rotation: f64,
+    /// m.
+    pub max_correction: f64,
 }
 
 impl Metrics {
@@ -150,11 +177,20 @@ impl Metrics {
             release_excess: f64::NAN,
             final_correction: f64::NAN,
             press_contact_losses: 0.0,
+            tilt_error_max: f64::NAN,
+            tilt_error_settled: f64::NAN,
+            max_rotation: f64::NAN,
+            final_rotation: f64::NAN,
+            max_correction: f64::NAN,
         };
         let Some(last) = win.last() else {
             return m;
         };
         m.final_correction = last.x_cmd.abs();
+        m.final_rotation = last.rotation;
+        m.max_rotation = win.iter().map(|r| r.rotation).fold(f64::NAN, f64::max);
+        m.max_correction = win.iter().map(|r| r.x_cmd.abs()).fold(f64::NAN, f64::max);
+        m.tilt(&win);
         m.pass(&win, force);
         m.kc_hat = last.kc_hat;
         m.xc_hat = last.xc_hat;
@@ -299,6 +335,28 @@ impl Metrics {
         }
     }
 
+    /// The tilt metrics of a pass on a curved part (see the module's list).
+    fn tilt(&mut self, win: &[&Row]) {
+        let (mut max, mut settled) = (f64::NAN, f64::NAN);
+        let mut entered: Option<f64> = None;
+        for r in win {
+            if r.phase != Some(phase::PRESSING) {
+                entered = None;
+                continue;
+            }
+            let t0 = *entered.get_or_insert(r.t);
+            if r.tilt_error.is_nan() {
+                continue;
+            }
+            max = max.max(r.tilt_error);
+            if r.t >= t0 + TILT_SETTLE {
+                settled = settled.max(r.tilt_error);
+            }
+        }
+        self.tilt_error_max = max;
+        self.tilt_error_settled = settled;
+    }
+
     /// A metric by name (see [`METRIC_NAMES`]).
     pub fn get(&self, name: &str) -> Option<f64> {
         Some(match name {
@@ -324,6 +382,11 @@ impl Metrics {
             "release_excess" => self.release_excess,
             "final_correction" => self.final_correction,
             "press_contact_losses" => self.press_contact_losses,
+            "tilt_error_max" => self.tilt_error_max,
+            "tilt_error_settled" => self.tilt_error_settled,
+            "max_rotation" => self.max_rotation,
+            "final_rotation" => self.final_rotation,
+            "max_correction" => self.max_correction,
             _ => return None,
         })
     }
@@ -478,5 +541,32 @@ mod tests {
             assert!(m.get(n).is_some(), "{n}");
         }
         assert!(m.get("nope").is_none());
+    }
+
+    #[test]
+    fn tilt_metrics_count_pressing_and_settle_after_entry() {
+        let rows: Vec<Row> = (0..100)
+            .map(|k| {
+                let t = k as f64 * 0.01;
+                Row {
+                    t,
+                    phase: Some(if (10..90).contains(&k) { 3 } else { 4 }),
+                    // 2° at entry, decaying to 0.5° after 0.2 s; 3° while releasing.
+                    tilt_error: if (10..90).contains(&k) {
+                        if k < 30 { 0.035 } else { 0.009 }
+                    } else {
+                        0.05
+                    },
+                    rotation: if k == 99 { 0.0 } else { 0.02 },
+                    x_cmd: -0.001 * (k % 3) as f64,
+                    ..Row::default()
+                }
+            })
+            .collect();
+        let m = Metrics::compute(&rows, 0.0, f64::INFINITY);
+        assert_eq!(m.tilt_error_max, 0.035);
+        assert_eq!(m.tilt_error_settled, 0.009);
+        assert_eq!((m.max_rotation, m.final_rotation), (0.02, 0.0));
+        assert_eq!(m.max_correction, 0.002);
     }
 }

@@ -51,6 +51,11 @@ pub struct Row {
     pub fault: Option<u8>,
     /// Path position along the workpiece, m (simulation only: NaN on a real cell and in files).
     pub s: f64,
+    /// On a simulated curved part: the true angle between the tool axis and the surface normal less
+    /// the program's tilt, rad (NaN elsewhere and in files; `docs/curved-parts.md`).
+    pub tilt_error: f64,
+    /// The magnitude of the correction's rotation sent, rad (NaN in files).
+    pub rotation: f64,
 }
 
 impl Row {
@@ -84,6 +89,8 @@ impl Row {
                 .process
                 .map(|_| r.command.process.fault.code() as u8),
             s: f64::NAN,
+            tilt_error: f64::NAN,
+            rotation: r.command.rotation.norm(),
         }
     }
 
@@ -121,6 +128,8 @@ impl Row {
             phase: None,
             fault: None,
             s: f64::NAN,
+            tilt_error: f64::NAN,
+            rotation: f64::NAN,
         }
     }
 }
@@ -274,6 +283,8 @@ pub fn read_csv(text: &str) -> Result<Vec<Row>> {
             x_c: v[10],
             condition,
             s: f64::NAN,
+            tilt_error: f64::NAN,
+            rotation: f64::NAN,
         });
     }
     Ok(rows)
@@ -305,6 +316,8 @@ mod tests {
                 phase: Some(3),
                 fault: Some(0),
                 s: f64::NAN,
+                tilt_error: f64::NAN,
+                rotation: f64::NAN,
             };
             2
         ];
@@ -317,10 +330,13 @@ mod tests {
         assert!(back[0].f.is_nan());
         assert_eq!(back[0].x_cmd, 0.0102);
         assert_eq!(back[1].condition, 1);
-        // NaN is not equal to itself: the missing `f` and the simulation-only `s` compared as 0.
+        // NaN is not equal to itself: the missing `f` and the simulation-only `s`, `tilt_error` and
+        // `rotation` compared as 0.
         let without_f = |r: &Row| Row {
             f: 0.0,
             s: 0.0,
+            tilt_error: 0.0,
+            rotation: 0.0,
             ..*r
         };
         assert_eq!(

@@ -36,6 +36,7 @@ pub fn fill_truth(rows: &mut [Row], truth: &[sim::world::Truth], period: f64) {
             r.k_c = tr.k_c;
             r.x_c = tr.x_c;
             r.s = tr.s;
+            r.tilt_error = tr.tilt_error;
         }
     }
 }
@@ -129,6 +130,10 @@ pub fn world(scenario: &Scenario, plant: &InnerLoopModel) -> SharedWorld {
         scenario.start_position(),
     )
     .with_form(scenario.environment.form.clone());
+    let world = match scenario.environment.geometry {
+        Some(g) => world.with_geometry(g),
+        None => world,
+    };
     match &scenario.program {
         Some(p) => world.with_program(p.clone()),
         None => world,
@@ -260,9 +265,9 @@ pub fn run_watched(
     watch: &mut dyn FnMut(&CycleReport, &Row),
 ) -> Result<Ended> {
     let tuning = resolve_tuning(scenario, plant, tuning);
-    let law = tuning.law.build().map_err(|e| anyhow!(e))?;
+    let law = tuning.cell_law().map_err(|e| anyhow!(e))?;
     let world = world(scenario, plant);
-    let mut lp = ControlLoop::new(
+    let mut lp = ControlLoop::with_law(
         InProcRobot::new(world.clone()),
         InProcSensor::new(world.clone()),
         law,

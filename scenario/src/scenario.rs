@@ -6,7 +6,9 @@ use std::path::Path;
 use anyhow::{Context, Result, anyhow, bail};
 use controller::Overrides;
 use serde::{Deserialize, Serialize};
-use sim::{ContactPlant, Event, InnerLoopModel, Program, Schedule, SensorParams, SurfaceForm};
+use sim::{
+    ContactPlant, Event, Geometry, InnerLoopModel, Program, Schedule, SensorParams, SurfaceForm,
+};
 
 pub use crate::tuning::{builtin_tuning_names, load_tuning, tuning_from_toml};
 
@@ -77,6 +79,9 @@ pub struct Environment {
     /// tool as a robot program moves it.
     #[serde(default)]
     pub form: SurfaceForm,
+    /// A curved part, its pad and tool (`docs/curved-parts.md`); absent: the 1-DOF plant.
+    #[serde(default)]
+    pub geometry: Option<Geometry>,
 }
 
 impl Environment {
@@ -309,6 +314,9 @@ impl Scenario {
         }
         if let Some(r) = &self.removal {
             r.validate().map_err(|e| anyhow!("{e}"))?;
+        }
+        if let Some(g) = &self.environment.geometry {
+            g.validate().map_err(|e| anyhow!("environment: {e}"))?;
         }
         let (lo, hi) = extent(&plant.x_c, self.duration);
         if !(lo >= -MAX_SURFACE && hi <= MAX_SURFACE) {

@@ -1748,6 +1748,8 @@ mod tests {
             phase: Some(9),
             fault: Some(4),
             s: f64::NAN,
+            tilt_error: f64::NAN,
+            rotation: f64::NAN,
         });
         rec.wrench = [0.5, -0.25, 5.0, 0.0, 0.125, f64::NAN];
         rec.sensor_seq = 300;

@@ -4,6 +4,7 @@
 
 pub mod ati_node;
 pub mod ft300;
+pub mod geometry;
 pub mod inner;
 pub mod irc5;
 pub mod krc;
@@ -13,6 +14,7 @@ pub mod sensor_model;
 pub mod vcan_env;
 pub mod world;
 
+pub use geometry::{Axis, Contact, ContactState, Geometry, Shape};
 pub use inner::{InnerLoop, InnerLoopModel};
 pub use irc5::{Irc5, Irc5Config, Irc5End, Irc5Report, RapidVariables};
 pub use krc::{Krc, KrcConfig, KrcEnd, KrcReport, Mechanism, RigidArm, Timing};

@@ -12,6 +12,7 @@ use hal::{
     Sample, UnitQuaternion, Vector3, Wrench,
 };
 
+use crate::geometry::{Contact, ContactState, Geometry};
 use crate::inner::{InnerLoop, InnerLoopModel};
 use crate::plant::ContactPlant;
 use crate::program::{Program, ProgramRunner, SurfaceForm};
@@ -32,6 +33,9 @@ pub struct World {
     program: Option<ProgramRunner>,
     /// Path position when no program moves the tool, m.
     s: f64,
+    /// A curved part's geometry, pad and tool rotation (`None`: the 1-DOF plant, as ever), and the
+    /// torque's sensor model.
+    curved: Option<(Contact, SensorModel)>,
     /// World time at which the program was first done, s.
     program_done_at: Option<f64>,
 }
@@ -51,6 +55,10 @@ pub struct Truth {
     pub x_c: f64,
     /// Path position along the workpiece, m.
     pub s: f64,
+    /// On a curved part ([`World::with_geometry`]): the angle between the tool axis and the surface
+    /// normal, less the program's tilt (the norm of their difference as rotations), rad; NaN on the
+    /// 1-DOF plant.
+    pub tilt_error: f64,
 }
 
 /// A world shared between the peers of one simulation.
@@ -76,8 +84,37 @@ impl World {
             form: SurfaceForm::default(),
             program: None,
             s: 0.0,
+            curved: None,
             program_done_at: None,
         }
+    }
+
+    /// A curved part (`docs/curved-parts.md`): the surface normal varies along the path, the pad
+    /// presses with a moment when tilted, friction drags against the feed, the tool turns by the
+    /// correction's rotation through the inner loop, and the sensor reads all six axes (the torque
+    /// through its own model: the force's filter, noise, bias and drift scaled by
+    /// [`crate::geometry::TORQUE_ARM`]).
+    pub fn with_geometry(mut self, geometry: Geometry) -> Self {
+        let contact = Contact::new(geometry, *self.inner.model());
+        let torque = SensorModel::new(crate::geometry::torque_params(self.sensor.params()));
+        self.curved = Some((contact, torque));
+        self
+    }
+
+    /// The curved part's contact now, if the world has one.
+    pub fn contact_state(&self) -> Option<ContactState> {
+        let (c, _) = self.curved.as_ref()?;
+        let t = self.time();
+        let s = self.path_position();
+        Some(c.state(
+            self.plant.k_c.at(t).max(0.0),
+            self.plant.c_e,
+            self.inner.position(),
+            self.inner.velocity(),
+            s,
+            c.feed(),
+            self.plant.x_c.at(t) + self.form.height(s),
+        ))
     }
 
     /// The workpiece's form along the path.
@@ -185,6 +222,9 @@ impl World {
 
     /// True contact force now, N.
     pub fn true_force(&self) -> f64 {
+        if let Some(st) = self.contact_state() {
+            return st.normal;
+        }
         // The form shifts the surface: the same as the tool standing back by its height.
         let (x, y) = self.path_xy();
         let h = self.form.height_at(x, y);
@@ -209,12 +249,30 @@ impl World {
     /// True wrench in the sensor (= tool) frame. Convention of the simulated sensor: a compressive contact
     /// force reads **positive** `F_z`.
     pub fn true_wrench(&self) -> Wrench {
+        if let Some(st) = self.contact_state() {
+            return Wrench {
+                force: st.force,
+                torque: st.torque,
+            };
+        }
         Wrench::from_array([0.0, 0.0, self.true_force(), 0.0, 0.0, 0.0])
     }
 
     /// Measure through the sensor model: `None` in a dropout.
     pub fn measure(&mut self) -> Option<Wrench> {
         let t = self.time();
+        if self.curved.is_some() {
+            let w = self.true_wrench();
+            let (_, torque_model) = self.curved.as_mut()?;
+            // The torque's model filters on through a force dropout as the force's does.
+            let tq = torque_model.measure(t, w.torque.into());
+            let f = self.sensor.measure(t, w.force.into()).ok()?;
+            self.measurements += 1;
+            return Some(Wrench {
+                force: Vector3::from(f),
+                torque: Vector3::from(tq.ok()?),
+            });
+        }
         let f = self
             .sensor
             .measure(t, self.true_wrench().force.into())
@@ -233,10 +291,16 @@ impl World {
 
     /// The measured state as the robot reports it for the current cycle.
     pub fn cycle(&self) -> Cycle {
-        let p = self.programmed_pose();
+        let mut p = self.programmed_pose();
+        let mut turned = p.orientation;
+        if let Some((c, _)) = &self.curved {
+            // The program's tilt is the programmed pose's; the correction's rotation the actual's.
+            p.orientation *= c.geometry().programmed();
+            turned = p.orientation * UnitQuaternion::from_scaled_axis(c.rotation());
+        }
         let actual = Pose {
             position: p.position + p.orientation * Vector3::new(0.0, 0.0, self.inner.position()),
-            orientation: p.orientation,
+            orientation: turned,
         };
         Cycle {
             seq: self.k,
@@ -261,6 +325,11 @@ impl World {
             k_c: self.stiffness(),
             x_c: self.surface(),
             s: self.path_position(),
+            tilt_error: self.curved.as_ref().map_or(f64::NAN, |(c, _)| {
+                let want = Vector3::new(0.0, c.geometry().program_tilt, 0.0);
+                self.contact_state()
+                    .map_or(f64::NAN, |st| (st.tilt - want).norm())
+            }),
         }
     }
 
@@ -287,8 +356,16 @@ impl World {
         }
         self.truth.push(self.truth());
         self.inner.advance(self.last_command);
+        let s0 = self.path_position();
         if let Some(p) = &mut self.program {
             p.advance(self.inner.model().period);
+        }
+        if self.curved.is_some() {
+            let feed = (self.path_position() - s0) / self.period();
+            let rotation = correction.map(|c| c.rotation);
+            if let Some((c, _)) = &mut self.curved {
+                c.advance(rotation, feed);
+            }
         }
         self.k += 1;
         if self.program_done_at.is_none() && self.program.as_ref().is_some_and(|p| p.done()) {
@@ -506,5 +583,85 @@ mod tests {
         let c = robot.next_cycle().unwrap();
         assert_eq!(c.seq, 2);
         assert!((c.tool_offset().z - 0.001).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_curved_world_reports_the_rotation_the_full_wrench_and_the_tilt() {
+        use crate::geometry::{Geometry, Shape};
+        let g = Geometry {
+            shape: Shape::Flat,
+            misplace_x: 0.05,
+            misplace_y: 0.0,
+            pad_radius: 0.02,
+            friction: 0.0,
+            tool_length: 0.1,
+            program_tilt: 0.0,
+        };
+        let world = World::new(
+            ContactPlant::spring(10_000.0, 0.001),
+            InnerLoopModel::P0,
+            SensorParams::default(),
+            0.003,
+        )
+        .with_geometry(g)
+        .shared();
+        let mut robot = InProcRobot::new(world.clone());
+        let mut sensor = InProcSensor::new(world.clone());
+        let c = robot.next_cycle().unwrap();
+        assert_eq!(c.actual.orientation, c.programmed.orientation);
+        let w = sensor.read().unwrap().wrench;
+        // Tilted: a moment about x and a lateral force, all six axes on the sample.
+        assert!(w.torque.x.abs() > 1e-3 && w.force.y.abs() > 0.1, "{w:?}");
+        assert!((lock(&world).truth().tilt_error - 0.05).abs() < 1e-9);
+        let turn = Correction {
+            rotation: Vector3::new(0.05, 0.0, 0.0),
+            ..Correction::along_z(0.003)
+        };
+        robot.reply(&turn).unwrap();
+        let c = robot.next_cycle().unwrap();
+        let rel = c.programmed.orientation.inverse() * c.actual.orientation;
+        assert!(
+            (rel.scaled_axis() - turn.rotation).norm() < 1e-12,
+            "the actual pose turned"
+        );
+        let w = sensor.read().unwrap().wrench;
+        assert!(w.torque.norm() < 1e-9 && w.force.y.abs() < 1e-9, "{w:?}");
+        assert!(lock(&world).truth().tilt_error < 1e-9);
+    }
+
+    #[test]
+    fn a_flat_square_geometry_gives_the_one_dof_force() {
+        let mk = |geo: bool| {
+            let w = World::new(
+                ContactPlant::spring(10_000.0, 0.001),
+                InnerLoopModel::P1,
+                SensorParams::default(),
+                0.0,
+            );
+            let w = if geo {
+                w.with_geometry(crate::geometry::Geometry {
+                    shape: crate::geometry::Shape::Flat,
+                    misplace_x: 0.0,
+                    misplace_y: 0.0,
+                    pad_radius: 0.02,
+                    friction: 0.0,
+                    tool_length: 0.1,
+                    program_tilt: 0.0,
+                })
+            } else {
+                w
+            };
+            w.shared()
+        };
+        let (a, b) = (mk(false), mk(true));
+        for k in 0..200 {
+            let z = 0.003 * (k as f64 / 100.0).min(1.0);
+            for w in [&a, &b] {
+                lock(w).advance(Some(&Correction::along_z(z)));
+            }
+            let (fa, fb) = (lock(&a).true_force(), lock(&b).true_force());
+            assert!((fa - fb).abs() < 1e-9, "{k}: {fa} {fb}");
+        }
+        assert!(lock(&a).truth().tilt_error.is_nan());
     }
 }

@@ -4,8 +4,9 @@ use serde::{Deserialize, Serialize};
 
 use super::process::{Process, ProcessConfig};
 
-/// The rate at which a rotation the law commanded returns to zero after an early end, rad/s (no law
-/// commands a rotation yet; the curved-part work makes it a setting with the loop's rotation limit).
+/// The rate at which a rotation the law commanded (orientation following) returns to zero after an
+/// early end, and while the process moves the command to a target (a RELEASE's lift, OFF, a
+/// fault's back-off), rad/s.
 pub const RETURN_TURN_RATE: f64 = 0.2;
 
 /// How the loop maps devices onto the 1-DOF law and what it refuses to command.

@@ -81,6 +81,12 @@ impl Guard {
                 format!("force {f:.1} N above the limit {:.1} N", cfg.max_force),
             ));
         }
+        if out.events.orientation_envelope {
+            return Err((
+                ProcessFault::CorrectionLimit,
+                "the tool's rotation reached its envelope (orientation.max_angle)".into(),
+            ));
+        }
         if out.events.deviation_limit {
             return Err((
                 ProcessFault::CorrectionLimit,

@@ -118,14 +118,22 @@ impl<R: RobotLink, S: ForceSensor, L: CellLaw> ControlLoop<R, S, L> {
     }
 
     /// The command one cycle nearer `target` (OFF's zero, a lift or a fault's back-off), at the
-    /// retract speed within the step limit; a back-off under a fault is reported as
+    /// retract speed within the step limit, the rotation one cycle nearer zero; a back-off under a fault is reported as
     /// [`Fault::Retracting`].
     fn move_to(&mut self, target: f64, cycle: &Cycle, fault: &mut Option<Fault>) -> f64 {
         let step = self.cfg.retract_step(cycle.period);
         let cmd = self.last_cmd + (target - self.last_cmd).clamp(-step, step);
-        if cmd == target {
+        // A rotation the law commanded (orientation following) turns back to zero meanwhile, at
+        // the return rate: after a RELEASE, an OFF or a fault the tool is square to its path again.
+        let turn = super::config::RETURN_TURN_RATE * cycle.period;
+        let r = self.side.rotation.norm();
+        if r > 0.0 {
+            self.side.rotation *= if r <= turn { 0.0 } else { 1.0 - turn / r };
+        }
+        if cmd == target && self.side.rotation == hal::Vector3::zeros() {
             self.process.arrived();
         }
+
         if self.process.phase == hal::ProcessPhase::Fault {
             self.stats.retract_cycles += 1;
             *fault = fault.or(Some(Fault::Retracting));
