@@ -714,7 +714,17 @@ fn rsi_config_takes_the_cell_file_or_refuses_and_overwrites_nothing_unasked() {
 fn rsi_config_with_orientation_following_writes_the_rotation_limits_of_the_tuning() {
     let dir = tempfile::tempdir().unwrap();
     let o = forcecell(
-        &["rsi-config", "--tuning", "robust-curved", "--ip", "192.168.1.100", "--robot-ip", "192.168.1.10", "--out", "curved"],
+        &[
+            "rsi-config",
+            "--tuning",
+            "robust-curved",
+            "--ip",
+            "192.168.1.100",
+            "--robot-ip",
+            "192.168.1.10",
+            "--out",
+            "curved",
+        ],
         dir.path(),
     );
     assert!(o.status.success(), "{}", text(&o.stderr));
@@ -737,7 +747,17 @@ fn rsi_config_with_orientation_following_writes_the_rotation_limits_of_the_tunin
     }
     // Without orientation following: RSI's default 5°.
     let o = forcecell(
-        &["rsi-config", "--tuning", "robust", "--ip", "192.168.1.100", "--robot-ip", "192.168.1.10", "--out", "flat"],
+        &[
+            "rsi-config",
+            "--tuning",
+            "robust",
+            "--ip",
+            "192.168.1.100",
+            "--robot-ip",
+            "192.168.1.10",
+            "--out",
+            "flat",
+        ],
         dir.path(),
     );
     assert!(o.status.success(), "{}", text(&o.stderr));
