@@ -41,7 +41,7 @@ pub struct ProcessConfig {
     /// at search speed, until `contact_loss_time` ends it (18 mm in 0.5 s at 36 mm/s).
     pub search_depth: f64,
     /// Re-zero the force sensor in free air between passes (OFF, tool still, out of contact), when
-    /// the check of `zeroing` passes ([`super::rezero`]; docs/rezero.md).
+    /// the check of `zeroing` passes (`control_loop::rezero`; docs/rezero.md).
     pub rezero: bool,
     /// The re-zero check's parameters.
     pub zeroing: RezeroParams,
