@@ -421,7 +421,8 @@ pub struct CellConfig {
     /// Real-time settings of the cycle (on by default: `SCHED_FIFO`, memory locked).
     #[serde(default)]
     pub realtime: crate::rt::Realtime,
-    /// The removal model for `forcecell removal` on this cell's recordings (not used by `run`).
+    /// The removal model: `run` maps each recording with it at the end (`NAME-removal.png` beside
+    /// it), and `forcecell removal` takes it for this cell's recordings.
     #[serde(default)]
     pub removal: Option<::scenario::removal::RemovalConfig>,
 }
@@ -943,6 +944,15 @@ pub fn run(path: &Path, live: Option<SocketAddr>) -> Result<u8> {
     );
     let recorded = recording.finish(Vec::new())?;
     println!("recorded {recorded}");
+    // What the run did to the part, when the cell file describes the pad and the process
+    // (`[removal]`): the map beside the recording. A run that made none (no contact, no poses) says
+    // why; the run's own status is not changed by it.
+    if let Some(r) = &cfg.removal {
+        match crate::removal::run(&mcap, r, None) {
+            Ok(o) => println!("{}", crate::removal::report(&o)),
+            Err(e) => eprintln!("removal map not written: {e:#}"),
+        }
+    }
     prov.finish(&out.ended, out.stopped, out.stats.cycles);
     let summary = stem.with_extension("json");
     crate::output::replace(&summary, |tmp| {

@@ -60,6 +60,14 @@ state_to = "{state_to}"
 [sensor]
 kind = "robotiq"
 port = "ft300"
+
+[removal]
+preston = 1e-12
+pad = "uniform"
+pad_radius = 0.01
+tool = "disc"
+rpm = 3000.0
+effective_radius = 0.02
 "#
     );
     std::fs::write(dir.path().join("egm-cell.toml"), cell).unwrap();
@@ -93,6 +101,14 @@ port = "ft300"
     for ext in ["mcap", "png", "json"] {
         assert!(names.contains(&format!("{stem}.{ext}")), "{names:?}");
     }
+    // The cell file describes the pad: `run` maps what the pass removed, beside the recording.
+    for name in [
+        format!("{stem}-removal.png"),
+        format!("{stem}-removal.mcap"),
+    ] {
+        assert!(names.contains(&name), "{name} in {names:?}\n{text}");
+    }
+    assert!(text.contains("mean removal"), "{text}");
     let summary: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(dir.path().join("rec").join(format!("{stem}.json"))).unwrap(),
     )

@@ -248,8 +248,21 @@ fn extent(s: &sim::Schedule, duration: f64) -> (f64, f64) {
 impl Scenario {
     /// Parse and validate TOML text; `origin` names the source in errors.
     pub fn from_toml(text: &str, origin: &str) -> Result<Self> {
+        Self::from_toml_at(text, origin, None)
+    }
+
+    /// [`from_toml`](Self::from_toml) for a file in `dir`: a height map it names is read from there
+    /// (under the one input rule, at most [`MAX_MAP_FILE`] bytes).
+    pub fn from_toml_at(text: &str, origin: &str, dir: Option<&Path>) -> Result<Self> {
         let mut s: Self =
             toml::from_str(text).map_err(|e| anyhow!("{origin}: {}", one_line(&e.to_string())))?;
+        if let (Some(m), Some(dir)) = (s.environment.form.height_map.as_mut(), dir) {
+            let file = dir.join(&m.file);
+            let csv = crate::input::read_text(&file, "height map", MAX_MAP_FILE)
+                .with_context(|| format!("{origin}: environment.form.height_map"))?;
+            m.load(&csv)
+                .map_err(|e| anyhow!("{origin}: environment: {e}"))?;
+        }
         s.tuning_named = text
             .parse::<toml::Table>()
             .is_ok_and(|t| t.contains_key("tuning"));
@@ -262,7 +275,8 @@ impl Scenario {
     /// containing a path separator).
     pub fn load(spec: &str) -> Result<Self> {
         if names_a_file(spec) {
-            return Self::from_toml(&read_toml_file(Path::new(spec), "scenario")?, spec);
+            let path = Path::new(spec);
+            return Self::from_toml_at(&read_toml_file(path, "scenario")?, spec, path.parent());
         }
         Self::from_toml(builtin_text(builtin::SCENARIOS, "scenario", spec)?, spec)
     }
@@ -383,6 +397,9 @@ impl Scenario {
     }
 }
 
+/// The largest height map file read, bytes (a 2000 × 2000 grid of 7-character values).
+pub const MAX_MAP_FILE: u64 = 32 << 20;
+
 /// The largest scenario or tuning file read, bytes (a device or a wrong path is an error, not a hang).
 pub const MAX_FILE: u64 = crate::input::MAX_CONFIG;
 
@@ -438,6 +455,30 @@ pub fn one_line(s: &str) -> String {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_height_map_is_read_beside_the_scenario_file() {
+        let dir = std::env::temp_dir().join(format!("forcecell-height-map-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let text = include_str!("../../scenarios/raster-step.toml").replace(
+            "steps = [{ at = 0.05, height = 0.0003, along = \"x\" }]",
+            "height_map = { file = \"part.csv\", spacing = 0.05, scale = 1e-6 }",
+        );
+        let path = dir.join("mapped.toml");
+        std::fs::write(&path, &text).unwrap();
+        // Missing file: one error naming it.
+        let e = format!("{:#}", Scenario::load(path.to_str().unwrap()).unwrap_err());
+        assert!(e.contains("part.csv"), "{e}");
+        // 3 × 3 points, 50 mm apart, in µm: 300 µm at the far corner.
+        std::fs::write(dir.join("part.csv"), "0,0,0\n0,0,0\n0,0,300\n").unwrap();
+        let s = Scenario::load(path.to_str().unwrap()).unwrap();
+        let form = &s.environment.form;
+        assert!((form.height_at(0.1, 0.1) - 3e-4).abs() < 1e-15);
+        assert!((form.height_at(0.075, 0.075) - 0.75e-4).abs() < 1e-15);
+        // Given as text (no directory to read it from): refused, not run as a flat part.
+        assert!(Scenario::from_toml(&text, "t.toml").is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     use super::*;
 
     #[test]

@@ -59,6 +59,130 @@ pub struct FormStep {
     pub along: Axis,
 }
 
+/// The largest height a height map may give, m: a form, not a fixture (RSI corrects by millimetres).
+pub const MAX_MAP_HEIGHT: f64 = 0.05;
+/// The largest grid a height map may hold (points): 2000 × 2000.
+pub const MAX_MAP_POINTS: usize = 4_000_000;
+
+/// A height map of the part from a file: a CSV grid of heights, one line per y (from y = 0 up), one
+/// value per x (from x = 0 on), `spacing` apart; each value times `scale` is metres along the normal
+/// (positive: the surface recedes from the tool). Between points the height is interpolated
+/// bilinearly; beyond the grid it is the nearest edge's.
+#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HeightMap {
+    /// The CSV file, relative to the scenario file.
+    pub file: String,
+    /// Grid spacing in x and y, m.
+    pub spacing: f64,
+    /// Metres per unit of the file's values (1e-6: the file is in µm).
+    pub scale: f64,
+    /// The heights, m, row by row (filled when the scenario file is loaded).
+    #[serde(skip)]
+    pub grid: Vec<f64>,
+    /// Points per row.
+    #[serde(skip)]
+    pub nx: usize,
+}
+
+impl HeightMap {
+    /// Read the grid from the CSV `text` (commas or whitespace between values; `#` lines skipped).
+    pub fn load(&mut self, text: &str) -> Result<(), String> {
+        let (mut grid, mut nx) = (Vec::new(), 0);
+        for (i, line) in text.lines().enumerate() {
+            let line = line.trim();
+            if line.is_empty() || line.starts_with('#') {
+                continue;
+            }
+            let before = grid.len();
+            for v in line.split(|c: char| c == ',' || c.is_whitespace()) {
+                if v.is_empty() {
+                    continue;
+                }
+                let h: f64 = v.parse().map_err(|_| {
+                    format!(
+                        "height map {}: line {}: {v:?} is no number",
+                        self.file,
+                        i + 1
+                    )
+                })?;
+                let m = h * self.scale;
+                if !(m.is_finite() && m.abs() <= MAX_MAP_HEIGHT) {
+                    return Err(format!(
+                        "height map {}: line {}: {h} × scale {} is {m} m, beyond ±{MAX_MAP_HEIGHT} m",
+                        self.file,
+                        i + 1,
+                        self.scale
+                    ));
+                }
+                grid.push(m);
+                if grid.len() > MAX_MAP_POINTS {
+                    return Err(format!(
+                        "height map {}: more than {MAX_MAP_POINTS} points",
+                        self.file
+                    ));
+                }
+            }
+            let n = grid.len() - before;
+            if nx == 0 {
+                nx = n;
+            } else if n != nx {
+                return Err(format!(
+                    "height map {}: line {} has {n} values, the first line {nx}",
+                    self.file,
+                    i + 1
+                ));
+            }
+        }
+        if nx < 2 || grid.len() / nx < 2 {
+            return Err(format!(
+                "height map {}: needs at least 2 × 2 values",
+                self.file
+            ));
+        }
+        self.grid = grid;
+        self.nx = nx;
+        Ok(())
+    }
+
+    /// The height at (x, y), m.
+    pub fn height(&self, x: f64, y: f64) -> f64 {
+        let ny = self.grid.len() / self.nx;
+        let at = |v: f64, n: usize| {
+            let u = (v / self.spacing).clamp(0.0, (n - 1) as f64);
+            let i = (u.floor() as usize).min(n - 2);
+            (i, u - i as f64)
+        };
+        let ((i, fx), (j, fy)) = (at(x, self.nx), at(y, ny));
+        let g = |i: usize, j: usize| self.grid[j * self.nx + i];
+        let lo = g(i, j) + fx * (g(i + 1, j) - g(i, j));
+        let hi = g(i, j + 1) + fx * (g(i + 1, j + 1) - g(i, j + 1));
+        lo + fy * (hi - lo)
+    }
+
+    fn validate(&self) -> Result<(), String> {
+        if !(self.spacing.is_finite() && self.spacing > 0.0 && self.spacing <= 1.0) {
+            return Err(format!(
+                "form.height_map.spacing must be in (0, 1] m, got {}",
+                self.spacing
+            ));
+        }
+        if !(self.scale.is_finite() && self.scale > 0.0 && self.scale <= 1.0) {
+            return Err(format!(
+                "form.height_map.scale must be in (0, 1] m per unit, got {}",
+                self.scale
+            ));
+        }
+        if self.nx < 2 {
+            return Err(format!(
+                "form.height_map: {} was not read (a height map needs a scenario file beside it)",
+                self.file
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// The workpiece's form along the path: the surface's offset along the tool normal at path position
 /// `s` (positive: farther from the programmed path).
 #[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
@@ -74,6 +198,8 @@ pub struct SurfaceForm {
     pub steps: Vec<FormStep>,
     /// The part ends at this path position; beyond it there is no surface (`None`: it goes on).
     pub edge: Option<f64>,
+    /// A height map from a file, added to the rest.
+    pub height_map: Option<HeightMap>,
 }
 
 impl SurfaceForm {
@@ -99,7 +225,8 @@ impl SurfaceForm {
             .filter(|st| st.along.of(x, y) >= st.at)
             .map(|st| st.height)
             .sum();
-        self.tilt * x + self.tilt_y * y + waves + steps
+        let map = self.height_map.as_ref().map_or(0.0, |m| m.height(x, y));
+        self.tilt * x + self.tilt_y * y + waves + steps + map
     }
 
     /// Checks the values.
@@ -133,6 +260,9 @@ impl SurfaceForm {
         }
         if let Some(e) = self.edge {
             fin("edge", e)?;
+        }
+        if let Some(m) = &self.height_map {
+            m.validate()?;
         }
         Ok(())
     }
@@ -557,6 +687,7 @@ mod tests {
                 along: Default::default(),
             }],
             edge: Some(0.1),
+            height_map: None,
         };
         assert!((f.height(0.0)).abs() < 1e-15);
         assert!((f.height(0.025 / 4.0) - (0.01 * 0.025 / 4.0 + 2e-4)).abs() < 1e-12);
@@ -685,6 +816,59 @@ mod tests {
             ..p
         };
         assert!(bad.validate().unwrap_err().contains("transfer_feed"));
+    }
+
+    #[test]
+    fn a_height_map_is_read_interpolated_and_bounded() {
+        let mut m = HeightMap {
+            file: "part.csv".into(),
+            spacing: 0.01,
+            scale: 1e-6,
+            ..HeightMap::default()
+        };
+        // Three points in x, two rows in y, in µm; a comment and a blank line.
+        m.load("# µm\n0, 10, 20\n\n30 40 50\n").unwrap();
+        assert_eq!((m.nx, m.grid.len()), (3, 6));
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-15;
+        assert!(close(m.height(0.0, 0.0), 0.0));
+        assert!(close(m.height(0.005, 0.0), 5e-6), "halfway along x");
+        assert!(close(m.height(0.01, 0.005), 25e-6), "halfway along y");
+        assert!(
+            close(m.height(0.5, 0.5), 50e-6),
+            "beyond the grid: its edge"
+        );
+        assert!(close(m.height(-1.0, 0.0), 0.0));
+        let f = SurfaceForm {
+            tilt: 0.001,
+            height_map: Some(m.clone()),
+            ..SurfaceForm::default()
+        };
+        f.validate().unwrap();
+        assert!(
+            close(f.height_at(0.02, 0.0), 0.02 * 0.001 + 20e-6),
+            "added to the rest"
+        );
+        // Every bad file is one clear error.
+        for (text, why) in [
+            ("0, 1\n2\n", "has 1 values"),
+            ("0, x\n1, 2\n", "is no number"),
+            ("0, 1\n", "2 × 2"),
+            ("0, 1e9\n1, 2\n", "beyond"),
+            ("0, NaN\n1, 2\n", "beyond"),
+        ] {
+            let e = m.clone().load(text).unwrap_err();
+            assert!(e.contains(why) && e.contains("part.csv"), "{text:?}: {e}");
+        }
+        // Not read (a scenario given as text, not a file): refused, not a flat part.
+        let unread = SurfaceForm {
+            height_map: Some(HeightMap {
+                grid: Vec::new(),
+                nx: 0,
+                ..m
+            }),
+            ..SurfaceForm::default()
+        };
+        assert!(unread.validate().unwrap_err().contains("was not read"));
     }
 
     #[test]
