@@ -51,6 +51,28 @@ pub fn rezeros(events: &[RezeroEvent], more: u64) -> Vec<String> {
     out
 }
 
+/// One line per pass with its mean force error (`scenario::metrics::pass_force_errors`: the true force
+/// in a simulation), when a run has more than one pass: how a long program's error moves from pass to
+/// pass (a drifting sensor, a wearing pad).
+pub fn pass_lines(passes: &[::scenario::metrics::PassError]) -> Vec<String> {
+    if passes.len() < 2 {
+        return Vec::new();
+    }
+    passes
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            format!(
+                "pass {:<3} {:>7.1}–{:<7.1} s  mean force error {:+.3} N",
+                i + 1,
+                p.start,
+                p.end,
+                p.mean_error
+            )
+        })
+        .collect()
+}
+
 /// Print the summary of a simulated run (speed, how it ended, the metrics, every target's verdict),
 /// write its CSV and plots into `out`, and return the exit status ([`crate::stop`]): an interrupted or
 /// early-ended run first, then (with `check`) a missed target.
@@ -158,6 +180,9 @@ pub fn sim(spec: &RunSpec, run: &RunResult, out: &Path, check: bool) -> Result<u
     for line in rezeros(&run.rezeros, 0) {
         println!("  {line}");
     }
+    for line in pass_lines(&::scenario::metrics::pass_force_errors(&run.rows)) {
+        println!("  {line}");
+    }
     let verdicts = run.verdicts(&spec.scenario.targets);
     if !verdicts.is_empty() {
         println!("\ntargets:");
@@ -221,4 +246,33 @@ pub fn sim(spec: &RunSpec, run: &RunResult, out: &Path, check: bool) -> Result<u
     } else {
         crate::stop::OK
     })
+}
+
+#[cfg(test)]
+mod pass_tests {
+    use super::pass_lines;
+    use ::scenario::metrics::PassError;
+
+    #[test]
+    fn a_line_per_pass_only_when_there_are_several() {
+        let p = |start: f64, e: f64| PassError {
+            start,
+            end: start + 50.0,
+            mean_error: e,
+        };
+        assert!(
+            pass_lines(&[p(1.0, -0.2)]).is_empty(),
+            "one pass: the summary says it"
+        );
+        let lines = pass_lines(&[p(1.0, -0.215), p(56.0, -0.683)]);
+        assert_eq!(lines.len(), 2);
+        assert!(
+            lines[0].starts_with("pass 1") && lines[0].ends_with("-0.215 N"),
+            "{lines:?}"
+        );
+        assert!(
+            lines[1].contains("56.0–106.0 s") && lines[1].ends_with("-0.683 N"),
+            "{lines:?}"
+        );
+    }
 }
