@@ -271,7 +271,7 @@ mod pass_tests {
             "{lines:?}"
         );
         assert!(
-            lines[1].contains("56.0–106.0 s") && lines[1].ends_with("-0.683 N"),
+            lines[1].contains("56.0–106.0") && lines[1].ends_with("-0.683 N"),
             "{lines:?}"
         );
     }
