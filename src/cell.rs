@@ -16,6 +16,8 @@
 //! watchdog_cycles = 25
 //! poscorr_mm = 5.0                  # the robot's POSCORR translation limit …
 //! poscorrmon_mm = 6.0               # … and POSCORRMON's
+//! # poscorr_deg = 15.0              # rotation limits (RSI's 5°/6° if absent): an orientation-following
+//! # poscorrmon_deg = 18.0           # tuning ([orientation]) needs them at or above its own
 //! max_speed = 3.0                   # m/s: a pose jump faster than this is a counted fault
 //!
 //! [sensor]
@@ -559,6 +561,10 @@ pub fn rsi_link_config(r: &RobotConfig, tuning: &Tuning) -> Result<LinkConfig> {
             Some(p) => anyhow!("{}: {e}", p.display()),
             None => anyhow!("{e}"),
         })?;
+    let turn_channels = tuning
+        .orientation
+        .map(|_| rotation_channels_missing(&ethernet))
+        .unwrap_or_default();
     let mut lc = LinkConfig::new(ethernet, RobotFilter::Ip(r.robot_ip));
     lc.bind = Some(r.listen);
     lc.period = Duration::from_millis(u64::from(r.cycle_ms));
@@ -569,13 +575,14 @@ pub fn rsi_link_config(r: &RobotConfig, tuning: &Tuning) -> Result<LinkConfig> {
     } else {
         CorrectionMode::Absolute
     };
+    let (rot_deg, rotmon_deg) = o.rotation_limits_deg();
     lc.poscorr = PoscorrLimits {
         translation: o.poscorr_mm * 1e-3,
-        ..PoscorrLimits::default()
+        rotation: rot_deg.to_radians(),
     };
     lc.poscorrmon = PoscorrLimits {
         translation: o.poscorrmon_mm * 1e-3,
-        ..PoscorrLimits::MONITOR_DEFAULT
+        rotation: rotmon_deg.to_radians(),
     };
     // Short waits for the first datagram, so a stop ends the wait (the loop waits again).
     lc.first_contact_timeout = Some(Duration::from_millis(100));
@@ -584,8 +591,79 @@ pub fn rsi_link_config(r: &RobotConfig, tuning: &Tuning) -> Result<LinkConfig> {
         max_translation_step: tuning.loop_cfg.max_step,
         ..Limits::default()
     };
+    if let Some(turn) = &tuning.orientation {
+        orientation_fits(
+            &turn_channels,
+            turn,
+            &mut lc.limits,
+            lc.poscorr,
+            lc.period,
+            &tuning.name,
+        )?;
+    }
     lc.validate().map_err(|e| anyhow!("robot: {e}"))?;
     Ok(lc)
+}
+
+/// The rotational correction channels (`RKorr.A`, `.B`, `.C`) the Ethernet config's RECEIVE lacks.
+fn rotation_channels_missing(ethernet: &EthernetConfig) -> Vec<&'static str> {
+    ["A", "B", "C"]
+        .into_iter()
+        .filter(|a| {
+            !ethernet
+                .receive
+                .iter()
+                .any(|e| e.tag == format!("RKorr.{a}"))
+        })
+        .collect()
+}
+
+/// An orientation-following tuning on an RSI robot: the Ethernet config carries the rotational
+/// correction, the robot's POSCORR rotation limit holds the tuning's (so the law, not the robot's
+/// silent clamp, limits each axis), and the law's envelope `max_angle` lies inside the driver's
+/// (90 % of the robot's limit) so the law faults first; the driver's rate limit then lets the law's
+/// fastest turn through (`max_rate` per cycle, 10 % margin).
+fn orientation_fits(
+    missing: &[&str],
+    o: &controller::OrientationParams,
+    limits: &mut Limits,
+    poscorr: PoscorrLimits,
+    period: Duration,
+    tuning: &str,
+) -> Result<()> {
+    if !missing.is_empty() {
+        bail!(
+            "tuning {tuning} turns the tool (orientation following) and the Ethernet config's \
+             RECEIVE has no RKorr.{}: add the rotational correction channels wired to POSCORR \
+             (`forcecell rsi-config` writes them)",
+            missing.join(", RKorr.")
+        );
+    }
+    let deg = |r: f64| r.to_degrees();
+    if o.poscorr > poscorr.rotation + 1e-9 {
+        bail!(
+            "tuning {tuning}'s orientation.poscorr is {:.1}° and the robot's POSCORR rotation limit \
+             is {:.1}° (robot.poscorr_deg): set robot.poscorr_deg to the robot's real limit (raise it \
+             on the robot with `forcecell rsi-config --config`) or lower orientation.poscorr",
+            deg(o.poscorr),
+            deg(poscorr.rotation)
+        );
+    }
+    limits.max_rotation = 0.9 * poscorr.rotation;
+    if o.max_angle >= limits.max_rotation {
+        bail!(
+            "tuning {tuning}'s orientation.max_angle {:.1}° must lie inside the driver's rotation \
+             envelope {:.1}° (90 % of robot.poscorr_deg {:.1}°), so the law faults before the robot \
+             clamps: raise POSCORR's rotation on the robot and robot.poscorr_deg, or lower max_angle",
+            deg(o.max_angle),
+            deg(limits.max_rotation),
+            deg(poscorr.rotation)
+        );
+    }
+    limits.max_rotation_step = limits
+        .max_rotation_step
+        .max(1.1 * o.max_rate * period.as_secs_f64());
+    Ok(())
 }
 
 /// How a cell run ended and what it recorded.
@@ -681,9 +759,10 @@ where
     R::Error: Send + Sync + 'static,
     S::Error: Send + Sync + 'static,
 {
-    let law = tuning.law.build().map_err(|e| anyhow!(e))?;
-    let mut lp =
-        ControlLoop::new(robot, sensor, law, tuning.loop_config()).with_gravity(cfg.compensator());
+    // The tuning's whole law: along the normal, with orientation following when it has [orientation].
+    let law = tuning.cell_law().map_err(|e| anyhow!(e))?;
+    let mut lp = ControlLoop::with_law(robot, sensor, law, tuning.loop_config())
+        .with_gravity(cfg.compensator());
     let mut sink = RecordSink::new(recorder).with_status(cfg.robot.late_budget());
     let limits = RunLimits {
         duration: cfg.duration,

@@ -313,7 +313,7 @@ struct SimArgs {
     #[arg(long, value_parser = ["p0", "p1", "p2"])]
     plant: Option<String>,
     /// Built-in tuning name or a tuning TOML file (default: the scenario's; with `--external-robot`,
-    /// `robust`: a real robot's 4 or 12 ms cycle is no place for the paper's tuning).
+    /// `robust` in place of `paper` or `impedance`: a real robot's 4 or 12 ms cycle is no place for them).
     #[arg(long)]
     tuning: Option<String>,
     /// Output directory.
@@ -441,10 +441,17 @@ fn sim(mut a: SimArgs) -> Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     let scenario = Scenario::load(&a.scenario)?;
+    // A real robot's 4 or 12 ms cycle is no place for the paper's law or a fixed impedance: a dry run
+    // keeps the scenario's tuning unless it is one of those (a curved part keeps its following).
     let tuning = match (&a.tuning, a.robot.external_robot) {
         (Some(t), _) => Some(t.as_str()),
-        (None, Some(_)) => Some("robust"),
-        (None, None) => None,
+        (None, Some(_))
+            if !scenario.tuning_named
+                || ["paper", "impedance"].contains(&scenario.tuning.as_str()) =>
+        {
+            Some("robust")
+        }
+        (None, _) => None,
     };
     let spec = RunSpec::new(scenario, a.plant.as_deref(), tuning)?;
     if a.sensor != "ati" && a.can.is_some() {

@@ -249,8 +249,9 @@ fn draw_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
 }
 
 /// Write the plot of a programmed pass: force against the program's `F` and the set-point in effect,
-/// the process state the program saw, its segment and the tool's position along the path, over time.
-/// Written like [`write_png`].
+/// the process state the program saw, its segment and the tool's position along the path, over time;
+/// on a curved part or with orientation following also the tilt error, the rotation sent and the
+/// moments. Written like [`write_png`].
 pub fn write_pass_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
     crate::output::require_extension(path, &["png"], "a plot")?;
     crate::output::replace(path, |tmp| draw_pass_png(tmp, title, rows))
@@ -264,13 +265,62 @@ fn draw_pass_png(path: &Path, title: &str, rows: &[Row]) -> Result<()> {
         .filter(|r| r.segment.is_some())
         .cloned()
         .collect();
-    let root = BitMapBackend::new(path, (1200, 1100)).into_drawing_area();
+    // A pass that turns the tool (orientation following) or runs over a simulated curved part gets
+    // two more panels: the tilt and the rotation sent, and the moments the tilt makes.
+    let turned = rows
+        .iter()
+        .any(|r| r.tilt_error.is_finite() || r.rotation > 0.0);
+    let extra = if turned { 2 } else { 0 };
+    let root = BitMapBackend::new(path, (1200, 1100 + 220 * extra)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| anyhow!("plot: {e}"))?;
     let root = root
         .titled(title, ("sans-serif", 24).into_font())
         .map_err(|e| anyhow!("plot: {e}"))?;
     let (top, bottom) = root.split_vertically(440);
-    let lower = bottom.split_evenly((3, 1));
+    let all = bottom.split_evenly((3 + extra as usize, 1));
+    let (turn, lower) = all.split_at(extra as usize);
+    if turned {
+        panel(
+            &turn[0],
+            &rows,
+            "orientation: tilt error (true, simulation) and the rotation sent",
+            "angle [°]",
+            &[
+                Line {
+                    label: tm::TILT_ERROR.label,
+                    color: RED_,
+                    width: 2,
+                    value: |r| r.tilt_error.to_degrees(),
+                },
+                Line {
+                    label: "rotation sent (magnitude)",
+                    color: BLACK,
+                    width: 1,
+                    value: |r| r.rotation.to_degrees(),
+                },
+            ],
+        )?;
+        panel(
+            &turn[1],
+            &rows,
+            "moments the loop read (sensor frame, after compensation)",
+            "torque [N·m]",
+            &[
+                Line {
+                    label: "about x",
+                    color: BLUE_,
+                    width: 2,
+                    value: |r| r.moment[0],
+                },
+                Line {
+                    label: "about y",
+                    color: GREEN_,
+                    width: 2,
+                    value: |r| r.moment[1],
+                },
+            ],
+        )?;
+    }
     panel(
         &top,
         &rows,

@@ -644,6 +644,9 @@ pub fn read_mcap(bytes: &[u8]) -> Result<ReadBack> {
                         c.schema_name()
                     )
                 })?;
+                if c.message.name == telemetry::CYCLE.name {
+                    rec.row.moment = [rec.wrench[3], rec.wrench[4]];
+                }
                 *row = rec.row;
                 if rec.pose.iter().all(|v| v.is_finite()) {
                     poses.insert(m.log_time, rec.pose);

@@ -12,6 +12,8 @@
 //! cycle_ms = 4
 //! poscorr_mm = 5.0
 //! poscorrmon_mm = 6.0
+//! poscorr_deg = 15.0                # rotation limits: only with an orientation-following tuning
+//! poscorrmon_deg = 18.0
 //! timeout = 100
 //!
 //! [robot]                           # ABB EGM path correction
@@ -48,6 +50,8 @@ const RSI: &[&str] = &[
     "mode",
     "poscorr_mm",
     "poscorrmon_mm",
+    "poscorr_deg",
+    "poscorrmon_deg",
     "timeout",
 ];
 /// ABB EGM's own options.
@@ -116,11 +120,32 @@ pub struct RsiOptions {
     /// The robot's POSCORRMON translation limit, mm.
     #[serde(default = "default_poscorrmon")]
     pub poscorrmon_mm: f64,
+    /// The robot's POSCORR rotation limit, degrees (absent: RSI's default 5° on the robot; an
+    /// orientation-following tuning needs it said, and `rsi-config --config` writes it).
+    #[serde(default)]
+    pub poscorr_deg: Option<f64>,
+    /// The robot's POSCORRMON rotation limit, degrees (absent: RSI's default 6°).
+    #[serde(default)]
+    pub poscorrmon_deg: Option<f64>,
     /// The robot's late-reply budget: the RSI ETHERNET object's `Timeout` (late replies tolerated
     /// before RSI stops the robot; RSI's default 100, as `rsi-config` writes it). The status line and
     /// the summary count the robot's late replies against it and warn at half.
     #[serde(default = "default_timeout")]
     pub timeout: u32,
+}
+
+/// The largest rotation limit a cell file may give, degrees (the orientation stage's own bound).
+pub const MAX_ROTATION_DEG: f64 = 30.0;
+
+impl RsiOptions {
+    /// The robot's POSCORR and POSCORRMON rotation limits, degrees (RSI's defaults 5° and 6° where
+    /// the file says nothing).
+    pub fn rotation_limits_deg(&self) -> (f64, f64) {
+        (
+            self.poscorr_deg.unwrap_or(5.0),
+            self.poscorrmon_deg.unwrap_or(6.0),
+        )
+    }
 }
 
 /// ABB EGM's own options.
@@ -315,6 +340,26 @@ impl RobotConfig {
                         bail!("robot.{n} must be > 0 mm, got {v}");
                     }
                 }
+                for (n, v) in [
+                    ("poscorr_deg", o.poscorr_deg),
+                    ("poscorrmon_deg", o.poscorrmon_deg),
+                ] {
+                    if let Some(v) = v
+                        && !(v.is_finite() && v > 0.0 && v <= MAX_ROTATION_DEG)
+                    {
+                        bail!(
+                            "robot.{n} must be in (0, {MAX_ROTATION_DEG}] degrees (past 30° a pad \
+                             is on its edge and no orientation stage works), got {v}"
+                        );
+                    }
+                }
+                let (rot, mon) = o.rotation_limits_deg();
+                if mon <= rot {
+                    bail!(
+                        "robot.poscorrmon_deg {mon} must be above robot.poscorr_deg {rot} (the \
+                         monitor stops the robot beyond what the correction may reach)"
+                    );
+                }
             }
             RobotKind::AbbEgm(o) => {
                 if self.cycle_ms == 0 || !self.cycle_ms.is_multiple_of(4) || self.cycle_ms > 1000 {
@@ -375,6 +420,14 @@ impl RobotConfig {
     }
 
     fn egm_spec(&self, o: &EgmOptions, tuning: &Tuning) -> Result<RobotSpec> {
+        if tuning.orientation.is_some() {
+            bail!(
+                "tuning {} follows the part's orientation, and EGM's path correction carries a \
+                 translation only (EgmSensorPathCorr has no rotation): on an ABB robot use a tuning \
+                 without [orientation] (e.g. robust)",
+                tuning.name
+            );
+        }
         if let Some(p) = &o.egm_settings {
             let text = crate::input::read_text(p, "EGM settings", crate::input::MAX_CONFIG)?;
             egm_settings_agree(self, o, &text).map_err(|e| anyhow!("{}: {e}", p.display()))?;

@@ -770,6 +770,27 @@ pub fn rsi_target(a: &RsiConfigArgs) -> Result<RsiTarget> {
              monitor stops the robot beyond what the correction may reach)"
         );
     }
+    // The rotation limits: the cell file's (what `run` will hold the robot to), else the tuning's,
+    // else RSI's defaults.
+    let rotation = (
+        rsi.as_ref()
+            .and_then(|r| r.poscorr_deg)
+            .map(f64::to_radians)
+            .or(tuning_poscorr.map(|t| t.0.rotation))
+            .unwrap_or(PoscorrLimits::default().rotation),
+        rsi.as_ref()
+            .and_then(|r| r.poscorrmon_deg)
+            .map(f64::to_radians)
+            .or(tuning_poscorr.map(|t| t.1.rotation))
+            .unwrap_or(PoscorrLimits::MONITOR_DEFAULT.rotation),
+    );
+    if rotation.1 <= rotation.0 {
+        bail!(
+            "rsi-config: POSCORRMON's rotation {:.1}° must be above POSCORR's {:.1}°",
+            rotation.1.to_degrees(),
+            rotation.0.to_degrees()
+        );
+    }
     let mode = a.mode.or(rsi.as_ref().map(|r| match r.mode {
         crate::cell::ModeName::Absolute => ModeArg::Absolute,
         crate::cell::ModeName::Relative => ModeArg::Relative,
@@ -783,11 +804,11 @@ pub fn rsi_target(a: &RsiConfigArgs) -> Result<RsiTarget> {
             .unwrap_or(49152),
         poscorr: PoscorrLimits {
             translation: poscorr_mm * 1e-3,
-            ..tuning_poscorr.map_or(PoscorrLimits::default(), |t| t.0)
+            rotation: rotation.0,
         },
         poscorrmon: PoscorrLimits {
             translation: poscorrmon_mm * 1e-3,
-            ..tuning_poscorr.map_or(PoscorrLimits::MONITOR_DEFAULT, |t| t.1)
+            rotation: rotation.1,
         },
         relative: mode == Some(ModeArg::Relative),
         ipo_fast: !(a.ipo12 || cell.as_ref().is_some_and(|r| r.cycle_ms == 12)),

@@ -55,6 +55,7 @@ fn record(k: u64) -> Record {
         s: f64::NAN,
         tilt_error: f64::NAN,
         rotation: f64::NAN,
+        moment: [f64::NAN; 2],
     });
     rec.wrench = [0.1, -0.2, 5.0 + k as f64, 0.01, 0.02, -0.03];
     rec.wrench_raw = [0.1, -0.2, 25.0, 0.01, 0.02, -0.03];

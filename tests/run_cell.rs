@@ -536,3 +536,183 @@ fn run_refuses_a_configuration_it_cannot_control_through_before_anything_moves()
         assert!(!dir.path().join("rec").exists(), "{file}: nothing recorded");
     }
 }
+
+/// A cell whose tuning follows the surface: the robot's POSCORR rotation (15°, POSCORRMON 18°) said.
+const TURNING_CELL: &str = r#"
+tuning = "robust-curved"
+duration = 1.5
+
+[robot]
+listen = "127.0.0.1:49152"
+robot_ip = "127.0.0.1"
+poscorr_deg = 15.0
+poscorrmon_deg = 18.0
+
+[sensor]
+kind = "ati"
+can = "vcan0"
+"#;
+
+/// `cell` against the simulated KUKA controller (its POSCORR rotation 15°, POSCORRMON 18°) on a flat
+/// part tilted 3° about the path under a 10 N/mm pad, 1 mm below the path: the outcome and the tilt
+/// error (truth) and rotation sent at the end.
+fn run_on_tilted_part(cell: &str) -> (CellOutcome, f64, f64) {
+    use sim::geometry::{Geometry, Shape};
+    let mut cfg = CellConfig::from_toml(cell, "cell.toml").unwrap();
+    cfg.robot.listen.set_port(0);
+    let tuning = cfg.tuning().unwrap();
+    let lc = cfg.link_config(&tuning).unwrap();
+    let link = RsiLink::bind(lc).unwrap();
+    let addr = link.local_addr().unwrap();
+    let world: SharedWorld = World::new(
+        ContactPlant::spring(10_000.0, 0.001),
+        InnerLoopModel::P2,
+        SensorParams::default(),
+        0.0,
+    )
+    .with_geometry(Geometry {
+        shape: Shape::Flat,
+        misplace_x: 3f64.to_radians(),
+        misplace_y: 0.0,
+        pad_radius: 0.02,
+        friction: 0.0,
+        tool_length: 0.1,
+        program_tilt: 0.0,
+    })
+    .shared();
+    let mut kc = KrcConfig::new(
+        EthernetConfig::forcecell([127, 0, 0, 1].into(), addr.port(), false),
+        addr,
+    );
+    kc.timing = Timing::Lockstep {
+        deadline: Duration::from_millis(500),
+    };
+    kc.cycles = Some(1_000);
+    kc.poscorr.rotation = 15f64.to_radians();
+    kc.poscorrmon.rotation = 18f64.to_radians();
+    let mut krc = Krc::new(kc).unwrap();
+    let mut mech = world.clone();
+    let robot = thread::spawn(move || krc.run(&mut mech));
+    let flag = AtomicBool::new(false);
+    let out = run_cell(&cfg, &tuning, link, InProcSensor::new(world.clone()), &flag).unwrap();
+    robot.join().unwrap();
+    let tilt = sim::world::lock(&world).truth().tilt_error;
+    let turned = out.rows.last().unwrap().rotation;
+    (out, tilt, turned)
+}
+
+#[test]
+fn run_follows_the_surface_with_a_tuning_that_has_orientation_and_not_without() {
+    let (out, tilt, turned) = run_on_tilted_part(TURNING_CELL);
+    assert!(out.stopped, "{}", out.ended);
+    assert!(
+        tilt.to_degrees() < 1.0,
+        "the tool came square to the part: tilt error {}°",
+        tilt.to_degrees()
+    );
+    assert!(
+        (turned.to_degrees() - 3.0).abs() < 0.5,
+        "turned by {}°",
+        turned.to_degrees()
+    );
+    let last = out.rows.last().unwrap();
+    assert!((last.f - 5.0).abs() < 0.25, "held {} N", last.f);
+    // The same cell with the law along the normal only: the tool keeps the program's orientation.
+    let (_, tilt, turned) = run_on_tilted_part(&TURNING_CELL.replace("robust-curved", "robust"));
+    assert!(
+        (tilt.to_degrees() - 3.0).abs() < 0.01,
+        "tilt {}°",
+        tilt.to_degrees()
+    );
+    assert_eq!(turned, 0.0);
+}
+
+#[test]
+fn an_orientation_following_tuning_is_refused_where_the_robot_cannot_turn_as_it_asks() {
+    let err = |text: &str| {
+        let cfg = CellConfig::from_toml(text, "cell.toml").unwrap();
+        let t = cfg.tuning().unwrap();
+        format!("{:#}", cfg.link_config(&t).unwrap_err())
+    };
+    // RSI's default 5° POSCORR rotation is below the tuning's 15°.
+    let e = err(&TURNING_CELL.replace("poscorr_deg = 15.0\nposcorrmon_deg = 18.0\n", ""));
+    assert!(
+        e.contains("robot.poscorr_deg") && e.contains("limit is 5.0°"),
+        "{e}"
+    );
+    // A robot limit of 12.5° is below the tuning's own 15° per axis.
+    let e = err(&TURNING_CELL.replace("poscorr_deg = 15.0", "poscorr_deg = 12.5"));
+    assert!(e.contains("orientation.poscorr"), "{e}");
+    // A law envelope of 14.3° beyond the driver's 13.5° (90 % of 15°): the robot would clamp first.
+    let dir = tempfile::tempdir().unwrap();
+    let shipped = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tunings/robust-curved.toml"),
+    )
+    .unwrap();
+    let wide = dir.path().join("wide.toml");
+    std::fs::write(
+        &wide,
+        shipped.replace("max_angle = 0.21", "max_angle = 0.25"),
+    )
+    .unwrap();
+    let e = err(&TURNING_CELL.replace(
+        "\"robust-curved\"",
+        &format!("{:?}", wide.display().to_string()),
+    ));
+    assert!(e.contains("orientation.max_angle 14.3°"), "{e}");
+    // An Ethernet config without the rotational channels.
+    let xml = EthernetConfig::forcecell([127, 0, 0, 1].into(), 49152, false)
+        .to_xml()
+        .lines()
+        .filter(|l| !l.contains("RKorr.A") && !l.contains("RKorr.B"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let path = dir.path().join("rsi.xml");
+    std::fs::write(&path, xml).unwrap();
+    let e = err(&TURNING_CELL.replace(
+        "[robot]\n",
+        &format!(
+            "[robot]\nethernet_config = {:?}\n",
+            path.display().to_string()
+        ),
+    ));
+    assert!(
+        e.contains("RKorr.A, RKorr.B") && !e.contains("RKorr.C"),
+        "{e}"
+    );
+    // The same robot with a tuning along the normal needs none of it.
+    let plain = TURNING_CELL.replace("robust-curved", "robust");
+    let cfg = CellConfig::from_toml(&plain, "cell.toml").unwrap();
+    cfg.link_config(&cfg.tuning().unwrap()).unwrap();
+    // POSCORRMON's rotation at or below POSCORR's.
+    let e = format!(
+        "{:#}",
+        CellConfig::from_toml(
+            &TURNING_CELL.replace("poscorrmon_deg = 18.0", "poscorrmon_deg = 15.0"),
+            "cell.toml"
+        )
+        .unwrap_err()
+    );
+    assert!(e.contains("poscorrmon_deg"), "{e}");
+}
+
+#[test]
+fn an_orientation_following_tuning_is_refused_on_an_abb_robot() {
+    let cell = r#"
+tuning = "robust-curved"
+
+[robot]
+kind = "abb-egm"
+listen = "127.0.0.1:6510"
+robot_ip = "127.0.0.1"
+
+[sensor]
+kind = "ati"
+can = "vcan0"
+"#;
+    let cfg = CellConfig::from_toml(cell, "cell.toml").unwrap();
+    let e = format!("{:#}", cfg.robot_spec(&cfg.tuning().unwrap()).unwrap_err());
+    assert!(e.contains("translation only"), "{e}");
+    let cfg = CellConfig::from_toml(&cell.replace("robust-curved", "robust"), "cell.toml").unwrap();
+    cfg.robot_spec(&cfg.tuning().unwrap()).unwrap();
+}

@@ -56,6 +56,9 @@ pub struct Row {
     pub tilt_error: f64,
     /// The magnitude of the correction's rotation sent, rad (NaN in files).
     pub rotation: f64,
+    /// The torque about the sensor's x and y in the wrench the loop used (after compensation), N·m
+    /// (NaN without a usable wrench; in a CSV file NaN, in a recording the `wrench` message's).
+    pub moment: [f64; 2],
 }
 
 impl Row {
@@ -91,6 +94,7 @@ impl Row {
             s: f64::NAN,
             tilt_error: f64::NAN,
             rotation: r.command.rotation.norm(),
+            moment: r.wrench.map_or([f64::NAN; 2], |w| [w.torque.x, w.torque.y]),
         }
     }
 
@@ -130,6 +134,7 @@ impl Row {
             s: f64::NAN,
             tilt_error: f64::NAN,
             rotation: f64::NAN,
+            moment: [f64::NAN; 2],
         }
     }
 }
@@ -285,6 +290,7 @@ pub fn read_csv(text: &str) -> Result<Vec<Row>> {
             s: f64::NAN,
             tilt_error: f64::NAN,
             rotation: f64::NAN,
+            moment: [f64::NAN; 2],
         });
     }
     Ok(rows)
@@ -318,6 +324,7 @@ mod tests {
                 s: f64::NAN,
                 tilt_error: f64::NAN,
                 rotation: f64::NAN,
+                moment: [f64::NAN; 2],
             };
             2
         ];
@@ -337,6 +344,7 @@ mod tests {
             s: 0.0,
             tilt_error: 0.0,
             rotation: 0.0,
+            moment: [0.0; 2],
             ..*r
         };
         assert_eq!(

@@ -237,7 +237,7 @@ pub struct EventFlag {
 }
 
 /// The law's event flags; [`Record::events`] holds them as bits, the first the lowest.
-pub const EVENTS: [EventFlag; 8] = [
+pub const EVENTS: [EventFlag; 12] = [
     EventFlag {
         name: "contact",
         description: "contact was detected (approach or re-acquire ended)",
@@ -277,6 +277,26 @@ pub const EVENTS: [EventFlag; 8] = [
         name: "bad_input",
         description: "a non-finite input or step reached the law; it held its command",
         get: |e| e.bad_input,
+    },
+    EventFlag {
+        name: "orientation_rate",
+        description: "orientation following: the rotation's rate was limited",
+        get: |e| e.orientation_rate,
+    },
+    EventFlag {
+        name: "orientation_limit",
+        description: "orientation following: the rotation was held at the robot's POSCORR rotation limit",
+        get: |e| e.orientation_limit,
+    },
+    EventFlag {
+        name: "orientation_hold",
+        description: "orientation following: the moment was not usable (saturated, out of range, not finite); the rotation held",
+        get: |e| e.orientation_hold,
+    },
+    EventFlag {
+        name: "orientation_envelope",
+        description: "orientation following: the rotation would have reached its envelope (a fault: the loop backs off)",
+        get: |e| e.orientation_envelope,
     },
 ];
 
@@ -802,6 +822,10 @@ pub const EVENT_FLAGS: MessageType = MessageType {
         event!(5),
         event!(6),
         event!(7),
+        event!(8),
+        event!(9),
+        event!(10),
+        event!(11),
     ],
 };
 
@@ -1173,11 +1197,55 @@ pub const X_C: Field = double!(
     |r| r.row.x_c
 );
 
+/// A simulation-only double that is often unknown: written only where it is known (NaN is left
+/// out, and read back as NaN).
+macro_rules! known_double {
+    ($name:literal, $n:literal, $unit:literal, $desc:literal, $label:literal, |$r:ident| $get:expr) => {
+        Field {
+            name: $name,
+            number: $n,
+            ty: Type::Double,
+            optional: true,
+            unit: $unit,
+            description: $desc,
+            label: $label,
+            get: |$r| {
+                let v = $get;
+                if v.is_nan() {
+                    Value::Absent
+                } else {
+                    Value::F64(v)
+                }
+            },
+            set: |$r, v| $get = v.f64(),
+        }
+    };
+}
+
+/// The tool's true path position (absent without a path).
+pub const S_TRUE: Field = known_double!(
+    "s",
+    4,
+    "m",
+    "the tool's position along the path (simulation; absent without a path)",
+    "path position (true)",
+    |r| r.row.s
+);
+/// The true tilt error on a curved part (absent elsewhere).
+pub const TILT_ERROR: Field = known_double!(
+    "tilt_error",
+    5,
+    "rad",
+    "angle between the tool axis and the surface normal less the program's tilt (simulation, curved part; absent elsewhere)",
+    "tilt error (true)",
+    |r| r.row.tilt_error
+);
+
 /// `forcecell.Truth`: the simulated world's truth, on [`TRUTH_TOPIC`].
 pub const TRUTH: MessageType = MessageType {
     name: "Truth",
     description: "the simulated world's truth (written when the run ends)",
-    fields: &[F_TRUE, K_C, X_C],
+    fields: &[F_TRUE, K_C, X_C, S_TRUE, TILT_ERROR],
 };
 
 /// The topic of every control cycle.
@@ -1750,6 +1818,7 @@ mod tests {
             s: f64::NAN,
             tilt_error: f64::NAN,
             rotation: f64::NAN,
+            moment: [f64::NAN; 2],
         });
         rec.wrench = [0.5, -0.25, 5.0, 0.0, 0.125, f64::NAN];
         rec.sensor_seq = 300;
