@@ -770,20 +770,22 @@ pub fn rsi_target(a: &RsiConfigArgs) -> Result<RsiTarget> {
              monitor stops the robot beyond what the correction may reach)"
         );
     }
-    // The rotation limits: the cell file's (what `run` will hold the robot to), else the tuning's,
-    // else RSI's defaults.
-    let rotation = (
-        rsi.as_ref()
-            .and_then(|r| r.poscorr_deg)
-            .map(f64::to_radians)
-            .or(tuning_poscorr.map(|t| t.0.rotation))
-            .unwrap_or(PoscorrLimits::default().rotation),
-        rsi.as_ref()
-            .and_then(|r| r.poscorrmon_deg)
-            .map(f64::to_radians)
-            .or(tuning_poscorr.map(|t| t.1.rotation))
-            .unwrap_or(PoscorrLimits::MONITOR_DEFAULT.rotation),
-    );
+    // The rotation limits: with a cell file its own (what `run` holds the robot to: `poscorr_deg`,
+    // `poscorrmon_deg`, RSI's 5°/6° when absent), so the robot and the cell file cannot disagree;
+    // without one the tuning's, else RSI's defaults.
+    let rotation = match &rsi {
+        Some(r) => {
+            let (p, m) = r.rotation_limits_deg();
+            (p.to_radians(), m.to_radians())
+        }
+        None => tuning_poscorr.map_or(
+            (
+                PoscorrLimits::default().rotation,
+                PoscorrLimits::MONITOR_DEFAULT.rotation,
+            ),
+            |t| (t.0.rotation, t.1.rotation),
+        ),
+    };
     if rotation.1 <= rotation.0 {
         bail!(
             "rsi-config: POSCORRMON's rotation {:.1}° must be above POSCORR's {:.1}°",

@@ -766,4 +766,23 @@ fn rsi_config_with_orientation_following_writes_the_rotation_limits_of_the_tunin
         krl.contains("MaxRotAngle 5.000 deg  <- RKorr.X..C"),
         "{krl}"
     );
+    // A cell file's own rotation limits (what `run` holds the robot to) come before the tuning's.
+    std::fs::write(
+        dir.path().join("cell.toml"),
+        "tuning = \"robust-curved\"\n[robot]\nlisten = \"192.168.1.100:49152\"\n\
+         robot_ip = \"192.168.1.10\"\nposcorr_deg = 16.0\nposcorrmon_deg = 19.5\n\
+         [sensor]\nkind = \"ati\"\ncan = \"can0\"\n",
+    )
+    .unwrap();
+    let o = forcecell(
+        &["rsi-config", "--config", "cell.toml", "--out", "cell"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let krl = std::fs::read_to_string(dir.path().join("cell/forcecell_rsi.src")).unwrap();
+    assert!(
+        krl.contains("MaxRotAngle 16.000 deg  <- RKorr.X..C")
+            && krl.contains("MaxRotAngle 19.500 deg"),
+        "{krl}"
+    );
 }
