@@ -136,6 +136,8 @@ pub struct RsiOptions {
 
 /// The largest rotation limit a cell file may give, degrees (the orientation stage's own bound).
 pub const MAX_ROTATION_DEG: f64 = 30.0;
+/// The largest POSCORRMON rotation limit a cell file may give, degrees.
+pub const MAX_MONITOR_DEG: f64 = 45.0;
 
 impl RsiOptions {
     /// The robot's POSCORR and POSCORRMON rotation limits, degrees (RSI's defaults 5° and 6° where
@@ -340,17 +342,24 @@ impl RobotConfig {
                         bail!("robot.{n} must be > 0 mm, got {v}");
                     }
                 }
-                for (n, v) in [
-                    ("poscorr_deg", o.poscorr_deg),
-                    ("poscorrmon_deg", o.poscorrmon_deg),
+                for (n, v, most, why) in [
+                    (
+                        "poscorr_deg",
+                        o.poscorr_deg,
+                        MAX_ROTATION_DEG,
+                        "past 30° a pad is on its edge and no orientation stage works",
+                    ),
+                    (
+                        "poscorrmon_deg",
+                        o.poscorrmon_deg,
+                        MAX_MONITOR_DEG,
+                        "a monitor beyond 1.5 × the largest usable POSCORR watches nothing",
+                    ),
                 ] {
                     if let Some(v) = v
-                        && !(v.is_finite() && v > 0.0 && v <= MAX_ROTATION_DEG)
+                        && !(v.is_finite() && v > 0.0 && v <= most)
                     {
-                        bail!(
-                            "robot.{n} must be in (0, {MAX_ROTATION_DEG}] degrees (past 30° a pad \
-                             is on its edge and no orientation stage works), got {v}"
-                        );
+                        bail!("robot.{n} must be in (0, {most}] degrees ({why}), got {v}");
                     }
                 }
                 let (rot, mon) = o.rotation_limits_deg();

@@ -951,6 +951,16 @@ fn the_documented_bounds_are_the_code_s_bounds() {
             std::fs::write(d.path().join("c.toml"), mutate(&base_cell(), k, v)).unwrap();
             forcecell(&["run", "--config", "c.toml"], d.path())
         };
+        let cell_add = |lines: &str| {
+            let base = base_cell();
+            let at = base.lines().find(|l| l.starts_with("robot_ip")).unwrap();
+            std::fs::write(
+                d.path().join("c.toml"),
+                base.replacen(at, &format!("{at}\n{lines}"), 1),
+            )
+            .unwrap();
+            forcecell(&["run", "--config", "c.toml"], d.path())
+        };
         let scenario = |v: &str| {
             std::fs::write(
                 d.path().join("s.toml"),
@@ -975,6 +985,12 @@ fn the_documented_bounds_are_the_code_s_bounds() {
                 "robot.watchdog_cycles" => cell(v, "watchdog_cycles"),
                 "duration" => cell(v, "duration"),
                 "robot.listen" => cell(&format!("\"192.168.1.100:{v}\""), "listen"),
+                // The rotation limits are commented out in the example: added (POSCORR's with the
+                // largest monitor above it).
+                "robot.poscorr_deg" => {
+                    cell_add(&format!("poscorr_deg = {v}\nposcorrmon_deg = 45.0"))
+                }
+                "robot.poscorrmon_deg" => cell_add(&format!("poscorrmon_deg = {v}")),
                 "[sensor] bandwidth" => scenario(v),
                 "rsi-config --wait-timeout" => forcecell(
                     &[
