@@ -8,10 +8,13 @@
 //! pass is met. One that ignores them (as a robot without `RKorr.A..C` wired would) leaves the tool
 //! 5° off: the tilt targets fail.
 
+mod common;
+
 use std::net::UdpSocket;
 use std::process::{Command, Output, Stdio};
 use std::time::Duration;
 
+use common::attr;
 use hal::{UnitQuaternion, Vector3};
 
 /// The hand-written robot: the tool points down (A 180, C 180) over the programmed path.
@@ -82,38 +85,13 @@ impl Robot {
             f(SOL),
             self.ipoc
         );
-        let mut buf = [0u8; 2048];
-        // The server may still be starting: resend until it answers, for at most about 20 s.
-        for _ in 0..100 {
-            if self.sock.send(rob.as_bytes()).is_err() {
-                std::thread::sleep(Duration::from_millis(200));
-                continue;
-            }
-            match self.sock.recv(&mut buf) {
-                Ok(n) => {
-                    let sen = String::from_utf8_lossy(&buf[..n]).into_owned();
-                    self.ipoc += 4;
-                    for (i, name) in ["X", "Y", "Z", "A", "B", "C"].iter().enumerate() {
-                        self.corr[i] = attr(&sen, "RKorr", name).expect("every reply corrects");
-                    }
-                    return Some(sen);
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => {
-                    std::thread::sleep(Duration::from_millis(200));
-                }
-                Err(_) => {}
-            }
+        let sen = common::exchange(&self.sock, &rob)?;
+        self.ipoc += 4;
+        for (i, name) in ["X", "Y", "Z", "A", "B", "C"].iter().enumerate() {
+            self.corr[i] = attr(&sen, "RKorr", name).expect("every reply corrects");
         }
-        None
+        Some(sen)
     }
-}
-
-/// The value of `name="…"` in the first `<tag …>` of `xml`.
-fn attr(xml: &str, tag: &str, name: &str) -> Option<f64> {
-    let start = xml.find(&format!("<{tag} "))?;
-    let el = &xml[start..start + xml[start..].find('>')?];
-    let at = el.find(&format!(" {name}=\""))? + name.len() + 3;
-    el[at..at + el[at..].find('"')?].parse().ok()
 }
 
 /// The dry run of `curved-cylinder` against the hand-written robot; its output, the largest rotation

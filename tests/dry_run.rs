@@ -2,10 +2,14 @@
 //! moves like a stiff arm (the measured pose is the programmed one plus the last correction), and reads
 //! the replies with string matching — no forcecell codec on this side.
 
+mod common;
+
 use std::net::UdpSocket;
 use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};
 use std::time::Duration;
+
+use common::attr;
 
 /// Start `forcecell sim --external-robot` on a free loopback port.
 fn start(dir: &Path, extra: &[&str]) -> (Child, String) {
@@ -73,39 +77,12 @@ impl Robot {
             fc.unwrap_or(""),
             self.ipoc
         );
-        let mut buf = [0u8; 2048];
-        // The server may still be starting (the port refuses, or nothing answers yet): resend until
-        // it answers, for at most about 20 s.
-        for _ in 0..100 {
-            if self.sock.send(rob.as_bytes()).is_err() {
-                std::thread::sleep(Duration::from_millis(200));
-                continue;
-            }
-            match self.sock.recv(&mut buf) {
-                Ok(n) => {
-                    let sen = String::from_utf8_lossy(&buf[..n]).into_owned();
-                    self.ipoc += self.step;
-                    self.x += self.dx;
-                    self.z_corr = attr(&sen, "RKorr", "Z").expect("every reply corrects");
-                    return Some(sen);
-                }
-                // Refused (ICMP port unreachable) returns at once: wait before the next try.
-                Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => {
-                    std::thread::sleep(Duration::from_millis(200));
-                }
-                Err(_) => {}
-            }
-        }
-        None
+        let sen = common::exchange(&self.sock, &rob)?;
+        self.ipoc += self.step;
+        self.x += self.dx;
+        self.z_corr = attr(&sen, "RKorr", "Z").expect("every reply corrects");
+        Some(sen)
     }
-}
-
-/// The value of `name="…"` in the first `<tag …>` of `xml`.
-fn attr(xml: &str, tag: &str, name: &str) -> Option<f64> {
-    let start = xml.find(&format!("<{tag} "))?;
-    let el = &xml[start..start + xml[start..].find('>')?];
-    let at = el.find(&format!(" {name}=\""))? + name.len() + 3;
-    el[at..at + el[at..].find('"')?].parse().ok()
 }
 
 fn finish(child: Child) -> Output {

@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{arm, client, finish, free_port, read_until, spawn};
+use common::{arm, attr, client, finish, free_port, read_until, spawn};
 
 #[test]
 fn run_says_what_it_got_and_what_it_does() {
@@ -107,14 +107,6 @@ sensor_priority = 10
     );
     assert!(summary["started"].as_str().unwrap().ends_with('Z'));
     assert!(summary["ended"].as_str().unwrap() >= summary["started"].as_str().unwrap());
-}
-
-/// The value of `name="…"` in the first `<tag …>` of `xml`.
-fn attr(xml: &str, tag: &str, name: &str) -> Option<f64> {
-    let start = xml.find(&format!("<{tag} "))?;
-    let el = &xml[start..start + xml[start..].find('>')?];
-    let at = el.find(&format!(" {name}=\""))? + name.len() + 3;
-    el[at..at + el[at..].find('"')?].parse().ok()
 }
 
 /// Issue 35, item 12: a robot whose every 25th datagram never arrives (an IPOC gap of one cycle, as the

@@ -202,3 +202,33 @@ pub fn arm() -> RigidArm {
         orientation: UnitQuaternion::from_euler_angles(core::f64::consts::PI, 0.0, 0.0),
     })
 }
+
+/// The value of `name="…"` in the first `<tag …>` of an RSI datagram: a hand-written robot reads
+/// forcecell's replies by string matching, without forcecell's codec.
+pub fn attr(xml: &str, tag: &str, name: &str) -> Option<f64> {
+    let start = xml.find(&format!("<{tag} "))?;
+    let el = &xml[start..start + xml[start..].find('>')?];
+    let at = el.find(&format!(" {name}=\""))? + name.len() + 3;
+    el[at..at + el[at..].find('"')?].parse().ok()
+}
+
+/// Send `datagram` on the connected `sock` and wait for the answer; a server still starting (the port
+/// refuses, or nothing answers yet) is retried for at most about 20 s. `None`: no answer.
+pub fn exchange(sock: &UdpSocket, datagram: &str) -> Option<String> {
+    let mut buf = [0u8; 2048];
+    for _ in 0..100 {
+        if sock.send(datagram.as_bytes()).is_err() {
+            std::thread::sleep(Duration::from_millis(200));
+            continue;
+        }
+        match sock.recv(&mut buf) {
+            Ok(n) => return Some(String::from_utf8_lossy(&buf[..n]).into_owned()),
+            // Refused (ICMP port unreachable) returns at once: wait before the next try.
+            Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => {
+                std::thread::sleep(Duration::from_millis(200));
+            }
+            Err(_) => {}
+        }
+    }
+    None
+}
