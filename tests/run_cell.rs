@@ -24,6 +24,29 @@ kind = "ati"
 can = "vcan0"
 "#;
 
+/// The simulated KUKA controller in lockstep (500 ms deadline) against the link at `addr`, moving
+/// `world`, at most `cycles` datagrams (so a missing `Stop` fails a test instead of hanging it), its
+/// configuration adjusted by `tweak`.
+fn lockstep_krc(
+    addr: std::net::SocketAddr,
+    cycles: u64,
+    world: &SharedWorld,
+    tweak: impl FnOnce(&mut KrcConfig),
+) -> thread::JoinHandle<KrcReport> {
+    let mut kc = KrcConfig::new(
+        EthernetConfig::forcecell([127, 0, 0, 1].into(), addr.port(), false),
+        addr,
+    );
+    kc.timing = Timing::Lockstep {
+        deadline: Duration::from_millis(500),
+    };
+    kc.cycles = Some(cycles);
+    tweak(&mut kc);
+    let mut krc = Krc::new(kc).unwrap();
+    let mut mech = world.clone();
+    thread::spawn(move || krc.run(&mut mech))
+}
+
 /// The cell of `CELL` against the simulated KUKA controller in lockstep on loopback, on a world whose
 /// tool starts on its programmed path (correction 0, as at a real `RSI_ON`) with the surface 1 mm below.
 /// The controller sends at most `cycles` datagrams, so a missing `Stop` fails the test instead of hanging it.
@@ -356,18 +379,9 @@ fn a_lost_link_ends_the_run_early_with_status_3() {
         0.0,
     )
     .shared();
-    let mut kc = KrcConfig::new(
-        EthernetConfig::forcecell([127, 0, 0, 1].into(), addr.port(), false),
-        addr,
-    );
-    kc.timing = Timing::Lockstep {
-        deadline: Duration::from_millis(500),
-    };
-    kc.cycles = Some(2_000);
-    kc.faults.silent_from = Some(100);
-    let mut krc = Krc::new(kc).unwrap();
-    let mut mech = world.clone();
-    let robot = thread::spawn(move || krc.run(&mut mech));
+    let robot = lockstep_krc(addr, 2_000, &world, |kc| {
+        kc.faults.silent_from = Some(100);
+    });
     let flag = AtomicBool::new(false);
     let out = run_cell(&cfg, &tuning, link, InProcSensor::new(world.clone()), &flag).unwrap();
     robot.join().unwrap();
@@ -580,19 +594,10 @@ fn run_on_tilted_part(cell: &str) -> (CellOutcome, f64, f64) {
         program_tilt: 0.0,
     })
     .shared();
-    let mut kc = KrcConfig::new(
-        EthernetConfig::forcecell([127, 0, 0, 1].into(), addr.port(), false),
-        addr,
-    );
-    kc.timing = Timing::Lockstep {
-        deadline: Duration::from_millis(500),
-    };
-    kc.cycles = Some(1_000);
-    kc.poscorr.rotation = 15f64.to_radians();
-    kc.poscorrmon.rotation = 18f64.to_radians();
-    let mut krc = Krc::new(kc).unwrap();
-    let mut mech = world.clone();
-    let robot = thread::spawn(move || krc.run(&mut mech));
+    let robot = lockstep_krc(addr, 1_000, &world, |kc| {
+        kc.poscorr.rotation = 15f64.to_radians();
+        kc.poscorrmon.rotation = 18f64.to_radians();
+    });
     let flag = AtomicBool::new(false);
     let out = run_cell(&cfg, &tuning, link, InProcSensor::new(world.clone()), &flag).unwrap();
     robot.join().unwrap();
