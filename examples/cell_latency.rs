@@ -31,6 +31,14 @@
 //! reply on the wall clock. `--period-us P` waits P µs between cycles (a real robot's 4000); default
 //! 0: lockstep.
 //!
+//! `--realtime` (`--cell run`) applies `run`'s real-time settings (the cell file's `[realtime]` defaults:
+//! `SCHED_FIFO` 80, memory locked, the stack touched; [`forcecell::rt::Realtime`]) to the loop's thread
+//! exactly as `run` applies them, and the same to the echo, so the echo stays the bar of what this
+//! machine gives a minimal program under the same settings. `--standin-priority P` runs the robot
+//! stand-in at `SCHED_FIFO` P in every condition (it plays a robot controller, which has hardware of
+//! its own). With a period, the replies later than the period (the robot's cycle: RSI counts them
+//! against its `Timeout`) are counted for the echo and for forcecell (`late`).
+//!
 //! `--recorder-sched idle` runs the recorder's writer thread under `SCHED_IDLE` (`chrt --idle`),
 //! `--recorder-sched nice` at nice 19 (`renice`): on a CPU it shares with the loop it then yields to
 //! the loop as soon as a datagram wakes it.
@@ -71,6 +79,8 @@ struct Opts {
     echo: bool,
     record: bool,
     recorder_sched: Option<String>,
+    realtime: bool,
+    standin_priority: u8,
 }
 
 fn parse_opts() -> Result<Opts> {
@@ -86,6 +96,8 @@ fn parse_opts() -> Result<Opts> {
         echo: true,
         record: true,
         recorder_sched: None,
+        realtime: false,
+        standin_priority: 0,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -102,6 +114,8 @@ fn parse_opts() -> Result<Opts> {
             "--no-echo" => o.echo = false,
             "--no-record" => o.record = false,
             "--recorder-sched" => o.recorder_sched = Some(val()?),
+            "--realtime" => o.realtime = true,
+            "--standin-priority" => o.standin_priority = val()?.parse()?,
             _ => bail!("unknown option {a} (see the file's documentation)"),
         }
     }
@@ -434,7 +448,7 @@ tuning = "robust-100hz"
 record = "unused"
 
 [robot]
-listen = "127.0.0.1:0"
+listen = "127.0.0.1:49152"
 robot_ip = "127.0.0.1"
 
 [sensor]
@@ -510,9 +524,15 @@ fn main() -> Result<()> {
     let echo = if o.echo {
         let sock = UdpSocket::bind("127.0.0.1:0")?;
         let addr = sock.local_addr()?;
-        let (d, cpu) = (done.clone(), o.loop_cpu);
+        let (d, cpu, rt) = (done.clone(), o.loop_cpu, o.realtime);
         thread::Builder::new().name("echo".into()).spawn(move || {
             pin(cpu).expect("pin the echo");
+            if rt {
+                let applied = forcecell::rt::Realtime::default().apply_to_cycle_thread();
+                for r in applied.refusals() {
+                    eprintln!("warning: echo: {r}");
+                }
+            }
             echo_server(sock, d);
         })?;
         Some(addr)
@@ -529,6 +549,8 @@ fn main() -> Result<()> {
                 let mut lc = cfg.link_config(&tuning)?;
                 // The stand-in may pause between warm-up and timing (a slow machine): 1 s watchdog.
                 lc.watchdog_cycles = 250;
+                // The cell file must name a real port; the benchmark lets the OS choose a free one.
+                lc.bind = Some(SocketAddr::from((Ipv4Addr::LOCALHOST, 0)));
                 let mut link = RsiLink::bind(lc)?;
                 let addr = link.local_addr()?;
                 let world = spring_world();
@@ -543,10 +565,19 @@ fn main() -> Result<()> {
                 } else {
                     None
                 };
-                let (cpu, driver) = (o.loop_cpu, driver.clone());
+                let (cpu, driver, rt) = (o.loop_cpu, driver.clone(), o.realtime);
                 let h = thread::Builder::new().name("loop".into()).spawn(
                     move || -> Result<String> {
                         pin(cpu)?;
+                        if rt {
+                            // As `run` does on its cycle's thread before the first cycle.
+                            let applied =
+                                forcecell::rt::Realtime::default().apply_to_cycle_thread();
+                            println!("loop: {applied}");
+                            for r in applied.refusals() {
+                                eprintln!("warning: {r}");
+                            }
+                        }
                         let stop = AtomicBool::new(false);
                         let (tx, rec) = recorder.map_or((None, None), |(t, r)| (Some(t), Some(r)));
                         let out = forcecell::cell::run_cell_recorded(
@@ -681,6 +712,18 @@ fn main() -> Result<()> {
         resched_recorder(how)?;
     }
     pin(o.standin_cpu)?;
+    if o.standin_priority > 0 {
+        let applied = forcecell::rt::Realtime {
+            priority: o.standin_priority,
+            sensor_priority: 0,
+            cpu: None,
+            lock_memory: false,
+        }
+        .apply_to_cycle_thread();
+        for r in applied.refusals() {
+            eprintln!("warning: stand-in: {r}");
+        }
+    }
     let mut times = if o.cell == "egm" {
         let (cell, world) = cell_addr.zip(world).context("the EGM cell")?;
         stand_in_egm(&o, echo, cell, world)?
@@ -726,6 +769,18 @@ fn main() -> Result<()> {
             r[0], r[1], r[2], r[3]
         );
         rows.push(r);
+    }
+    if !o.period.is_zero() {
+        let limit = u32::try_from(o.period.as_nanos()).unwrap_or(u32::MAX);
+        let late = |t: &[u32]| t.iter().filter(|&&v| v > limit).count();
+        println!(
+            "late (reply after more than {:?}): echo {} of {}, forcecell {} of {}",
+            o.period,
+            late(&times.echo),
+            times.echo.len(),
+            late(&times.cell),
+            times.cell.len()
+        );
     }
     if let [e, f] = rows[..] {
         println!(
