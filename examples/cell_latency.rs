@@ -434,7 +434,7 @@ tuning = "robust-100hz"
 record = "unused"
 
 [robot]
-listen = "127.0.0.1:0"
+listen = "127.0.0.1:49152"
 robot_ip = "127.0.0.1"
 
 [sensor]
@@ -529,6 +529,8 @@ fn main() -> Result<()> {
                 let mut lc = cfg.link_config(&tuning)?;
                 // The stand-in may pause between warm-up and timing (a slow machine): 1 s watchdog.
                 lc.watchdog_cycles = 250;
+                // The cell file must name a real port; the benchmark lets the OS choose a free one.
+                lc.bind = Some(SocketAddr::from((Ipv4Addr::LOCALHOST, 0)));
                 let mut link = RsiLink::bind(lc)?;
                 let addr = link.local_addr()?;
                 let world = spring_world();

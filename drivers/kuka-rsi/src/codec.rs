@@ -131,6 +131,20 @@ pub struct Schema {
     slots: usize,
     required: u128,
     precision: u8,
+    /// The message's constant text, derived from the rest (see [`Schema::rebuild`]).
+    template: Template,
+}
+
+/// What [`Schema::write`] writes: the constant text between the values, precomputed, so a message
+/// is a few copies and its numbers.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Template {
+    /// Everything but the values and the IPOC's digits, in order.
+    text: Vec<u8>,
+    /// Where each value goes in `text` (in order), and its element and field.
+    values: Vec<(u32, u16, u16)>,
+    /// Where the IPOC's digits go in `text`.
+    ipoc_at: u32,
 }
 
 impl Schema {
@@ -157,7 +171,60 @@ impl Schema {
             slots: 0,
             required: 0,
             precision,
-        })
+            template: Template::default(),
+        }
+        .rebuilt())
+    }
+
+    fn rebuilt(mut self) -> Self {
+        self.rebuild();
+        self
+    }
+
+    /// Derive the write template from the elements (after every change to them).
+    fn rebuild(&mut self) {
+        let root = self.direction.root();
+        let mut text = Vec::new();
+        let mut values = Vec::new();
+        let mark = |text: &Vec<u8>| text.len() as u32;
+        text.extend_from_slice(b"<");
+        text.extend_from_slice(root);
+        text.extend_from_slice(b" Type=\"");
+        text.extend_from_slice(self.type_value.as_bytes());
+        text.extend_from_slice(b"\">");
+        for (ei, e) in self.elements.iter().enumerate() {
+            text.extend_from_slice(b"<");
+            text.extend_from_slice(e.tag.as_bytes());
+            match &e.content {
+                Content::Attributes(fields) => {
+                    for (fi, f) in fields.iter().enumerate() {
+                        text.extend_from_slice(b" ");
+                        text.extend_from_slice(f.name.as_bytes());
+                        text.extend_from_slice(b"=\"");
+                        values.push((mark(&text), ei as u16, fi as u16));
+                        text.extend_from_slice(b"\"");
+                    }
+                    text.extend_from_slice(b"/>");
+                }
+                Content::Text(_) => {
+                    text.extend_from_slice(b">");
+                    values.push((mark(&text), ei as u16, 0));
+                    text.extend_from_slice(b"</");
+                    text.extend_from_slice(e.tag.as_bytes());
+                    text.extend_from_slice(b">");
+                }
+            }
+        }
+        text.extend_from_slice(b"<IPOC>");
+        let ipoc_at = mark(&text);
+        text.extend_from_slice(b"</IPOC></");
+        text.extend_from_slice(root);
+        text.extend_from_slice(b">");
+        self.template = Template {
+            text,
+            values,
+            ipoc_at,
+        };
     }
 
     /// Which message this is.
@@ -260,6 +327,7 @@ impl Schema {
         if let Content::Attributes(fields) = &mut self.elements[idx].content {
             fields.push(field);
         }
+        self.rebuild();
         Ok(())
     }
 
@@ -278,6 +346,7 @@ impl Schema {
             content: Content::Text(field),
             key: short_key(tag.as_bytes()),
         });
+        self.rebuild();
         Ok(())
     }
 
@@ -387,39 +456,22 @@ impl Schema {
     /// Write one message from `frame` into `out`; returns the number of bytes written.
     pub fn write(&self, frame: &Frame, out: &mut [u8]) -> Result<usize, WriteError> {
         let mut w = Out { buf: out, n: 0 };
-        w.put(b"<")?;
-        w.put(self.direction.root())?;
-        w.put(b" Type=\"")?;
-        w.put(self.type_value.as_bytes())?;
-        w.put(b"\">")?;
-        for e in &self.elements {
-            w.put(b"<")?;
-            w.put(e.tag.as_bytes())?;
-            match &e.content {
-                Content::Attributes(fields) => {
-                    for f in fields {
-                        w.put(b" ")?;
-                        w.put(f.name.as_bytes())?;
-                        w.put(b"=\"")?;
-                        self.value(&mut w, f, frame)?;
-                        w.put(b"\"")?;
-                    }
-                    w.put(b"/>")?;
-                }
-                Content::Text(f) => {
-                    w.put(b">")?;
-                    self.value(&mut w, f, frame)?;
-                    w.put(b"</")?;
-                    w.put(e.tag.as_bytes())?;
-                    w.put(b">")?;
-                }
-            }
+        let t = &self.template;
+        let mut from = 0usize;
+        for &(at, e, f) in &t.values {
+            let at = at as usize;
+            w.put(&t.text[from..at])?;
+            self.value(
+                &mut w,
+                &self.elements[usize::from(e)].fields()[usize::from(f)],
+                frame,
+            )?;
+            from = at;
         }
-        w.put(b"<IPOC>")?;
+        let ipoc_at = t.ipoc_at as usize;
+        w.put(&t.text[from..ipoc_at])?;
         w.put(frame.ipoc.digits())?;
-        w.put(b"</IPOC></")?;
-        w.put(self.direction.root())?;
-        w.put(b">")?;
+        w.put(&t.text[ipoc_at..])?;
         Ok(w.n)
     }
 
@@ -794,43 +846,93 @@ pub(crate) fn decimal_prefix(s: &[u8]) -> (Option<f64>, usize) {
         Some(b'+') => (false, 1),
         _ => (false, 0),
     };
-    let body = &s[sign..];
-    // The digits before and after the point, accumulated as one integer (wrapping: only read when
-    // there are at most 19 digits, which cannot overflow).
-    let mut mant: u64 = 0;
-    let mut i = 0;
-    let digits_from = |i: &mut usize, mant: &mut u64| {
-        while let Some(d) = body
-            .get(*i)
-            .map(|c| c.wrapping_sub(b'0'))
-            .filter(|&d| d <= 9)
-        {
-            *mant = mant.wrapping_mul(10).wrapping_add(u64::from(d));
-            *i += 1;
-        }
-    };
-    digits_from(&mut i, &mut mant);
-    let int_digits = i;
-    let mut frac = 0usize;
-    if body.get(i) == Some(&b'.') {
+    let (int_digits, int_value) = digit_run(s, sign);
+    let mut i = sign + int_digits;
+    let (mut frac, mut mant) = (0usize, int_value);
+    if s.get(i) == Some(&b'.') {
         i += 1;
-        digits_from(&mut i, &mut mant);
-        frac = i - int_digits - 1;
+        let (n, v) = digit_run(s, i);
+        i += n;
+        frac = n;
+        // Only read with at most 19 digits in all (below), where neither step overflows.
+        mant = int_value
+            .wrapping_mul(POW10_19.get(n).copied().unwrap_or(0))
+            .wrapping_add(v);
     }
     let digits = int_digits + frac;
-    let len = sign + i;
     if digits == 0 {
-        return (None, len);
+        return (None, i);
     }
     if digits <= 19 && mant < (1u64 << 53) && frac < POW10F.len() {
         let v = mant as f64 / POW10F[frac];
-        return (Some(if neg { -v } else { v }), len);
+        return (Some(if neg { -v } else { v }), i);
     }
-    let v = core::str::from_utf8(&s[..len])
+    let v = core::str::from_utf8(&s[..i])
         .ok()
         .and_then(|t| t.parse::<f64>().ok())
         .filter(|v| v.is_finite());
-    (v, len)
+    (v, i)
+}
+
+/// 10^0 ..= 10^19, all within u64.
+const POW10_19: [u64; 20] = {
+    let mut t = [1u64; 20];
+    let mut k = 1;
+    while k < 20 {
+        t[k] = t[k - 1] * 10;
+        k += 1;
+    }
+    t
+};
+
+/// The run of ASCII digits in `s` from `from`: how many, and their value (wrapping past 19 digits,
+/// where the caller does not use it). Eight bytes at a time: one word tells which are digits and
+/// three multiplications give their value.
+#[inline]
+fn digit_run(s: &[u8], from: usize) -> (usize, u64) {
+    let (mut n, mut value) = (0usize, 0u64);
+    loop {
+        let rest = s.get(from + n..).unwrap_or(&[]);
+        let (count, v) = eight_digits(rest);
+        n += count;
+        value = value.wrapping_mul(POW10_19[count]).wrapping_add(v);
+        if count < 8 {
+            return (n, value);
+        }
+    }
+}
+
+/// The leading ASCII digits among the first eight bytes of `s` (fewer bytes are read as if padded
+/// with a non-digit): how many, and their value.
+#[inline]
+fn eight_digits(s: &[u8]) -> (usize, u64) {
+    let word = match s.first_chunk::<8>() {
+        Some(w) => u64::from_le_bytes(*w),
+        None => {
+            let mut w = [0u8; 8];
+            w[..s.len()].copy_from_slice(s);
+            u64::from_le_bytes(w)
+        }
+    };
+    // A byte is a digit when its high nibble is 3 and stays 3 after adding 6 (0x30..=0x39). The
+    // addition may carry out of a byte ≥ 0xFA into the next, but such a byte is not a digit and ends
+    // the run, so the bytes after it do not matter.
+    const HIGH: u64 = 0xF0F0_F0F0_F0F0_F0F0;
+    let class = (word & HIGH) | ((word.wrapping_add(0x0606_0606_0606_0606) & HIGH) >> 4);
+    let not_digit = class ^ 0x3333_3333_3333_3333;
+    let count = (not_digit.trailing_zeros() / 8) as usize;
+    if count == 0 {
+        return (0, 0);
+    }
+    // The digits' values, the run moved to the top bytes (what follows the run is shifted out; a
+    // borrow from a byte below '0' only runs upwards, into those bytes), leading zero bytes in front.
+    let d = word.wrapping_sub(0x3030_3030_3030_3030) << (8 * (8 - count));
+    // Pairs, then quads, then the eight (the first byte is the most significant digit).
+    let d = d.wrapping_mul(10).wrapping_add(d >> 8);
+    let d = ((d & 0x0000_00FF_0000_00FF).wrapping_mul(100 + (1_000_000 << 32))
+        + ((d >> 16) & 0x0000_00FF_0000_00FF).wrapping_mul(1 + (10_000 << 32)))
+        >> 32;
+    (count, d)
 }
 
 /// `[+-]digits` within i64.
@@ -892,17 +994,6 @@ impl Out<'_> {
         Ok(())
     }
 
-    fn put_digits(&mut self, mut v: u64, min_len: usize) -> Result<(), WriteError> {
-        let mut tmp = [b'0'; 20];
-        let mut n = 0;
-        while v > 0 || n < min_len.max(1) {
-            tmp[19 - n] = b'0' + (v % 10) as u8;
-            v /= 10;
-            n += 1;
-        }
-        self.put(&tmp[20 - n..])
-    }
-
     /// Plain fixed-point with `decimals` digits after the point, rounded half away from zero.
     /// Refuses (`OutOfRange`) when `|v|·10^decimals` is not exactly representable (≥ 2^53).
     fn fixed(&mut self, v: f64, decimals: u8, slot: usize) -> Result<(), WriteError> {
@@ -912,15 +1003,35 @@ impl Out<'_> {
             return Err(WriteError::OutOfRange { slot });
         }
         let n = scaled as u64;
-        if v.is_sign_negative() && n != 0 {
-            self.put(b"-")?;
-        }
-        self.put_digits(n / scale, 1)?;
+        // Right to left into one buffer: the decimals, the point, the integer part, the sign (at
+        // most 16 digits below 2^53, a point and a sign).
+        let mut tmp = [b'0'; 24];
+        let mut at = tmp.len();
+        let mut int = n;
         if decimals > 0 {
-            self.put(b".")?;
-            self.put_digits(n % scale, decimals as usize)?;
+            let mut frac = n % scale;
+            int = n / scale;
+            for _ in 0..decimals {
+                at -= 1;
+                tmp[at] = b'0' + (frac % 10) as u8;
+                frac /= 10;
+            }
+            at -= 1;
+            tmp[at] = b'.';
         }
-        Ok(())
+        loop {
+            at -= 1;
+            tmp[at] = b'0' + (int % 10) as u8;
+            int /= 10;
+            if int == 0 {
+                break;
+            }
+        }
+        if v.is_sign_negative() && n != 0 {
+            at -= 1;
+            tmp[at] = b'-';
+        }
+        self.put(&tmp[at..])
     }
 }
 
@@ -989,6 +1100,104 @@ mod tests {
         assert_eq!(parse_decimal(&huge), None, "overflow to inf is rejected");
     }
 
+    #[test]
+    fn digit_runs_of_every_length_end_at_the_first_non_digit() {
+        // Every run length across the eight-byte words, followed by each kind of byte that ends a
+        // run (below '0', above '9', the point, a quote, bytes ≥ 0xFA whose word addition carries).
+        for len in 0..=41 {
+            let digits: Vec<u8> = (0..len).map(|k| b"8301297465"[k % 10]).collect();
+            for end in [b'/', b':', b'.', b'"', b'<', b' ', 0x00, 0x7f, 0xfa, 0xff] {
+                for tail in [&b""[..], b"9", b"12345678"] {
+                    let mut text = b"-".to_vec();
+                    text.extend_from_slice(&digits);
+                    text.push(end);
+                    text.extend_from_slice(tail);
+                    let (n, v) = digit_run(&text, 1);
+                    assert_eq!(n, len, "{text:?}");
+                    if (1..=19).contains(&len) {
+                        let want: u64 = core::str::from_utf8(&digits).unwrap().parse().unwrap();
+                        assert_eq!(v, want, "{text:?}");
+                    }
+                }
+            }
+            // The run at the very end of the input (fewer than eight bytes left to read).
+            assert_eq!(digit_run(&digits, 0).0, len);
+        }
+        assert_eq!(digit_run(b"12", 5), (0, 0), "past the end");
+    }
+
+    #[test]
+    fn decimal_edge_cases() {
+        assert_eq!(parse_decimal(b"0"), Some(0.0));
+        assert_eq!(
+            parse_decimal(b"-0.0000").map(f64::to_bits),
+            Some((-0.0f64).to_bits())
+        );
+        assert_eq!(parse_decimal(b"+0012.5000"), Some(12.5));
+        assert_eq!(parse_decimal(b"-179.9999"), Some(-179.9999));
+        assert_eq!(
+            parse_decimal(b"12345678.87654321"),
+            Some(12_345_678.876_543_21)
+        );
+        // 19 digits (the fast path's most), 20 (the standard parser's), a long fraction.
+        assert_eq!(
+            parse_decimal(b"1234567890.123456789"),
+            Some(1_234_567_890.123_456_8)
+        );
+        assert_eq!(parse_decimal(b"9999999999999999999"), Some(1e19));
+        assert_eq!(
+            parse_decimal(b"0.100000000000000000000000000001"),
+            Some(0.1)
+        );
+        // 2^53 + 1 has no exact double: rounded as the standard parser rounds it.
+        assert_eq!(
+            parse_decimal(b"9007199254740993"),
+            Some(9_007_199_254_740_992.0)
+        );
+        for bad in [
+            &b"--1"[..],
+            b"+-1",
+            b"1-",
+            b"1e-3",
+            b"1E3",
+            b"1.5e",
+            b"0x1",
+            b".",
+            b"+.",
+            b"1,5",
+            b" 1",
+            b"1 ",
+            b"\xff1",
+        ] {
+            assert_eq!(parse_decimal(bad), None, "{bad:?}");
+        }
+        // What the layout's reader sees: the value, and the byte it stopped at.
+        assert_eq!(decimal_prefix(b"445.1234\" Y="), (Some(445.1234), 8));
+        assert_eq!(decimal_prefix(b"-.5<"), (Some(-0.5), 3));
+        assert_eq!(decimal_prefix(b"-x"), (None, 1));
+    }
+
+    #[test]
+    fn written_decimals_read_back_exactly() {
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        for _ in 0..20_000 {
+            // xorshift: magnitudes from 1e-6 to 1e6, both signs.
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let mag = 10f64.powi((x % 13) as i32 - 6);
+            let v = ((x >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0 * mag;
+            for d in [0u8, 1, 3, 4, 6, 9] {
+                let text = write_one(v, d);
+                let scale = POW10[d as usize] as f64;
+                let want = (v.abs() * scale).round() / scale;
+                let got = parse_decimal(text.as_bytes()).unwrap();
+                assert_eq!(got.abs(), want, "{v} at {d} decimals wrote {text}");
+                assert_eq!(text.starts_with('-'), v < 0.0 && want != 0.0, "{text}");
+            }
+        }
+    }
+
     proptest::proptest! {
         /// Plain decimals read as `str::parse` reads them (correctly rounded), any digit counts.
         #[test]
@@ -999,6 +1208,24 @@ mod tests {
             let has_digit = text.bytes().any(|c| c.is_ascii_digit());
             let got = parse_decimal(text.as_bytes());
             proptest::prop_assert_eq!(got.map(f64::to_bits), expected.filter(|_| has_digit).map(f64::to_bits));
+        }
+
+        /// Any bytes: a decimal where the standard parser reads a plain one, nothing otherwise.
+        #[test]
+        fn any_bytes_read_as_plain_decimals_or_not_at_all(
+            bytes in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..40),
+        ) {
+            let plain = bytes.iter().enumerate().all(|(k, &c)| {
+                c.is_ascii_digit() || c == b'.' || (k == 0 && (c == b'+' || c == b'-'))
+            }) && bytes.iter().filter(|&&c| c == b'.').count() <= 1
+                && bytes.iter().any(u8::is_ascii_digit);
+            let expected = core::str::from_utf8(&bytes)
+                .ok()
+                .filter(|_| plain)
+                .and_then(|t| t.parse::<f64>().ok())
+                .filter(|v| v.is_finite());
+            let got = parse_decimal(&bytes);
+            proptest::prop_assert_eq!(got.map(f64::to_bits), expected.map(f64::to_bits));
         }
     }
 

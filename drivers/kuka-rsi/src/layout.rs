@@ -104,8 +104,9 @@ impl Layout {
         for &(at, len, what) in &self.learnt.spots[..self.learnt.n] {
             let (at, end) = (at as usize, (at + len) as usize);
             let between = &text[old..at];
-            if bytes.get(new..new + between.len()) != Some(between) {
-                return false;
+            match bytes.get(new..new + between.len()) {
+                Some(b) if same(b, between) => {}
+                _ => return false,
             }
             new += between.len();
             // The value runs to the byte that ended it in the learnt message (a quote, `<`); a value
@@ -148,6 +149,29 @@ impl Layout {
     }
 }
 
+/// `a == b` for slices of the same length, without a library call for the short runs between the
+/// values (a few bytes: `" Y="`, `"/><RSol X="`): two overlapping word compares.
+#[inline]
+fn same(a: &[u8], b: &[u8]) -> bool {
+    let n = a.len();
+    if n != b.len() {
+        return false;
+    }
+    fn w8(s: &[u8], at: usize) -> u64 {
+        u64::from_le_bytes(s[at..at + 8].try_into().unwrap_or([0; 8]))
+    }
+    fn w4(s: &[u8], at: usize) -> u32 {
+        u32::from_le_bytes(s[at..at + 4].try_into().unwrap_or([0; 4]))
+    }
+    match n {
+        0 => true,
+        1..=3 => a.iter().zip(b).all(|(x, y)| x == y),
+        4..=7 => w4(a, 0) == w4(b, 0) && w4(a, n - 4) == w4(b, n - 4),
+        8..=16 => w8(a, 0) == w8(b, 0) && w8(a, n - 8) == w8(b, n - 8),
+        _ => a == b,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -170,6 +194,27 @@ mod tests {
         let n = s.write(&f, &mut buf).unwrap();
         buf.truncate(n);
         buf
+    }
+
+    #[test]
+    fn short_runs_compare_as_slices_do() {
+        let text = b"<RIst X=\"1\" Y=\"2\"/><RSol X=\"3\" Y=\"4\"/><IPOC>5</IPOC></Rob>";
+        for n in 0..=24 {
+            for start in 0..text.len() - n {
+                let a = &text[start..start + n];
+                for other in 0..text.len() - n {
+                    let b = &text[other..other + n];
+                    assert_eq!(same(a, b), a == b, "{a:?} {b:?}");
+                }
+                // One byte changed anywhere: not the same.
+                for k in 0..n {
+                    let mut c = a.to_vec();
+                    c[k] ^= 1;
+                    assert!(!same(a, &c), "{a:?} {c:?}");
+                }
+            }
+        }
+        assert!(!same(b"abc", b"ab"));
     }
 
     #[test]
