@@ -840,24 +840,59 @@ pub(crate) fn parse_decimal(s: &[u8]) -> Option<f64> {
 
 /// The plain decimal at the start of `s` (see [`parse_decimal`]), read up to the first byte that
 /// cannot continue it: its value (`None`: no digit, or not finite) and the bytes it took.
+///
+/// Where at least 16 bytes follow the sign (a value inside a datagram, as the learnt layout reads
+/// it), an RSI number of up to 7 digits before and 7 after the point is read a word at a time
+/// ([`eight_digits`]); anything else, byte by byte. Both give the same result.
+#[inline]
 pub(crate) fn decimal_prefix(s: &[u8]) -> (Option<f64>, usize) {
     let (neg, sign) = match s.first() {
         Some(b'-') => (true, 1),
         Some(b'+') => (false, 1),
         _ => (false, 0),
     };
-    let (int_digits, int_value) = digit_run(s, sign);
-    let mut i = sign + int_digits;
-    let (mut frac, mut mant) = (0usize, int_value);
+    if let Some(word) = s.get(sign..sign + 16) {
+        let (k, int) = eight_digits(word);
+        if k < 8 {
+            let (frac, mant) = if word[k] == b'.' {
+                let (m, f) = eight_digits(&word[k + 1..]);
+                (m, int * POW10_8[m] + f)
+            } else {
+                (0, int)
+            };
+            if frac < 8 {
+                let end = sign + k + usize::from(word[k] == b'.') + frac;
+                if k + frac == 0 {
+                    return (None, end);
+                }
+                // At most 14 digits: below 2^53, exact, and so is 10^frac.
+                let v = mant as f64 / POW10F[frac];
+                return (Some(if neg { -v } else { v }), end);
+            }
+        }
+    }
+    decimal_prefix_bytewise(s, neg, sign)
+}
+
+/// [`decimal_prefix`] a byte at a time, after the sign.
+fn decimal_prefix_bytewise(s: &[u8], neg: bool, sign: usize) -> (Option<f64>, usize) {
+    // The digits before and after the point, accumulated as one integer (wrapping: only read when
+    // there are at most 19 digits, which cannot overflow).
+    let mut mant: u64 = 0;
+    let mut i = sign;
+    let mut digits_from = |i: &mut usize| {
+        while let Some(d) = s.get(*i).map(|c| c.wrapping_sub(b'0')).filter(|&d| d <= 9) {
+            mant = mant.wrapping_mul(10).wrapping_add(u64::from(d));
+            *i += 1;
+        }
+    };
+    digits_from(&mut i);
+    let int_digits = i - sign;
+    let mut frac = 0usize;
     if s.get(i) == Some(&b'.') {
         i += 1;
-        let (n, v) = digit_run(s, i);
-        i += n;
-        frac = n;
-        // Only read with at most 19 digits in all (below), where neither step overflows.
-        mant = int_value
-            .wrapping_mul(POW10_19.get(n).copied().unwrap_or(0))
-            .wrapping_add(v);
+        digits_from(&mut i);
+        frac = i - sign - int_digits - 1;
     }
     let digits = int_digits + frac;
     if digits == 0 {
@@ -874,53 +909,30 @@ pub(crate) fn decimal_prefix(s: &[u8]) -> (Option<f64>, usize) {
     (v, i)
 }
 
-/// 10^0 ..= 10^19, all within u64.
-const POW10_19: [u64; 20] = {
-    let mut t = [1u64; 20];
-    let mut k = 1;
-    while k < 20 {
-        t[k] = t[k - 1] * 10;
-        k += 1;
-    }
-    t
-};
+/// 10^0 ..= 10^8.
+const POW10_8: [u64; 9] = [
+    1,
+    10,
+    100,
+    1_000,
+    10_000,
+    100_000,
+    1_000_000,
+    10_000_000,
+    100_000_000,
+];
 
-/// The run of ASCII digits in `s` from `from`: how many, and their value (wrapping past 19 digits,
-/// where the caller does not use it). Eight bytes at a time: one word tells which are digits and
-/// three multiplications give their value.
-#[inline]
-fn digit_run(s: &[u8], from: usize) -> (usize, u64) {
-    let (mut n, mut value) = (0usize, 0u64);
-    loop {
-        let rest = s.get(from + n..).unwrap_or(&[]);
-        let (count, v) = eight_digits(rest);
-        n += count;
-        value = value.wrapping_mul(POW10_19[count]).wrapping_add(v);
-        if count < 8 {
-            return (n, value);
-        }
-    }
-}
-
-/// The leading ASCII digits among the first eight bytes of `s` (fewer bytes are read as if padded
-/// with a non-digit): how many, and their value.
-#[inline]
+/// The leading ASCII digits among the first eight bytes of `s` (at least eight): how many, and
+/// their value. One word tells which bytes are digits and three multiplications give the value.
+#[inline(always)]
 fn eight_digits(s: &[u8]) -> (usize, u64) {
-    let word = match s.first_chunk::<8>() {
-        Some(w) => u64::from_le_bytes(*w),
-        None => {
-            let mut w = [0u8; 8];
-            w[..s.len()].copy_from_slice(s);
-            u64::from_le_bytes(w)
-        }
-    };
+    let word = u64::from_le_bytes(s.first_chunk::<8>().copied().unwrap_or([0; 8]));
     // A byte is a digit when its high nibble is 3 and stays 3 after adding 6 (0x30..=0x39). The
     // addition may carry out of a byte ≥ 0xFA into the next, but such a byte is not a digit and ends
     // the run, so the bytes after it do not matter.
     const HIGH: u64 = 0xF0F0_F0F0_F0F0_F0F0;
     let class = (word & HIGH) | ((word.wrapping_add(0x0606_0606_0606_0606) & HIGH) >> 4);
-    let not_digit = class ^ 0x3333_3333_3333_3333;
-    let count = (not_digit.trailing_zeros() / 8) as usize;
+    let count = ((class ^ 0x3333_3333_3333_3333).trailing_zeros() / 8) as usize;
     if count == 0 {
         return (0, 0);
     }
@@ -1101,29 +1113,86 @@ mod tests {
     }
 
     #[test]
-    fn digit_runs_of_every_length_end_at_the_first_non_digit() {
-        // Every run length across the eight-byte words, followed by each kind of byte that ends a
-        // run (below '0', above '9', the point, a quote, bytes ≥ 0xFA whose word addition carries).
-        for len in 0..=41 {
-            let digits: Vec<u8> = (0..len).map(|k| b"8301297465"[k % 10]).collect();
+    fn eight_digit_words_end_at_the_first_non_digit() {
+        // Every run length, followed by each kind of byte that ends a run (below '0', above '9', the
+        // point, a quote, bytes ≥ 0xFA whose word addition carries into the next byte).
+        for len in 0..=8 {
+            let digits: Vec<u8> = (0..len).map(|k| b"83012974"[k]).collect();
             for end in [b'/', b':', b'.', b'"', b'<', b' ', 0x00, 0x7f, 0xfa, 0xff] {
-                for tail in [&b""[..], b"9", b"12345678"] {
-                    let mut text = b"-".to_vec();
-                    text.extend_from_slice(&digits);
+                for tail in [&b"0000000"[..], b"9999999", b"\xff\xff\xff\xff\xff\xff\xff"] {
+                    let mut text = digits.clone();
                     text.push(end);
                     text.extend_from_slice(tail);
-                    let (n, v) = digit_run(&text, 1);
+                    let (n, v) = eight_digits(&text);
                     assert_eq!(n, len, "{text:?}");
-                    if (1..=19).contains(&len) {
-                        let want: u64 = core::str::from_utf8(&digits).unwrap().parse().unwrap();
-                        assert_eq!(v, want, "{text:?}");
-                    }
+                    let want: u64 = core::str::from_utf8(&digits).unwrap().parse().unwrap_or(0);
+                    assert_eq!(v, want, "{text:?}");
                 }
             }
-            // The run at the very end of the input (fewer than eight bytes left to read).
-            assert_eq!(digit_run(&digits, 0).0, len);
         }
-        assert_eq!(digit_run(b"12", 5), (0, 0), "past the end");
+        assert_eq!(eight_digits(b"00000000"), (8, 0));
+        assert_eq!(eight_digits(b"99999999"), (8, 99_999_999));
+        assert_eq!(eight_digits(b"00000001"), (8, 1));
+    }
+
+    /// The word-at-a-time path (16 bytes after the sign) and the bytewise one agree on every
+    /// prefix, whatever follows the number.
+    #[test]
+    fn word_and_byte_paths_agree() {
+        let numbers: Vec<String> = [
+            "0",
+            "7",
+            "-0",
+            "+3",
+            "445.1234",
+            "-179.9999",
+            "0.0001",
+            "-.5",
+            "3.",
+            ".",
+            "-",
+            "",
+            "1234567.1234567",
+            "12345678.1",
+            "1.12345678",
+            "99999999",
+            "-9999999.9999999",
+            "0000000.0000000",
+            "1e5",
+            "1.5e3",
+            "12.34.56",
+            "+-1",
+        ]
+        .iter()
+        .map(|s| (*s).to_owned())
+        .collect();
+        for n in &numbers {
+            for after in ["\"", "\" Y=\"", "/>", "<", "x", ".", "5", "\u{7f}"] {
+                let mut text = format!("{n}{after}").into_bytes();
+                let short = text.clone();
+                text.extend_from_slice(b"0123456789abcdefghij");
+                let (neg, sign) = match text.first() {
+                    Some(b'-') => (true, 1),
+                    Some(b'+') => (false, 1),
+                    _ => (false, 0),
+                };
+                let fast = decimal_prefix(&text);
+                let slow = decimal_prefix_bytewise(&text, neg, sign);
+                assert_eq!(
+                    fast.0.map(f64::to_bits),
+                    slow.0.map(f64::to_bits),
+                    "{text:?}"
+                );
+                assert_eq!(fast.1, slow.1, "{text:?}");
+                // Cut right after the number (fewer than 16 bytes left): the same reading.
+                let (v, n) = decimal_prefix(&short);
+                let (w, m) = decimal_prefix_bytewise(&short, neg, sign);
+                assert_eq!((v.map(f64::to_bits), n), (w.map(f64::to_bits), m));
+                if !after.starts_with(|c: char| c.is_ascii_digit() || c == '.') {
+                    assert_eq!((v.map(f64::to_bits), n), (slow.0.map(f64::to_bits), slow.1));
+                }
+            }
+        }
     }
 
     #[test]
@@ -1208,6 +1277,29 @@ mod tests {
             let has_digit = text.bytes().any(|c| c.is_ascii_digit());
             let got = parse_decimal(text.as_bytes());
             proptest::prop_assert_eq!(got.map(f64::to_bits), expected.filter(|_| has_digit).map(f64::to_bits));
+        }
+
+        /// Inside a datagram (16 bytes or more follow): the value the standard parser reads, and
+        /// the number's length.
+        #[test]
+        fn decimals_inside_a_datagram_read_as_the_standard_parser_reads_them(
+            text in "[+-]?[0-9]{0,10}(\\.[0-9]{0,10})?",
+            after in "[\"/<. x0-9]{16,20}",
+        ) {
+            let expected = text.parse::<f64>().ok().filter(|v| v.is_finite());
+            let has_digit = text.bytes().any(|c| c.is_ascii_digit());
+            let joined = format!("{text}{after}");
+            let (got, n) = decimal_prefix(joined.as_bytes());
+            if after.as_bytes()[0].is_ascii_digit() || (after.starts_with('.') && !text.contains('.')) {
+                // The number runs on into what follows: compare with the bytewise reading.
+                let sign = usize::from(text.starts_with(['+', '-']));
+                let slow = decimal_prefix_bytewise(joined.as_bytes(), text.starts_with('-'), sign);
+                proptest::prop_assert_eq!(got.map(f64::to_bits), slow.0.map(f64::to_bits));
+                proptest::prop_assert_eq!(n, slow.1);
+            } else {
+                proptest::prop_assert_eq!(got.map(f64::to_bits), expected.filter(|_| has_digit).map(f64::to_bits));
+                proptest::prop_assert_eq!(n, text.len());
+            }
         }
 
         /// Any bytes: a decimal where the standard parser reads a plain one, nothing otherwise.
