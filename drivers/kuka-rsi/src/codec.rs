@@ -145,6 +145,8 @@ struct Template {
     values: Vec<(u32, u16, u16)>,
     /// Where the IPOC's digits go in `text`.
     ipoc_at: u32,
+    /// The text's length (16 zero bytes follow it).
+    len: u32,
 }
 
 impl Schema {
@@ -220,7 +222,11 @@ impl Schema {
         text.extend_from_slice(b"</IPOC></");
         text.extend_from_slice(root);
         text.extend_from_slice(b">");
+        let len = text.len() as u32;
+        // Room to read a whole 16-byte block from any piece's start.
+        text.extend_from_slice(&[0; 16]);
         self.template = Template {
+            len,
             text,
             values,
             ipoc_at,
@@ -460,7 +466,7 @@ impl Schema {
         let mut from = 0usize;
         for &(at, e, f) in &t.values {
             let at = at as usize;
-            w.put(&t.text[from..at])?;
+            w.put_piece(&t.text, from, at)?;
             self.value(
                 &mut w,
                 &self.elements[usize::from(e)].fields()[usize::from(f)],
@@ -469,9 +475,9 @@ impl Schema {
             from = at;
         }
         let ipoc_at = t.ipoc_at as usize;
-        w.put(&t.text[from..ipoc_at])?;
+        w.put_piece(&t.text, from, ipoc_at)?;
         w.put(frame.ipoc.digits())?;
-        w.put(&t.text[ipoc_at..])?;
+        w.put(&t.text[ipoc_at..t.len as usize])?;
         Ok(w.n)
     }
 
@@ -655,6 +661,17 @@ impl Frame {
     /// Six slots at once.
     pub fn get6(&self, slots: [usize; 6]) -> [f64; 6] {
         slots.map(|s| self.values[s])
+    }
+
+    /// Set the value in `slot` without marking it present (see [`Frame::mark_present`]).
+    #[inline]
+    pub(crate) fn put_value(&mut self, slot: usize, v: f64) {
+        self.values[slot] = v;
+    }
+
+    /// Mark the slots in `mask` present (a reader that filled all of them).
+    pub(crate) fn mark_present(&mut self, mask: u128) {
+        self.present |= mask;
     }
 
     /// Set six slots at once.
@@ -996,6 +1013,24 @@ const POW10: [u64; 10] = [
 ];
 
 impl Out<'_> {
+    /// `text[from..to]`; a piece of up to 16 bytes as one block copy where the buffer has room for
+    /// the whole block (`text` has 16 readable bytes past every piece's start; the bytes past the
+    /// piece are written over by what follows).
+    #[inline]
+    fn put_piece(&mut self, text: &[u8], from: usize, to: usize) -> Result<(), WriteError> {
+        if to - from <= 16 {
+            if let (Some(dst), Some(src)) = (
+                self.buf.get_mut(self.n..self.n + 16),
+                text.get(from..from + 16),
+            ) {
+                dst.copy_from_slice(src);
+                self.n += to - from;
+                return Ok(());
+            }
+        }
+        self.put(&text[from..to])
+    }
+
     fn put(&mut self, s: &[u8]) -> Result<(), WriteError> {
         let end = self.n + s.len();
         if end > self.buf.len() {
@@ -1010,19 +1045,46 @@ impl Out<'_> {
     /// Refuses (`OutOfRange`) when `|v|·10^decimals` is not exactly representable (≥ 2^53).
     fn fixed(&mut self, v: f64, decimals: u8, slot: usize) -> Result<(), WriteError> {
         let scale = POW10[decimals as usize];
-        let scaled = (v.abs() * scale as f64).round();
-        if !scaled.is_finite() || scaled >= 9_007_199_254_740_992.0 {
+        let x = v.abs() * scale as f64;
+        if !(x < 9_007_199_254_740_992.0) {
             return Err(WriteError::OutOfRange { slot });
         }
-        let n = scaled as u64;
+        // Below 2^53 the truncation is exact, and so is the remainder: half away from zero.
+        let t = x as u64;
+        let n = t + u64::from(x - t as f64 >= 0.5);
+        let negative = v.is_sign_negative() && n != 0;
+        let (int, frac) = (n / scale, n % scale);
+        // The common case, written eight digits at a time: up to 8 integer digits and 8 decimals,
+        // with room for whole words (the bytes past the number are written over by what follows).
+        if int < 100_000_000 && decimals <= 8 && self.buf.len() - self.n >= 24 {
+            let mut at = self.n;
+            if negative {
+                self.buf[at] = b'-';
+                at += 1;
+            }
+            let digits = ascii_eight(int as u32);
+            // Leading zeros are the low bytes that hold '0' and precede the first other digit.
+            let skip = (((digits ^ 0x3030_3030_3030_3030).trailing_zeros() / 8) as usize).min(7);
+            self.buf[at..at + 8].copy_from_slice(&(digits >> (8 * skip)).to_le_bytes());
+            at += 8 - skip;
+            if decimals > 0 {
+                self.buf[at] = b'.';
+                at += 1;
+                let d = usize::from(decimals);
+                let digits = ascii_eight(frac as u32) >> (8 * (8 - d));
+                self.buf[at..at + 8].copy_from_slice(&digits.to_le_bytes());
+                at += d;
+            }
+            self.n = at;
+            return Ok(());
+        }
         // Right to left into one buffer: the decimals, the point, the integer part, the sign (at
         // most 16 digits below 2^53, a point and a sign).
         let mut tmp = [b'0'; 24];
         let mut at = tmp.len();
-        let mut int = n;
+        let mut int = int;
         if decimals > 0 {
-            let mut frac = n % scale;
-            int = n / scale;
+            let mut frac = frac;
             for _ in 0..decimals {
                 at -= 1;
                 tmp[at] = b'0' + (frac % 10) as u8;
@@ -1039,12 +1101,29 @@ impl Out<'_> {
                 break;
             }
         }
-        if v.is_sign_negative() && n != 0 {
+        if negative {
             at -= 1;
             tmp[at] = b'-';
         }
         self.put(&tmp[at..])
     }
+}
+
+/// `n` < 10^8 as eight ASCII digits with leading zeros, the most significant in the lowest byte
+/// (the order they are written in): halves, quarters and digits split with multiplications, all
+/// lanes at once.
+#[inline]
+fn ascii_eight(n: u32) -> u64 {
+    let n = u64::from(n);
+    // Two 4-digit halves in two 32-bit lanes, the high half in the low lane.
+    let x = (n / 10_000) | ((n % 10_000) << 32);
+    // Each lane (< 10^4) into two 2-digit lanes of 16 bits: x / 100 as (x · 5243) >> 19.
+    let hi = ((x * 5243) >> 19) & 0x0000_007F_0000_007F;
+    let x = hi | ((x - hi * 100) << 16);
+    // Each lane (< 100) into two digits of 8 bits: x / 10 as (x · 103) >> 10.
+    let hi = ((x * 103) >> 10) & 0x000F_000F_000F_000F;
+    let x = hi | ((x - hi * 10) << 8);
+    x | 0x3030_3030_3030_3030
 }
 
 #[cfg(test)]
@@ -1073,6 +1152,64 @@ mod tests {
         assert_eq!(write_one(1e-30, 4), "0.0000");
         assert_eq!(write_one(7.0, 0), "7");
         assert_eq!(write_one(123_456_789.5, 1), "123456789.5");
+    }
+
+    #[test]
+    fn eight_ascii_digits() {
+        // Every value of each 4-digit half against the other half's extremes, and a stride of all.
+        let check = |n: u32| {
+            let want = format!("{n:08}");
+            assert_eq!(&ascii_eight(n).to_le_bytes(), want.as_bytes(), "{n}");
+        };
+        for k in 0..10_000 {
+            for other in [0, 1, 5_000, 9_999] {
+                check(k * 10_000 + other);
+                check(other * 10_000 + k);
+            }
+        }
+        for n in (0..100_000_000).step_by(9_973) {
+            check(n);
+        }
+        check(99_999_999);
+    }
+
+    #[test]
+    fn both_fixed_point_paths_write_the_same() {
+        // The word path (room for 24 bytes) against the digit loop (a buffer with no room to spare).
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        for _ in 0..50_000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let mag = 10f64.powi((x % 15) as i32 - 8);
+            let v = ((x >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0 * mag;
+            for d in 0..=9u8 {
+                let fast = write_one(v, d);
+                let mut exact = vec![0u8; fast.len()];
+                let mut o = Out {
+                    buf: &mut exact,
+                    n: 0,
+                };
+                o.fixed(v, d, 0).unwrap();
+                assert_eq!(o.n, fast.len());
+                assert_eq!(core::str::from_utf8(&exact).unwrap(), fast, "{v} at {d}");
+                // And what the standard formatter writes, but for its rounding of ties.
+                let std = format!("{:.*}", usize::from(d), v.abs());
+                let std = std.trim_start_matches('-');
+                assert_eq!(
+                    fast.trim_start_matches('-').len(),
+                    std.len(),
+                    "{v} {fast} {std}"
+                );
+            }
+        }
+        assert_eq!(write_one(99_999_999.5, 0), "100000000");
+        assert_eq!(write_one(-99_999_999.99995, 4), "-100000000.0000");
+        assert_eq!(write_one(12_345_678.123_456_78, 8), "12345678.12345678");
+        assert_eq!(write_one(0.5, 0), "1");
+        assert_eq!(write_one(-0.5, 0), "-1");
+        assert_eq!(write_one(0.499_999_999_999_999_94, 0), "0");
+        assert_eq!(write_one(2.5, 0), "3");
     }
 
     #[test]

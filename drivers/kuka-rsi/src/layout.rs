@@ -61,6 +61,8 @@ pub struct Layout {
     len: usize,
     learnt: Recorded,
     scratch: Recorded,
+    /// The slots the learnt message fills.
+    present: u128,
 }
 
 impl Layout {
@@ -71,6 +73,7 @@ impl Layout {
             len: 0,
             learnt: Recorded::new(),
             scratch: Recorded::new(),
+            present: 0,
         }
     }
 
@@ -92,6 +95,10 @@ impl Layout {
             self.text[..bytes.len()].copy_from_slice(bytes);
             self.len = bytes.len();
             core::mem::swap(&mut self.learnt, &mut self.scratch);
+            self.present = self.learnt.spots[..self.learnt.n]
+                .iter()
+                .filter_map(|&(_, _, what)| what)
+                .fold(0, |m, (slot, _)| m | 1u128 << slot);
         }
         Ok(())
     }
@@ -119,7 +126,7 @@ impl Layout {
                 // A decimal is read as it is scanned, and must end where the learnt one did.
                 Some((slot, ValueType::Double)) => match decimal_prefix(rest) {
                     (Some(v), n) if rest.get(n) == Some(&stop) => {
-                        frame.set(usize::from(slot), v);
+                        frame.put_value(usize::from(slot), v);
                         n
                     }
                     _ => return false,
@@ -131,7 +138,7 @@ impl Layout {
                     let value = &rest[..n];
                     match what {
                         Some((slot, ty)) => match parse_value(ty, value) {
-                            Some(v) => frame.set(usize::from(slot), v),
+                            Some(v) => frame.put_value(usize::from(slot), v),
                             None => return false,
                         },
                         None => match Ipoc::parse(value) {
@@ -145,7 +152,11 @@ impl Layout {
             new += n;
             old = end;
         }
-        bytes.get(new..) == Some(&text[old..])
+        if bytes.get(new..) != Some(&text[old..]) {
+            return false;
+        }
+        frame.mark_present(self.present);
+        true
     }
 }
 
@@ -230,7 +241,9 @@ mod tests {
         assert_eq!(f.ipoc(), strict.ipoc());
         for slot in 0..s.slots() {
             assert_eq!(f.get(slot), strict.get(slot), "slot {slot}");
+            assert_eq!(f.is_present(slot), strict.is_present(slot), "slot {slot}");
         }
+        assert!(!f.is_present(s.slots()), "no slot past the schema's");
         // A space before `/>`, a value that does not parse, a message cut short: not this layout.
         let text = String::from_utf8(next.clone()).unwrap();
         let spaced = text.replacen("/>", " />", 1);
