@@ -31,6 +31,9 @@
 //! reply on the wall clock. `--period-us P` waits P µs between cycles (a real robot's 4000); default
 //! 0: lockstep.
 //!
+//! `--spin-us N` (`--cell run`) sets the RSI link's `spin`: it polls for the datagram from N µs
+//! before it is due until N µs after (`robot.spin_us` in a cell file).
+//!
 //! `--recorder-sched idle` runs the recorder's writer thread under `SCHED_IDLE` (`chrt --idle`),
 //! `--recorder-sched nice` at nice 19 (`renice`): on a CPU it shares with the loop it then yields to
 //! the loop as soon as a datagram wakes it.
@@ -71,6 +74,7 @@ struct Opts {
     echo: bool,
     record: bool,
     recorder_sched: Option<String>,
+    spin_us: u64,
 }
 
 fn parse_opts() -> Result<Opts> {
@@ -86,6 +90,7 @@ fn parse_opts() -> Result<Opts> {
         echo: true,
         record: true,
         recorder_sched: None,
+        spin_us: 0,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -100,6 +105,7 @@ fn parse_opts() -> Result<Opts> {
             "--other-cpu" => o.other_cpu = Some(val()?.parse()?),
             "--standin-cpu" => o.standin_cpu = Some(val()?.parse()?),
             "--no-echo" => o.echo = false,
+            "--spin-us" => o.spin_us = val()?.parse()?,
             "--no-record" => o.record = false,
             "--recorder-sched" => o.recorder_sched = Some(val()?),
             _ => bail!("unknown option {a} (see the file's documentation)"),
@@ -531,6 +537,8 @@ fn main() -> Result<()> {
                 lc.watchdog_cycles = 250;
                 // The cell file must name a real port; the benchmark lets the OS choose a free one.
                 lc.bind = Some(SocketAddr::from((Ipv4Addr::LOCALHOST, 0)));
+                // `--spin-us`: the link's `spin` (robot.spin_us of a cell file).
+                lc.spin = Duration::from_micros(o.spin_us);
                 let mut link = RsiLink::bind(lc)?;
                 let addr = link.local_addr()?;
                 let world = spring_world();

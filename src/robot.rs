@@ -13,6 +13,7 @@
 //! poscorr_mm = 5.0
 //! poscorrmon_mm = 6.0
 //! timeout = 100
+//! spin_us = 0                       # poll for the datagram this long around when it is due
 //!
 //! [robot]                           # ABB EGM path correction
 //! kind = "abb-egm"
@@ -49,6 +50,7 @@ const RSI: &[&str] = &[
     "poscorr_mm",
     "poscorrmon_mm",
     "timeout",
+    "spin_us",
 ];
 /// ABB EGM's own options.
 const EGM: &[&str] = &["correction_mm", "egm_settings", "command_slot", "state_to"];
@@ -121,6 +123,11 @@ pub struct RsiOptions {
     /// the summary count the robot's late replies against it and warn at half.
     #[serde(default = "default_timeout")]
     pub timeout: u32,
+    /// Poll for the robot's datagram from this long before it is due until this long after,
+    /// instead of sleeping in the receive call, µs (the link's `spin`); 0, the default: sleep. Only
+    /// worth it with the loop on a CPU of its own (docs/performance.md); at most a quarter cycle.
+    #[serde(default)]
+    pub spin_us: u32,
 }
 
 /// ABB EGM's own options.
@@ -306,6 +313,14 @@ impl RobotConfig {
                 }
                 if self.cycle_ms != 4 && self.cycle_ms != 12 {
                     bail!("robot.cycle_ms must be 4 or 12, got {}", self.cycle_ms);
+                }
+                if o.spin_us > self.cycle_ms * 250 {
+                    bail!(
+                        "robot.spin_us must be at most a quarter of the {} ms cycle ({} µs), got {}",
+                        self.cycle_ms,
+                        self.cycle_ms * 250,
+                        o.spin_us
+                    );
                 }
                 for (n, v) in [
                     ("poscorr_mm", o.poscorr_mm),

@@ -1050,8 +1050,9 @@ impl Out<'_> {
             return Err(WriteError::OutOfRange { slot });
         }
         // Below 2^53 the truncation is exact, and so is the remainder: half away from zero.
-        let t = x as u64;
-        let n = t + u64::from(x - t as f64 >= 0.5);
+        // (Through i64: one conversion instruction, where a u64 conversion is a branchy sequence.)
+        let t = x as i64 as u64;
+        let n = t + u64::from(x - t as i64 as f64 >= 0.5);
         let negative = v.is_sign_negative() && n != 0;
         let (int, frac) = (n / scale, n % scale);
         // The common case, written eight digits at a time: up to 8 integer digits and 8 decimals,

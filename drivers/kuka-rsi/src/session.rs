@@ -105,6 +105,8 @@ struct SenSlots {
 struct Track {
     last_ipoc: u64,
     last_rx: Instant,
+    /// When the last datagram arrived (its kernel stamp; else when it was read).
+    last_arrival: Instant,
     peer: SocketAddr,
     /// The last plausible `RIst` and `RSol` positions (m) and their IPOC.
     plausible: Option<([hal::Vector3<f64>; 2], u64)>,
@@ -384,12 +386,23 @@ impl RsiSession {
             }
         })?;
         a.arrived = arrived.map(|t| t.min(rx_at));
+        if let Some(t) = self.track.as_mut() {
+            t.last_arrival = a.arrived.unwrap_or(rx_at);
+        }
         if let Some(old) = self.candidate.take() {
             self.diag.counters.skipped += 1;
             a.cycle.new_session |= old.cycle.new_session;
         }
         self.candidate = Some(a);
         Ok(())
+    }
+
+    /// When the robot's next datagram is due: one period after the last one arrived (`None`: no
+    /// session).
+    pub fn next_due(&self) -> Option<Instant> {
+        self.track
+            .as_ref()
+            .map(|t| t.last_arrival + self.cfg.period)
     }
 
     /// The newest good datagram offered since the last call, as the cycle to answer next.
@@ -466,6 +479,7 @@ impl RsiSession {
             self.track = Some(Track {
                 last_ipoc: v,
                 last_rx: rx_at,
+                last_arrival: rx_at,
                 peer: from,
                 plausible: None,
                 n: 0,
