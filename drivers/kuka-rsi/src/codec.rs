@@ -891,6 +891,42 @@ pub(crate) fn decimal_prefix(s: &[u8]) -> (Option<f64>, usize) {
     decimal_prefix_bytewise(s, neg, sign)
 }
 
+/// How many bytes the plain decimal at the start of `s` takes, when [`decimal_prefix`] would read
+/// one (`None` where it reads none), without converting it: where 16 bytes follow the sign, up to
+/// 7 digits before and 7 after the point are checked a word at a time.
+#[inline]
+pub(crate) fn plain_decimal_len(s: &[u8]) -> Option<usize> {
+    let sign = usize::from(matches!(s.first(), Some(b'-' | b'+')));
+    if let Some(word) = s.get(sign..sign + 16) {
+        let k = digit_count(word);
+        if k < 8 {
+            let (point, frac) = if word[k] == b'.' {
+                (1, digit_count(&word[k + 1..]))
+            } else {
+                (0, 0)
+            };
+            // Fewer than 15 digits: finite.
+            if frac < 8 {
+                return (k + frac > 0).then_some(sign + k + point + frac);
+            }
+        }
+    }
+    match decimal_prefix(s) {
+        (Some(_), n) => Some(n),
+        (None, _) => None,
+    }
+}
+
+/// How many of the first eight bytes of `s` (at least eight) are ASCII digits before the first
+/// that is not ([`eight_digits`] without the value).
+#[inline(always)]
+fn digit_count(s: &[u8]) -> usize {
+    let word = u64::from_le_bytes(s.first_chunk::<8>().copied().unwrap_or([0; 8]));
+    const HIGH: u64 = 0xF0F0_F0F0_F0F0_F0F0;
+    let class = (word & HIGH) | ((word.wrapping_add(0x0606_0606_0606_0606) & HIGH) >> 4);
+    ((class ^ 0x3333_3333_3333_3333).trailing_zeros() / 8) as usize
+}
+
 /// [`decimal_prefix`] a byte at a time, after the sign.
 fn decimal_prefix_bytewise(s: &[u8], neg: bool, sign: usize) -> (Option<f64>, usize) {
     // The digits before and after the point, accumulated as one integer (wrapping: only read when
@@ -1322,6 +1358,13 @@ mod tests {
                     "{text:?}"
                 );
                 assert_eq!(fast.1, slow.1, "{text:?}");
+                // The length alone, as the checked-not-converted reader sees it.
+                assert_eq!(plain_decimal_len(&text), fast.0.map(|_| fast.1), "{text:?}");
+                assert_eq!(
+                    plain_decimal_len(&short),
+                    decimal_prefix(&short).0.map(|_| decimal_prefix(&short).1),
+                    "{short:?}"
+                );
                 // Cut right after the number (fewer than 16 bytes left): the same reading.
                 let (v, n) = decimal_prefix(&short);
                 let (w, m) = decimal_prefix_bytewise(&short, neg, sign);
@@ -1428,6 +1471,7 @@ mod tests {
             let has_digit = text.bytes().any(|c| c.is_ascii_digit());
             let joined = format!("{text}{after}");
             let (got, n) = decimal_prefix(joined.as_bytes());
+            proptest::prop_assert_eq!(plain_decimal_len(joined.as_bytes()), got.map(|_| n));
             if after.as_bytes()[0].is_ascii_digit() || (after.starts_with('.') && !text.contains('.')) {
                 // The number runs on into what follows: compare with the bytewise reading.
                 let sign = usize::from(text.starts_with(['+', '-']));

@@ -9,7 +9,9 @@
 //! Why: the strict scanner is 70 % of the instructions an RSI cycle costs on the PC (`callgrind` of
 //! `examples/rsi_answer`), and the cycle's turnaround is what the robot waits for.
 
-use crate::codec::{Frame, Ipoc, MAX_SLOTS, Schema, ValueType, decimal_prefix, parse_value};
+use crate::codec::{
+    Frame, Ipoc, MAX_SLOTS, Schema, ValueType, decimal_prefix, parse_value, plain_decimal_len,
+};
 use crate::xml::ParseError;
 
 /// Where one value lay in a message: its start, length and what it is (`None`: the IPOC).
@@ -63,17 +65,28 @@ pub struct Layout {
     scratch: Recorded,
     /// The slots the learnt message fills.
     present: u128,
+    /// The slots whose values are converted; the others' are only checked (see [`Layout::reading`]).
+    wanted: u128,
 }
 
 impl Layout {
     /// No layout yet, for messages of up to `max_len` bytes.
     pub fn new(max_len: usize) -> Self {
+        Self::reading(max_len, u128::MAX)
+    }
+
+    /// [`Layout::new`] for a reader that only reads the slots in `wanted` (bit `slot` set): a
+    /// message read through the layout then has every other decimal checked as the strict parser
+    /// checks it (same acceptance, same errors) but not converted — its slot in the frame keeps an
+    /// unspecified value (still marked present). A message the strict parser reads fills every slot.
+    pub fn reading(max_len: usize, wanted: u128) -> Self {
         Self {
             text: vec![0; max_len].into_boxed_slice(),
             len: 0,
             learnt: Recorded::new(),
             scratch: Recorded::new(),
             present: 0,
+            wanted,
         }
     }
 
@@ -123,6 +136,13 @@ impl Layout {
             };
             let rest = &bytes[new..];
             let n = match what {
+                // A decimal nobody reads is checked, not converted.
+                Some((slot, ValueType::Double)) if self.wanted & (1u128 << slot) == 0 => {
+                    match plain_decimal_len(rest) {
+                        Some(n) if rest.get(n) == Some(&stop) => n,
+                        _ => return false,
+                    }
+                }
                 // A decimal is read as it is scanned, and must end where the learnt one did.
                 Some((slot, ValueType::Double)) => match decimal_prefix(rest) {
                     (Some(v), n) if rest.get(n) == Some(&stop) => {
@@ -205,6 +225,48 @@ mod tests {
         let n = s.write(&f, &mut buf).unwrap();
         buf.truncate(n);
         buf
+    }
+
+    #[test]
+    fn values_nobody_reads_are_checked_as_strictly_but_not_converted() {
+        let s = schema();
+        let rist = s.six("RIst", ["X", "Y", "Z", "A", "B", "C"]).unwrap();
+        let wanted = rist.iter().fold(0u128, |m, &k| m | 1u128 << k);
+        let mut layout = Layout::reading(4096, wanted);
+        let (mut f, mut strict) = (Frame::new(), Frame::new());
+        layout.parse(&s, &message(&s, 1.0, 7), &mut f).unwrap();
+        let next = message(&s, -123.0, 11);
+        assert!(layout.read(&next, &mut f));
+        s.parse(&next, &mut strict).unwrap();
+        for slot in 0..s.slots() {
+            assert!(f.is_present(slot), "slot {slot}");
+            if wanted & (1u128 << slot) != 0 {
+                assert_eq!(f.get(slot), strict.get(slot), "slot {slot}");
+            }
+        }
+        assert_eq!(f.ipoc(), strict.ipoc());
+        // An unread value that is no plain decimal: not this layout, and the strict parser's error.
+        let aipos = s.slot("AIPos", "A1").unwrap();
+        assert_eq!(wanted & (1u128 << aipos), 0);
+        let text = String::from_utf8(next).unwrap();
+        for bad in [
+            "1e3",
+            "",
+            "-",
+            "1.2.3",
+            "0x1",
+            "+.",
+            "12345678901234567890123",
+        ] {
+            let spoiled = text.replacen("A1=\"-1599.0000\"", &format!("A1=\"{bad}\""), 1);
+            assert_ne!(spoiled, text);
+            let want = s.parse(spoiled.as_bytes(), &mut strict).map(|_| ());
+            assert!(
+                !layout.read(spoiled.as_bytes(), &mut f) || want.is_ok(),
+                "{bad}"
+            );
+            assert_eq!(layout.parse(&s, spoiled.as_bytes(), &mut f), want, "{bad}");
+        }
     }
 
     #[test]

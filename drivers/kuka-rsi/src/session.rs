@@ -102,6 +102,17 @@ struct SenSlots {
     process: Option<StateSlots>,
 }
 
+impl RobSlots {
+    /// Every slot the session reads from a `<Rob>` (bit `slot` set).
+    fn read_mask(&self) -> u128 {
+        let six = |s: &[usize; 6]| s.iter().fold(0u128, |m, &k| m | 1u128 << k);
+        six(&self.rist)
+            | six(&self.rsol)
+            | self.delay.map_or(0, |d| 1u128 << d)
+            | self.process.map_or(0, |p| p.mask())
+    }
+}
+
 struct Track {
     last_ipoc: u64,
     last_rx: Instant,
@@ -214,7 +225,9 @@ impl RsiSession {
         let shaper = Shaper::new(cfg.limits, sen_slots.rkorr.map(|s| s.is_some()));
         Ok(Self {
             rob,
-            rob_layout: Box::new(Layout::new(cfg.max_datagram)),
+            // Only the values the session reads are converted; the others (the axis positions
+            // AIPos and ASPos of forcecell's config, a user's extra SEND channels) are checked.
+            rob_layout: Box::new(Layout::reading(cfg.max_datagram, rob_slots.read_mask())),
             sen,
             rob_slots,
             sen_slots,
