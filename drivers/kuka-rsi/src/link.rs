@@ -5,10 +5,11 @@ use core::fmt;
 use core::time::Duration;
 use std::io::{self, IoSliceMut};
 use std::net::{IpAddr, SocketAddr, UdpSocket};
-use std::os::fd::AsRawFd;
+use std::os::fd::{AsFd, AsRawFd};
 use std::time::{Instant, SystemTime};
 
 use hal::{Correction, Cycle, ErrorKind, RobotLink};
+use nix::poll::{PollFd, PollFlags, ppoll};
 use nix::sys::socket::{
     ControlMessageOwned, MsgFlags, MultiHeaders, SockaddrStorage, recvmmsg, setsockopt, sockopt,
 };
@@ -558,10 +559,13 @@ impl RobotLink for RsiLink {
             if let (Some(due), Some(budget)) = (due, remaining) {
                 let sleep_until = due.checked_sub(spin).unwrap_or(due);
                 if now < sleep_until {
-                    self.set_timeout(Some(budget.min(sleep_until - now)))?;
-                    self.receive_burst(true)?;
-                    if let Some(c) = self.session.take_cycle() {
-                        return Ok(c);
+                    // Until then, or until a datagram is there (whichever first): `ppoll`, whose
+                    // timeout is in nanoseconds (the socket's counts in scheduler ticks, up to 4 ms).
+                    let wait = budget.min(sleep_until - now);
+                    let mut fds = [PollFd::new(self.sock.as_fd(), PollFlags::POLLIN)];
+                    match ppoll(&mut fds, Some(TimeSpec::from_duration(wait)), None) {
+                        Ok(_) | Err(nix::errno::Errno::EINTR) => {}
+                        Err(e) => return Err(LinkError::Io(io::Error::from(e))),
                     }
                 }
                 let until = due + spin;
