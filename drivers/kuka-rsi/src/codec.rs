@@ -861,7 +861,7 @@ pub(crate) fn parse_decimal(s: &[u8]) -> Option<f64> {
 /// Where at least 16 bytes follow the sign (a value inside a datagram, as the learnt layout reads
 /// it), an RSI number of up to 7 digits before and 7 after the point is read a word at a time
 /// ([`eight_digits`]); anything else, byte by byte. Both give the same result.
-#[inline]
+#[inline(always)]
 pub(crate) fn decimal_prefix(s: &[u8]) -> (Option<f64>, usize) {
     let (neg, sign) = match s.first() {
         Some(b'-') => (true, 1),
@@ -911,7 +911,14 @@ pub(crate) fn plain_decimal_len(s: &[u8]) -> Option<usize> {
             }
         }
     }
-    match decimal_prefix(s) {
+    plain_decimal_len_bytewise(s)
+}
+
+#[cold]
+#[inline(never)]
+fn plain_decimal_len_bytewise(s: &[u8]) -> Option<usize> {
+    let sign = usize::from(matches!(s.first(), Some(b'-' | b'+')));
+    match decimal_prefix_bytewise(s, s.first() == Some(&b'-'), sign) {
         (Some(_), n) => Some(n),
         (None, _) => None,
     }
@@ -928,6 +935,8 @@ fn digit_count(s: &[u8]) -> usize {
 }
 
 /// [`decimal_prefix`] a byte at a time, after the sign.
+#[cold]
+#[inline(never)]
 fn decimal_prefix_bytewise(s: &[u8], neg: bool, sign: usize) -> (Option<f64>, usize) {
     // The digits before and after the point, accumulated as one integer (wrapping: only read when
     // there are at most 19 digits, which cannot overflow).

@@ -55,6 +55,29 @@ impl Recorded {
     }
 }
 
+/// What the reader does at one value of the learnt message: compare the bytes `from..to` of the
+/// learnt text (those before the value), then read the value up to the byte `stop`.
+#[derive(Clone, Copy, Debug, Default)]
+struct Step {
+    from: u32,
+    to: u32,
+    stop: u8,
+    op: Op,
+    slot: u8,
+    ty: Option<ValueType>,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+enum Op {
+    /// A decimal whose value is read.
+    #[default]
+    Convert,
+    /// A decimal nobody reads: checked, not converted.
+    Check,
+    /// Another type, or (`ty` `None`) the IPOC.
+    Other,
+}
+
 /// The learnt layout of one direction's messages (allocated once, at the largest message accepted).
 #[derive(Clone, Debug)]
 pub struct Layout {
@@ -67,6 +90,11 @@ pub struct Layout {
     present: u128,
     /// The slots whose values are converted; the others' are only checked (see [`Layout::reading`]).
     wanted: u128,
+    /// The learnt message as steps (`n_steps` of them), and where its text after the last value
+    /// starts.
+    steps: Box<[Step; MAX_SLOTS + 1]>,
+    n_steps: usize,
+    tail: usize,
 }
 
 impl Layout {
@@ -87,6 +115,9 @@ impl Layout {
             scratch: Recorded::new(),
             present: 0,
             wanted,
+            steps: Box::new([Step::default(); MAX_SLOTS + 1]),
+            n_steps: 0,
+            tail: 0,
         }
     }
 
@@ -112,72 +143,96 @@ impl Layout {
                 .iter()
                 .filter_map(|&(_, _, what)| what)
                 .fold(0, |m, (slot, _)| m | 1u128 << slot);
+            self.compile();
         }
         Ok(())
+    }
+
+    /// The learnt message's values as steps (or no layout, `len` 0, where a value ends the text).
+    fn compile(&mut self) {
+        let text = &self.text[..self.len];
+        let mut old = 0usize;
+        for (k, &(at, len, what)) in self.learnt.spots[..self.learnt.n].iter().enumerate() {
+            let end = (at + len) as usize;
+            // The value runs to the byte that ended it in the learnt message (a quote, `<`); a
+            // value that parses holds neither.
+            let Some(&stop) = text.get(end) else {
+                self.len = 0;
+                return;
+            };
+            let (op, slot, ty) = match what {
+                Some((slot, ValueType::Double)) if self.wanted & (1u128 << slot) == 0 => {
+                    (Op::Check, slot, Some(ValueType::Double))
+                }
+                Some((slot, ValueType::Double)) => (Op::Convert, slot, Some(ValueType::Double)),
+                Some((slot, ty)) => (Op::Other, slot, Some(ty)),
+                None => (Op::Other, 0, None),
+            };
+            self.steps[k] = Step {
+                from: old as u32,
+                to: at,
+                stop,
+                op,
+                slot,
+                ty,
+            };
+            old = end;
+        }
+        self.n_steps = self.learnt.n;
+        self.tail = old;
     }
 
     /// Read `bytes` through the layout; false (the frame then undefined) where it does not fit.
     fn read(&self, bytes: &[u8], frame: &mut Frame) -> bool {
         let text = &self.text[..self.len];
         frame.clear_for_parse();
-        let (mut old, mut new) = (0usize, 0usize);
-        for &(at, len, what) in &self.learnt.spots[..self.learnt.n] {
-            let (at, end) = (at as usize, (at + len) as usize);
-            let between = &text[old..at];
+        let mut new = 0usize;
+        for st in &self.steps[..self.n_steps] {
+            let between = &text[st.from as usize..st.to as usize];
             match bytes.get(new..new + between.len()) {
                 Some(b) if same(b, between) => {}
                 _ => return false,
             }
             new += between.len();
-            // The value runs to the byte that ended it in the learnt message (a quote, `<`); a value
-            // that parses holds neither.
-            let Some(&stop) = text.get(end) else {
-                return false;
-            };
             let rest = &bytes[new..];
-            let n = match what {
-                // A decimal nobody reads is checked, not converted.
-                Some((slot, ValueType::Double)) if self.wanted & (1u128 << slot) == 0 => {
-                    match plain_decimal_len(rest) {
-                        Some(n) if rest.get(n) == Some(&stop) => n,
-                        _ => return false,
-                    }
-                }
+            let n = match st.op {
                 // A decimal is read as it is scanned, and must end where the learnt one did.
-                Some((slot, ValueType::Double)) => match decimal_prefix(rest) {
-                    (Some(v), n) if rest.get(n) == Some(&stop) => {
-                        frame.put_value(usize::from(slot), v);
+                Op::Convert => match decimal_prefix(rest) {
+                    (Some(v), n) if rest.get(n) == Some(&st.stop) => {
+                        frame.put_value(usize::from(st.slot), v);
                         n
                     }
                     _ => return false,
                 },
-                _ => {
-                    let Some(n) = rest.iter().position(|&c| c == stop) else {
-                        return false;
-                    };
-                    let value = &rest[..n];
-                    match what {
-                        Some((slot, ty)) => match parse_value(ty, value) {
-                            Some(v) => frame.put_value(usize::from(slot), v),
-                            None => return false,
-                        },
-                        None => match Ipoc::parse(value) {
-                            Ok(ipoc) => frame.set_ipoc(ipoc),
-                            Err(_) => return false,
-                        },
-                    }
-                    n
-                }
+                Op::Check => match plain_decimal_len(rest) {
+                    Some(n) if rest.get(n) == Some(&st.stop) => n,
+                    _ => return false,
+                },
+                Op::Other => match read_other(st, rest, frame) {
+                    Some(n) => n,
+                    None => return false,
+                },
             };
             new += n;
-            old = end;
         }
-        if bytes.get(new..) != Some(&text[old..]) {
+        if bytes.get(new..) != Some(&text[self.tail..]) {
             return false;
         }
         frame.mark_present(self.present);
         true
     }
+}
+
+/// A value that is not a decimal (an integer, a bool, the IPOC) up to `st.stop`: its length.
+#[inline(never)]
+fn read_other(st: &Step, rest: &[u8], frame: &mut Frame) -> Option<usize> {
+    let n = rest.iter().position(|&c| c == st.stop)?;
+    let value = &rest[..n];
+    match st.ty {
+        Some(ty) => frame.put_value(usize::from(st.slot), parse_value(ty, value)?),
+        None => frame.set_ipoc(Ipoc::parse(value).ok()?),
+    }
+    Some(n)
 }
 
 /// `a == b` for slices of the same length, without a library call for the short runs between the
