@@ -655,6 +655,21 @@ mod tests {
     }
 
     #[test]
+    fn spin_is_off_by_default_and_at_most_a_quarter_cycle() {
+        let base = "listen = \"127.0.0.1:49152\"\nrobot_ip = \"127.0.0.1\"\n";
+        let r = parse(base).unwrap();
+        assert_eq!(r.rsi().unwrap().spin_us, 0);
+        let r = parse(&format!("{base}spin_us = 300\n")).unwrap();
+        assert_eq!(r.rsi().unwrap().spin_us, 300);
+        assert!(r.validate().is_ok());
+        let r = parse(&format!("{base}spin_us = 1001\n")).unwrap();
+        let e = r.validate().unwrap_err().to_string();
+        assert!(e.contains("robot.spin_us must be at most a quarter"), "{e}");
+        let e = parse(&format!("{base}kind = \"abb-egm\"\nspin_us = 300\n")).unwrap_err();
+        assert!(e.contains("spin_us"), "{e}");
+    }
+
+    #[test]
     fn the_kind_defaults_to_rsi_and_each_kind_takes_its_own_options() {
         let r = parse("listen = \"127.0.0.1:49152\"\nrobot_ip = \"127.0.0.1\"\nposcorr_mm = 4.0\n")
             .unwrap();
