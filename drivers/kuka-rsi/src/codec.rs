@@ -1063,15 +1063,15 @@ impl Out<'_> {
     /// piece are written over by what follows).
     #[inline]
     fn put_piece(&mut self, text: &[u8], from: usize, to: usize) -> Result<(), WriteError> {
-        if to - from <= 16 {
-            if let (Some(dst), Some(src)) = (
+        if to - from <= 16
+            && let (Some(dst), Some(src)) = (
                 self.buf.get_mut(self.n..self.n + 16),
                 text.get(from..from + 16),
-            ) {
-                dst.copy_from_slice(src);
-                self.n += to - from;
-                return Ok(());
-            }
+            )
+        {
+            dst.copy_from_slice(src);
+            self.n += to - from;
+            return Ok(());
         }
         self.put(&text[from..to])
     }
@@ -1091,7 +1091,7 @@ impl Out<'_> {
     fn fixed(&mut self, v: f64, decimals: u8, slot: usize) -> Result<(), WriteError> {
         let scale = POW10[decimals as usize];
         let x = v.abs() * scale as f64;
-        if !(x < 9_007_199_254_740_992.0) {
+        if x.is_nan() || x >= 9_007_199_254_740_992.0 {
             return Err(WriteError::OutOfRange { slot });
         }
         // Below 2^53 the truncation is exact, and so is the remainder: half away from zero.
