@@ -127,7 +127,7 @@ pub struct RsiOptions {
     /// instead of sleeping in the receive call, µs (the link's `spin`); 0, the default: sleep. Only
     /// worth it with the loop on a CPU of its own (docs/performance.md); at most a quarter cycle.
     #[serde(default)]
-    pub spin_us: u32,
+    pub spin_us: i64,
 }
 
 /// ABB EGM's own options.
@@ -314,11 +314,11 @@ impl RobotConfig {
                 if self.cycle_ms != 4 && self.cycle_ms != 12 {
                     bail!("robot.cycle_ms must be 4 or 12, got {}", self.cycle_ms);
                 }
-                if o.spin_us > self.cycle_ms * 250 {
+                let quarter = i64::from(self.cycle_ms) * 250;
+                if !(0..=quarter).contains(&o.spin_us) {
                     bail!(
-                        "robot.spin_us must be at most a quarter of the {} ms cycle ({} µs), got {}",
+                        "robot.spin_us must be 0..={quarter} µs (at most a quarter of the {} ms cycle), got {}",
                         self.cycle_ms,
-                        self.cycle_ms * 250,
                         o.spin_us
                     );
                 }
@@ -664,7 +664,10 @@ mod tests {
         assert!(r.validate().is_ok());
         let r = parse(&format!("{base}spin_us = 1001\n")).unwrap();
         let e = r.validate().unwrap_err().to_string();
-        assert!(e.contains("robot.spin_us must be at most a quarter"), "{e}");
+        assert!(e.contains("robot.spin_us must be 0..=1000 µs"), "{e}");
+        let r = parse(&format!("{base}spin_us = -1\n")).unwrap();
+        let e = r.validate().unwrap_err().to_string();
+        assert!(e.contains("robot.spin_us"), "{e}");
         let e = parse(&format!("{base}kind = \"abb-egm\"\nspin_us = 300\n")).unwrap_err();
         assert!(e.contains("spin_us"), "{e}");
     }
