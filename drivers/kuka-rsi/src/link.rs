@@ -265,7 +265,9 @@ const BATCH: usize = 16;
 /// receives and sends. Two system calls per cycle in the steady state: one blocking `recvmmsg`
 /// (`MSG_WAITFORONE`: it waits for the first datagram, then also takes whatever else is queued, so a
 /// backlog is drained in the same call), and one `sendto`. The socket stays blocking; the watchdog is
-/// its receive timeout (`SO_RCVTIMEO`), set only when its value changes.
+/// its receive timeout (`SO_RCVTIMEO`), set only when its value changes. With
+/// [`LinkConfig::spin`] a `ppoll` comes first and the datagram is taken by non-blocking `recvmmsg`
+/// calls (as many as the polling makes).
 ///
 /// The socket asks the kernel for each datagram's arrival time (`SO_TIMESTAMPNS`: a software stamp
 /// taken when the datagram reaches the network stack, delivered in the same `recvmmsg` as a control
