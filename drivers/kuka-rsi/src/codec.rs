@@ -869,13 +869,28 @@ pub(crate) fn decimal_prefix(s: &[u8]) -> (Option<f64>, usize) {
         _ => (false, 0),
     };
     if let Some(word) = s.get(sign..sign + 16) {
-        let (k, int) = eight_digits(word);
+        let lo = word_at(word, 0);
+        let k = digit_count(word);
         if k < 8 {
             let (frac, mant) = if word[k] == b'.' {
-                let (m, f) = eight_digits(&word[k + 1..]);
-                (m, int * POW10_8[m] + f)
+                let after = word_at(word, k + 1);
+                let m = digit_count(&word[k + 1..]);
+                if k + m <= 8 {
+                    // Both runs in one word (the point taken out), converted once.
+                    let int = if k == 0 {
+                        0
+                    } else {
+                        lo & (u64::MAX >> (64 - 8 * k))
+                    };
+                    (m, digits_value(int | (after << (8 * k)), k + m))
+                } else {
+                    (
+                        m,
+                        digits_value(lo, k) * POW10_8[m.min(8)] + digits_value(after, m),
+                    )
+                }
             } else {
-                (0, int)
+                (0, digits_value(lo, k))
             };
             if frac < 8 {
                 let end = sign + k + usize::from(word[k] == b'.') + frac;
@@ -925,7 +940,7 @@ fn plain_decimal_len_bytewise(s: &[u8]) -> Option<usize> {
 }
 
 /// How many of the first eight bytes of `s` (at least eight) are ASCII digits before the first
-/// that is not ([`eight_digits`] without the value).
+/// that is not (a mask of the bytes that are not, and its trailing zeros).
 #[inline(always)]
 fn digit_count(s: &[u8]) -> usize {
     let word = u64::from_le_bytes(s.first_chunk::<8>().copied().unwrap_or([0; 8]));
@@ -984,29 +999,36 @@ const POW10_8: [u64; 9] = [
     100_000_000,
 ];
 
-/// The leading ASCII digits among the first eight bytes of `s` (at least eight): how many, and
-/// their value. One word tells which bytes are digits and three multiplications give the value.
+/// The eight bytes of `s` from `at` as a little-endian word (zero where fewer).
 #[inline(always)]
-fn eight_digits(s: &[u8]) -> (usize, u64) {
-    let word = u64::from_le_bytes(s.first_chunk::<8>().copied().unwrap_or([0; 8]));
-    // A byte is a digit when its high nibble is 3 and stays 3 after adding 6 (0x30..=0x39). The
-    // addition may carry out of a byte ≥ 0xFA into the next, but such a byte is not a digit and ends
-    // the run, so the bytes after it do not matter.
-    const HIGH: u64 = 0xF0F0_F0F0_F0F0_F0F0;
-    let class = (word & HIGH) | ((word.wrapping_add(0x0606_0606_0606_0606) & HIGH) >> 4);
-    let count = ((class ^ 0x3333_3333_3333_3333).trailing_zeros() / 8) as usize;
-    if count == 0 {
-        return (0, 0);
+fn word_at(s: &[u8], at: usize) -> u64 {
+    u64::from_le_bytes(
+        s.get(at..at + 8)
+            .and_then(|w| w.try_into().ok())
+            .unwrap_or([0; 8]),
+    )
+}
+
+/// The value of the first `n` (0..=8) bytes of `word`, ASCII digits, the first the most significant
+/// (as [`eight_digits`] converts them).
+#[inline(always)]
+fn digits_value(word: u64, n: usize) -> u64 {
+    if n == 0 {
+        return 0;
     }
-    // The digits' values, the run moved to the top bytes (what follows the run is shifted out; a
-    // borrow from a byte below '0' only runs upwards, into those bytes), leading zero bytes in front.
-    let d = word.wrapping_sub(0x3030_3030_3030_3030) << (8 * (8 - count));
-    // Pairs, then quads, then the eight (the first byte is the most significant digit).
+    let d = word.wrapping_sub(0x3030_3030_3030_3030) << (8 * (8 - n));
     let d = d.wrapping_mul(10).wrapping_add(d >> 8);
-    let d = ((d & 0x0000_00FF_0000_00FF).wrapping_mul(100 + (1_000_000 << 32))
+    ((d & 0x0000_00FF_0000_00FF).wrapping_mul(100 + (1_000_000 << 32))
         + ((d >> 16) & 0x0000_00FF_0000_00FF).wrapping_mul(1 + (10_000 << 32)))
-        >> 32;
-    (count, d)
+        >> 32
+}
+
+/// The leading ASCII digits among the first eight bytes of `s` (at least eight): how many, and
+/// their value ([`digit_count`] and [`digits_value`] together; the tests' handle on both).
+#[cfg(test)]
+fn eight_digits(s: &[u8]) -> (usize, u64) {
+    let n = digit_count(s);
+    (n, digits_value(word_at(s, 0), n))
 }
 
 /// `[+-]digits` within i64.
