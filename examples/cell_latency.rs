@@ -39,6 +39,9 @@
 //! its own). With a period, the replies later than the period (the robot's cycle: RSI counts them
 //! against its `Timeout`) are counted for the echo and for forcecell (`late`).
 //!
+//! `--spin-us N` (`--cell run`) sets the RSI link's `spin`: it polls for the datagram from N µs
+//! before it is due until N µs after (`robot.spin_us` in a cell file).
+//!
 //! `--recorder-sched idle` runs the recorder's writer thread under `SCHED_IDLE` (`chrt --idle`),
 //! `--recorder-sched nice` at nice 19 (`renice`): on a CPU it shares with the loop it then yields to
 //! the loop as soon as a datagram wakes it.
@@ -81,6 +84,7 @@ struct Opts {
     recorder_sched: Option<String>,
     realtime: bool,
     standin_priority: u8,
+    spin_us: u64,
 }
 
 fn parse_opts() -> Result<Opts> {
@@ -98,6 +102,7 @@ fn parse_opts() -> Result<Opts> {
         recorder_sched: None,
         realtime: false,
         standin_priority: 0,
+        spin_us: 0,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -112,6 +117,7 @@ fn parse_opts() -> Result<Opts> {
             "--other-cpu" => o.other_cpu = Some(val()?.parse()?),
             "--standin-cpu" => o.standin_cpu = Some(val()?.parse()?),
             "--no-echo" => o.echo = false,
+            "--spin-us" => o.spin_us = val()?.parse()?,
             "--no-record" => o.record = false,
             "--recorder-sched" => o.recorder_sched = Some(val()?),
             "--realtime" => o.realtime = true,
@@ -551,6 +557,8 @@ fn main() -> Result<()> {
                 lc.watchdog_cycles = 250;
                 // The cell file must name a real port; the benchmark lets the OS choose a free one.
                 lc.bind = Some(SocketAddr::from((Ipv4Addr::LOCALHOST, 0)));
+                // `--spin-us`: the link's `spin` (robot.spin_us of a cell file).
+                lc.spin = Duration::from_micros(o.spin_us);
                 let mut link = RsiLink::bind(lc)?;
                 let addr = link.local_addr()?;
                 let world = spring_world();

@@ -586,6 +586,8 @@ pub fn rsi_link_config(r: &RobotConfig, tuning: &Tuning) -> Result<LinkConfig> {
     };
     // Short waits for the first datagram, so a stop ends the wait (the loop waits again).
     lc.first_contact_timeout = Some(Duration::from_millis(100));
+    // Checked 0..=a quarter cycle by the robot section's validation.
+    lc.spin = Duration::from_micros(u64::try_from(o.spin_us).unwrap_or(0));
     lc.limits = Limits {
         max_translation: (0.9 * lc.poscorr.translation).min(tuning.loop_cfg.max_offset),
         max_translation_step: tuning.loop_cfg.max_step,

@@ -15,6 +15,7 @@
 //! poscorr_deg = 15.0                # rotation limits: only with an orientation-following tuning
 //! poscorrmon_deg = 18.0
 //! timeout = 100
+//! spin_us = 0                       # poll for the datagram this long around when it is due
 //!
 //! [robot]                           # ABB EGM path correction
 //! kind = "abb-egm"
@@ -53,6 +54,7 @@ const RSI: &[&str] = &[
     "poscorr_deg",
     "poscorrmon_deg",
     "timeout",
+    "spin_us",
 ];
 /// ABB EGM's own options.
 const EGM: &[&str] = &["correction_mm", "egm_settings", "command_slot", "state_to"];
@@ -132,6 +134,11 @@ pub struct RsiOptions {
     /// the summary count the robot's late replies against it and warn at half.
     #[serde(default = "default_timeout")]
     pub timeout: u32,
+    /// Poll for the robot's datagram from this long before it is due until this long after,
+    /// instead of sleeping in the receive call, µs (the link's `spin`); 0, the default: sleep. Only
+    /// worth it with the loop on a CPU of its own (docs/performance.md); at most a quarter cycle.
+    #[serde(default)]
+    pub spin_us: i64,
 }
 
 /// The largest rotation limit a cell file may give, degrees (the orientation stage's own bound).
@@ -333,6 +340,14 @@ impl RobotConfig {
                 }
                 if self.cycle_ms != 4 && self.cycle_ms != 12 {
                     bail!("robot.cycle_ms must be 4 or 12, got {}", self.cycle_ms);
+                }
+                let quarter = i64::from(self.cycle_ms) * 250;
+                if !(0..=quarter).contains(&o.spin_us) {
+                    bail!(
+                        "robot.spin_us must be 0..={quarter} µs (at most a quarter of the {} ms cycle), got {}",
+                        self.cycle_ms,
+                        o.spin_us
+                    );
                 }
                 for (n, v) in [
                     ("poscorr_mm", o.poscorr_mm),
@@ -699,6 +714,24 @@ mod tests {
         toml::from_str::<Wrap>(&format!("[robot]\n{robot}"))
             .map(|w| w.robot)
             .map_err(|e| e.message().to_string())
+    }
+
+    #[test]
+    fn spin_is_off_by_default_and_at_most_a_quarter_cycle() {
+        let base = "listen = \"127.0.0.1:49152\"\nrobot_ip = \"127.0.0.1\"\n";
+        let r = parse(base).unwrap();
+        assert_eq!(r.rsi().unwrap().spin_us, 0);
+        let r = parse(&format!("{base}spin_us = 300\n")).unwrap();
+        assert_eq!(r.rsi().unwrap().spin_us, 300);
+        assert!(r.validate().is_ok());
+        let r = parse(&format!("{base}spin_us = 1001\n")).unwrap();
+        let e = r.validate().unwrap_err().to_string();
+        assert!(e.contains("robot.spin_us must be 0..=1000 µs"), "{e}");
+        let r = parse(&format!("{base}spin_us = -1\n")).unwrap();
+        let e = r.validate().unwrap_err().to_string();
+        assert!(e.contains("robot.spin_us"), "{e}");
+        let e = parse(&format!("{base}kind = \"abb-egm\"\nspin_us = 300\n")).unwrap_err();
+        assert!(e.contains("spin_us"), "{e}");
     }
 
     #[test]

@@ -983,6 +983,7 @@ fn the_documented_bounds_are_the_code_s_bounds() {
             match key {
                 "sensor.poll_hz" => cell(v, "poll_hz"),
                 "robot.watchdog_cycles" => cell(v, "watchdog_cycles"),
+                "robot.spin_us" => cell(v, "spin_us"),
                 "duration" => cell(v, "duration"),
                 "robot.listen" => cell(&format!("\"192.168.1.100:{v}\""), "listen"),
                 // The rotation limits are commented out in the example: added (POSCORR's with the

@@ -131,6 +131,22 @@ pub struct Schema {
     slots: usize,
     required: u128,
     precision: u8,
+    /// The message's constant text, derived from the rest (see [`Schema::rebuild`]).
+    template: Template,
+}
+
+/// What [`Schema::write`] writes: the constant text between the values, precomputed, so a message
+/// is a few copies and its numbers.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Template {
+    /// Everything but the values and the IPOC's digits, in order.
+    text: Vec<u8>,
+    /// Where each value goes in `text` (in order), and its element and field.
+    values: Vec<(u32, u16, u16)>,
+    /// Where the IPOC's digits go in `text`.
+    ipoc_at: u32,
+    /// The text's length (16 zero bytes follow it).
+    len: u32,
 }
 
 impl Schema {
@@ -157,7 +173,64 @@ impl Schema {
             slots: 0,
             required: 0,
             precision,
-        })
+            template: Template::default(),
+        }
+        .rebuilt())
+    }
+
+    fn rebuilt(mut self) -> Self {
+        self.rebuild();
+        self
+    }
+
+    /// Derive the write template from the elements (after every change to them).
+    fn rebuild(&mut self) {
+        let root = self.direction.root();
+        let mut text = Vec::new();
+        let mut values = Vec::new();
+        let mark = |text: &Vec<u8>| text.len() as u32;
+        text.extend_from_slice(b"<");
+        text.extend_from_slice(root);
+        text.extend_from_slice(b" Type=\"");
+        text.extend_from_slice(self.type_value.as_bytes());
+        text.extend_from_slice(b"\">");
+        for (ei, e) in self.elements.iter().enumerate() {
+            text.extend_from_slice(b"<");
+            text.extend_from_slice(e.tag.as_bytes());
+            match &e.content {
+                Content::Attributes(fields) => {
+                    for (fi, f) in fields.iter().enumerate() {
+                        text.extend_from_slice(b" ");
+                        text.extend_from_slice(f.name.as_bytes());
+                        text.extend_from_slice(b"=\"");
+                        values.push((mark(&text), ei as u16, fi as u16));
+                        text.extend_from_slice(b"\"");
+                    }
+                    text.extend_from_slice(b"/>");
+                }
+                Content::Text(_) => {
+                    text.extend_from_slice(b">");
+                    values.push((mark(&text), ei as u16, 0));
+                    text.extend_from_slice(b"</");
+                    text.extend_from_slice(e.tag.as_bytes());
+                    text.extend_from_slice(b">");
+                }
+            }
+        }
+        text.extend_from_slice(b"<IPOC>");
+        let ipoc_at = mark(&text);
+        text.extend_from_slice(b"</IPOC></");
+        text.extend_from_slice(root);
+        text.extend_from_slice(b">");
+        let len = text.len() as u32;
+        // Room to read a whole 16-byte block from any piece's start.
+        text.extend_from_slice(&[0; 16]);
+        self.template = Template {
+            len,
+            text,
+            values,
+            ipoc_at,
+        };
     }
 
     /// Which message this is.
@@ -260,6 +333,7 @@ impl Schema {
         if let Content::Attributes(fields) = &mut self.elements[idx].content {
             fields.push(field);
         }
+        self.rebuild();
         Ok(())
     }
 
@@ -278,6 +352,7 @@ impl Schema {
             content: Content::Text(field),
             key: short_key(tag.as_bytes()),
         });
+        self.rebuild();
         Ok(())
     }
 
@@ -387,39 +462,22 @@ impl Schema {
     /// Write one message from `frame` into `out`; returns the number of bytes written.
     pub fn write(&self, frame: &Frame, out: &mut [u8]) -> Result<usize, WriteError> {
         let mut w = Out { buf: out, n: 0 };
-        w.put(b"<")?;
-        w.put(self.direction.root())?;
-        w.put(b" Type=\"")?;
-        w.put(self.type_value.as_bytes())?;
-        w.put(b"\">")?;
-        for e in &self.elements {
-            w.put(b"<")?;
-            w.put(e.tag.as_bytes())?;
-            match &e.content {
-                Content::Attributes(fields) => {
-                    for f in fields {
-                        w.put(b" ")?;
-                        w.put(f.name.as_bytes())?;
-                        w.put(b"=\"")?;
-                        self.value(&mut w, f, frame)?;
-                        w.put(b"\"")?;
-                    }
-                    w.put(b"/>")?;
-                }
-                Content::Text(f) => {
-                    w.put(b">")?;
-                    self.value(&mut w, f, frame)?;
-                    w.put(b"</")?;
-                    w.put(e.tag.as_bytes())?;
-                    w.put(b">")?;
-                }
-            }
+        let t = &self.template;
+        let mut from = 0usize;
+        for &(at, e, f) in &t.values {
+            let at = at as usize;
+            w.put_piece(&t.text, from, at)?;
+            self.value(
+                &mut w,
+                &self.elements[usize::from(e)].fields()[usize::from(f)],
+                frame,
+            )?;
+            from = at;
         }
-        w.put(b"<IPOC>")?;
+        let ipoc_at = t.ipoc_at as usize;
+        w.put_piece(&t.text, from, ipoc_at)?;
         w.put(frame.ipoc.digits())?;
-        w.put(b"</IPOC></")?;
-        w.put(self.direction.root())?;
-        w.put(b">")?;
+        w.put(&t.text[ipoc_at..t.len as usize])?;
         Ok(w.n)
     }
 
@@ -605,6 +663,17 @@ impl Frame {
         slots.map(|s| self.values[s])
     }
 
+    /// Set the value in `slot` without marking it present (see [`Frame::mark_present`]).
+    #[inline]
+    pub(crate) fn put_value(&mut self, slot: usize, v: f64) {
+        self.values[slot] = v;
+    }
+
+    /// Mark the slots in `mask` present (a reader that filled all of them).
+    pub(crate) fn mark_present(&mut self, mask: u128) {
+        self.present |= mask;
+    }
+
     /// Set six slots at once.
     pub fn set6(&mut self, slots: [usize; 6], v: [f64; 6]) {
         for (s, x) in slots.into_iter().zip(v) {
@@ -788,49 +857,178 @@ pub(crate) fn parse_decimal(s: &[u8]) -> Option<f64> {
 
 /// The plain decimal at the start of `s` (see [`parse_decimal`]), read up to the first byte that
 /// cannot continue it: its value (`None`: no digit, or not finite) and the bytes it took.
+///
+/// Where at least 16 bytes follow the sign (a value inside a datagram, as the learnt layout reads
+/// it), an RSI number of up to 7 digits before and 7 after the point is read a word at a time
+/// ([`eight_digits`]); anything else, byte by byte. Both give the same result.
+#[inline(always)]
 pub(crate) fn decimal_prefix(s: &[u8]) -> (Option<f64>, usize) {
     let (neg, sign) = match s.first() {
         Some(b'-') => (true, 1),
         Some(b'+') => (false, 1),
         _ => (false, 0),
     };
-    let body = &s[sign..];
+    if let Some(word) = s.get(sign..sign + 16) {
+        let lo = word_at(word, 0);
+        let k = digit_count(word);
+        if k < 8 {
+            let (frac, mant) = if word[k] == b'.' {
+                let after = word_at(word, k + 1);
+                let m = digit_count(&word[k + 1..]);
+                if k + m <= 8 {
+                    // Both runs in one word (the point taken out), converted once.
+                    let int = if k == 0 {
+                        0
+                    } else {
+                        lo & (u64::MAX >> (64 - 8 * k))
+                    };
+                    (m, digits_value(int | (after << (8 * k)), k + m))
+                } else {
+                    (
+                        m,
+                        digits_value(lo, k) * POW10_8[m.min(8)] + digits_value(after, m),
+                    )
+                }
+            } else {
+                (0, digits_value(lo, k))
+            };
+            if frac < 8 {
+                let end = sign + k + usize::from(word[k] == b'.') + frac;
+                if k + frac == 0 {
+                    return (None, end);
+                }
+                // At most 14 digits: below 2^53, exact, and so is 10^frac.
+                let v = mant as f64 / POW10F[frac];
+                return (Some(if neg { -v } else { v }), end);
+            }
+        }
+    }
+    decimal_prefix_bytewise(s, neg, sign)
+}
+
+/// How many bytes the plain decimal at the start of `s` takes, when [`decimal_prefix`] would read
+/// one (`None` where it reads none), without converting it: where 16 bytes follow the sign, up to
+/// 7 digits before and 7 after the point are checked a word at a time.
+#[inline]
+pub(crate) fn plain_decimal_len(s: &[u8]) -> Option<usize> {
+    let sign = usize::from(matches!(s.first(), Some(b'-' | b'+')));
+    if let Some(word) = s.get(sign..sign + 16) {
+        let k = digit_count(word);
+        if k < 8 {
+            let (point, frac) = if word[k] == b'.' {
+                (1, digit_count(&word[k + 1..]))
+            } else {
+                (0, 0)
+            };
+            // Fewer than 15 digits: finite.
+            if frac < 8 {
+                return (k + frac > 0).then_some(sign + k + point + frac);
+            }
+        }
+    }
+    plain_decimal_len_bytewise(s)
+}
+
+#[cold]
+#[inline(never)]
+fn plain_decimal_len_bytewise(s: &[u8]) -> Option<usize> {
+    let sign = usize::from(matches!(s.first(), Some(b'-' | b'+')));
+    match decimal_prefix_bytewise(s, s.first() == Some(&b'-'), sign) {
+        (Some(_), n) => Some(n),
+        (None, _) => None,
+    }
+}
+
+/// How many of the first eight bytes of `s` (at least eight) are ASCII digits before the first
+/// that is not (a mask of the bytes that are not, and its trailing zeros).
+#[inline(always)]
+fn digit_count(s: &[u8]) -> usize {
+    let word = u64::from_le_bytes(s.first_chunk::<8>().copied().unwrap_or([0; 8]));
+    const HIGH: u64 = 0xF0F0_F0F0_F0F0_F0F0;
+    let class = (word & HIGH) | ((word.wrapping_add(0x0606_0606_0606_0606) & HIGH) >> 4);
+    ((class ^ 0x3333_3333_3333_3333).trailing_zeros() / 8) as usize
+}
+
+/// [`decimal_prefix`] a byte at a time, after the sign.
+#[cold]
+#[inline(never)]
+fn decimal_prefix_bytewise(s: &[u8], neg: bool, sign: usize) -> (Option<f64>, usize) {
     // The digits before and after the point, accumulated as one integer (wrapping: only read when
     // there are at most 19 digits, which cannot overflow).
     let mut mant: u64 = 0;
-    let mut i = 0;
-    let digits_from = |i: &mut usize, mant: &mut u64| {
-        while let Some(d) = body
-            .get(*i)
-            .map(|c| c.wrapping_sub(b'0'))
-            .filter(|&d| d <= 9)
-        {
-            *mant = mant.wrapping_mul(10).wrapping_add(u64::from(d));
+    let mut i = sign;
+    let mut digits_from = |i: &mut usize| {
+        while let Some(d) = s.get(*i).map(|c| c.wrapping_sub(b'0')).filter(|&d| d <= 9) {
+            mant = mant.wrapping_mul(10).wrapping_add(u64::from(d));
             *i += 1;
         }
     };
-    digits_from(&mut i, &mut mant);
-    let int_digits = i;
+    digits_from(&mut i);
+    let int_digits = i - sign;
     let mut frac = 0usize;
-    if body.get(i) == Some(&b'.') {
+    if s.get(i) == Some(&b'.') {
         i += 1;
-        digits_from(&mut i, &mut mant);
-        frac = i - int_digits - 1;
+        digits_from(&mut i);
+        frac = i - sign - int_digits - 1;
     }
     let digits = int_digits + frac;
-    let len = sign + i;
     if digits == 0 {
-        return (None, len);
+        return (None, i);
     }
     if digits <= 19 && mant < (1u64 << 53) && frac < POW10F.len() {
         let v = mant as f64 / POW10F[frac];
-        return (Some(if neg { -v } else { v }), len);
+        return (Some(if neg { -v } else { v }), i);
     }
-    let v = core::str::from_utf8(&s[..len])
+    let v = core::str::from_utf8(&s[..i])
         .ok()
         .and_then(|t| t.parse::<f64>().ok())
         .filter(|v| v.is_finite());
-    (v, len)
+    (v, i)
+}
+
+/// 10^0 ..= 10^8.
+const POW10_8: [u64; 9] = [
+    1,
+    10,
+    100,
+    1_000,
+    10_000,
+    100_000,
+    1_000_000,
+    10_000_000,
+    100_000_000,
+];
+
+/// The eight bytes of `s` from `at` as a little-endian word (zero where fewer).
+#[inline(always)]
+fn word_at(s: &[u8], at: usize) -> u64 {
+    u64::from_le_bytes(
+        s.get(at..at + 8)
+            .and_then(|w| w.try_into().ok())
+            .unwrap_or([0; 8]),
+    )
+}
+
+/// The value of the first `n` (0..=8) bytes of `word`, ASCII digits, the first the most significant
+/// (as [`eight_digits`] converts them).
+#[inline(always)]
+fn digits_value(word: u64, n: usize) -> u64 {
+    if n == 0 {
+        return 0;
+    }
+    let d = word.wrapping_sub(0x3030_3030_3030_3030) << (8 * (8 - n));
+    let d = d.wrapping_mul(10).wrapping_add(d >> 8);
+    ((d & 0x0000_00FF_0000_00FF).wrapping_mul(100 + (1_000_000 << 32))
+        + ((d >> 16) & 0x0000_00FF_0000_00FF).wrapping_mul(1 + (10_000 << 32)))
+        >> 32
+}
+
+/// The leading ASCII digits among the first eight bytes of `s` (at least eight): how many, and
+/// their value ([`digit_count`] and [`digits_value`] together; the tests' handle on both).
+#[cfg(test)]
+fn eight_digits(s: &[u8]) -> (usize, u64) {
+    let n = digit_count(s);
+    (n, digits_value(word_at(s, 0), n))
 }
 
 /// `[+-]digits` within i64.
@@ -882,6 +1080,24 @@ const POW10: [u64; 10] = [
 ];
 
 impl Out<'_> {
+    /// `text[from..to]`; a piece of up to 16 bytes as one block copy where the buffer has room for
+    /// the whole block (`text` has 16 readable bytes past every piece's start; the bytes past the
+    /// piece are written over by what follows).
+    #[inline]
+    fn put_piece(&mut self, text: &[u8], from: usize, to: usize) -> Result<(), WriteError> {
+        if to - from <= 16
+            && let (Some(dst), Some(src)) = (
+                self.buf.get_mut(self.n..self.n + 16),
+                text.get(from..from + 16),
+            )
+        {
+            dst.copy_from_slice(src);
+            self.n += to - from;
+            return Ok(());
+        }
+        self.put(&text[from..to])
+    }
+
     fn put(&mut self, s: &[u8]) -> Result<(), WriteError> {
         let end = self.n + s.len();
         if end > self.buf.len() {
@@ -892,36 +1108,90 @@ impl Out<'_> {
         Ok(())
     }
 
-    fn put_digits(&mut self, mut v: u64, min_len: usize) -> Result<(), WriteError> {
-        let mut tmp = [b'0'; 20];
-        let mut n = 0;
-        while v > 0 || n < min_len.max(1) {
-            tmp[19 - n] = b'0' + (v % 10) as u8;
-            v /= 10;
-            n += 1;
-        }
-        self.put(&tmp[20 - n..])
-    }
-
     /// Plain fixed-point with `decimals` digits after the point, rounded half away from zero.
     /// Refuses (`OutOfRange`) when `|v|·10^decimals` is not exactly representable (≥ 2^53).
     fn fixed(&mut self, v: f64, decimals: u8, slot: usize) -> Result<(), WriteError> {
         let scale = POW10[decimals as usize];
-        let scaled = (v.abs() * scale as f64).round();
-        if !scaled.is_finite() || scaled >= 9_007_199_254_740_992.0 {
+        let x = v.abs() * scale as f64;
+        if x.is_nan() || x >= 9_007_199_254_740_992.0 {
             return Err(WriteError::OutOfRange { slot });
         }
-        let n = scaled as u64;
-        if v.is_sign_negative() && n != 0 {
-            self.put(b"-")?;
+        // Below 2^53 the truncation is exact, and so is the remainder: half away from zero.
+        // (Through i64: one conversion instruction, where a u64 conversion is a branchy sequence.)
+        let t = x as i64 as u64;
+        let n = t + u64::from(x - t as i64 as f64 >= 0.5);
+        let negative = v.is_sign_negative() && n != 0;
+        let (int, frac) = (n / scale, n % scale);
+        // The common case, written eight digits at a time: up to 8 integer digits and 8 decimals,
+        // with room for whole words (the bytes past the number are written over by what follows).
+        if int < 100_000_000 && decimals <= 8 && self.buf.len() - self.n >= 24 {
+            let mut at = self.n;
+            if negative {
+                self.buf[at] = b'-';
+                at += 1;
+            }
+            let digits = ascii_eight(int as u32);
+            // Leading zeros are the low bytes that hold '0' and precede the first other digit.
+            let skip = (((digits ^ 0x3030_3030_3030_3030).trailing_zeros() / 8) as usize).min(7);
+            self.buf[at..at + 8].copy_from_slice(&(digits >> (8 * skip)).to_le_bytes());
+            at += 8 - skip;
+            if decimals > 0 {
+                self.buf[at] = b'.';
+                at += 1;
+                let d = usize::from(decimals);
+                let digits = ascii_eight(frac as u32) >> (8 * (8 - d));
+                self.buf[at..at + 8].copy_from_slice(&digits.to_le_bytes());
+                at += d;
+            }
+            self.n = at;
+            return Ok(());
         }
-        self.put_digits(n / scale, 1)?;
+        // Right to left into one buffer: the decimals, the point, the integer part, the sign (at
+        // most 16 digits below 2^53, a point and a sign).
+        let mut tmp = [b'0'; 24];
+        let mut at = tmp.len();
+        let mut int = int;
         if decimals > 0 {
-            self.put(b".")?;
-            self.put_digits(n % scale, decimals as usize)?;
+            let mut frac = frac;
+            for _ in 0..decimals {
+                at -= 1;
+                tmp[at] = b'0' + (frac % 10) as u8;
+                frac /= 10;
+            }
+            at -= 1;
+            tmp[at] = b'.';
         }
-        Ok(())
+        loop {
+            at -= 1;
+            tmp[at] = b'0' + (int % 10) as u8;
+            int /= 10;
+            if int == 0 {
+                break;
+            }
+        }
+        if negative {
+            at -= 1;
+            tmp[at] = b'-';
+        }
+        self.put(&tmp[at..])
     }
+}
+
+/// `n` < 10^8 as eight ASCII digits with leading zeros, the most significant in the lowest byte
+/// (the order they are written in): halves, quarters and digits split with multiplications, all
+/// lanes at once.
+#[inline]
+fn ascii_eight(n: u32) -> u64 {
+    let n = u64::from(n);
+    // Two 4-digit halves in two 32-bit lanes, the high half in the low lane.
+    let x = (n / 10_000) | ((n % 10_000) << 32);
+    // Each lane (< 10^4) into two 2-digit lanes of 16 bits: x / 100 as (x · 5243) >> 19.
+    let hi = ((x * 5243) >> 19) & 0x0000_007F_0000_007F;
+    let x = hi | ((x - hi * 100) << 16);
+    // Each lane (< 100) into two digits of 8 bits: x / 10 as (x · 103) >> 10.
+    let hi = ((x * 103) >> 10) & 0x000F_000F_000F_000F;
+    let x = hi | ((x - hi * 10) << 8);
+    x | 0x3030_3030_3030_3030
 }
 
 #[cfg(test)]
@@ -950,6 +1220,64 @@ mod tests {
         assert_eq!(write_one(1e-30, 4), "0.0000");
         assert_eq!(write_one(7.0, 0), "7");
         assert_eq!(write_one(123_456_789.5, 1), "123456789.5");
+    }
+
+    #[test]
+    fn eight_ascii_digits() {
+        // Every value of each 4-digit half against the other half's extremes, and a stride of all.
+        let check = |n: u32| {
+            let want = format!("{n:08}");
+            assert_eq!(&ascii_eight(n).to_le_bytes(), want.as_bytes(), "{n}");
+        };
+        for k in 0..10_000 {
+            for other in [0, 1, 5_000, 9_999] {
+                check(k * 10_000 + other);
+                check(other * 10_000 + k);
+            }
+        }
+        for n in (0..100_000_000).step_by(9_973) {
+            check(n);
+        }
+        check(99_999_999);
+    }
+
+    #[test]
+    fn both_fixed_point_paths_write_the_same() {
+        // The word path (room for 24 bytes) against the digit loop (a buffer with no room to spare).
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        for _ in 0..50_000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let mag = 10f64.powi((x % 15) as i32 - 8);
+            let v = ((x >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0 * mag;
+            for d in 0..=9u8 {
+                let fast = write_one(v, d);
+                let mut exact = vec![0u8; fast.len()];
+                let mut o = Out {
+                    buf: &mut exact,
+                    n: 0,
+                };
+                o.fixed(v, d, 0).unwrap();
+                assert_eq!(o.n, fast.len());
+                assert_eq!(core::str::from_utf8(&exact).unwrap(), fast, "{v} at {d}");
+                // And what the standard formatter writes, but for its rounding of ties.
+                let std = format!("{:.*}", usize::from(d), v.abs());
+                let std = std.trim_start_matches('-');
+                assert_eq!(
+                    fast.trim_start_matches('-').len(),
+                    std.len(),
+                    "{v} {fast} {std}"
+                );
+            }
+        }
+        assert_eq!(write_one(99_999_999.5, 0), "100000000");
+        assert_eq!(write_one(-99_999_999.99995, 4), "-100000000.0000");
+        assert_eq!(write_one(12_345_678.123_456_78, 8), "12345678.12345678");
+        assert_eq!(write_one(0.5, 0), "1");
+        assert_eq!(write_one(-0.5, 0), "-1");
+        assert_eq!(write_one(0.499_999_999_999_999_94, 0), "0");
+        assert_eq!(write_one(2.5, 0), "3");
     }
 
     #[test]
@@ -989,6 +1317,168 @@ mod tests {
         assert_eq!(parse_decimal(&huge), None, "overflow to inf is rejected");
     }
 
+    #[test]
+    fn eight_digit_words_end_at_the_first_non_digit() {
+        // Every run length, followed by each kind of byte that ends a run (below '0', above '9', the
+        // point, a quote, bytes ≥ 0xFA whose word addition carries into the next byte).
+        for len in 0..=8 {
+            let digits: Vec<u8> = (0..len).map(|k| b"83012974"[k]).collect();
+            for end in [b'/', b':', b'.', b'"', b'<', b' ', 0x00, 0x7f, 0xfa, 0xff] {
+                for tail in [&b"0000000"[..], b"9999999", b"\xff\xff\xff\xff\xff\xff\xff"] {
+                    let mut text = digits.clone();
+                    text.push(end);
+                    text.extend_from_slice(tail);
+                    let (n, v) = eight_digits(&text);
+                    assert_eq!(n, len, "{text:?}");
+                    let want: u64 = core::str::from_utf8(&digits).unwrap().parse().unwrap_or(0);
+                    assert_eq!(v, want, "{text:?}");
+                }
+            }
+        }
+        assert_eq!(eight_digits(b"00000000"), (8, 0));
+        assert_eq!(eight_digits(b"99999999"), (8, 99_999_999));
+        assert_eq!(eight_digits(b"00000001"), (8, 1));
+    }
+
+    /// The word-at-a-time path (16 bytes after the sign) and the bytewise one agree on every
+    /// prefix, whatever follows the number.
+    #[test]
+    fn word_and_byte_paths_agree() {
+        let numbers: Vec<String> = [
+            "0",
+            "7",
+            "-0",
+            "+3",
+            "445.1234",
+            "-179.9999",
+            "0.0001",
+            "-.5",
+            "3.",
+            ".",
+            "-",
+            "",
+            "1234567.1234567",
+            "12345678.1",
+            "1.12345678",
+            "99999999",
+            "-9999999.9999999",
+            "0000000.0000000",
+            "1e5",
+            "1.5e3",
+            "12.34.56",
+            "+-1",
+        ]
+        .iter()
+        .map(|s| (*s).to_owned())
+        .collect();
+        for n in &numbers {
+            for after in ["\"", "\" Y=\"", "/>", "<", "x", ".", "5", "\u{7f}"] {
+                let mut text = format!("{n}{after}").into_bytes();
+                let short = text.clone();
+                text.extend_from_slice(b"0123456789abcdefghij");
+                let (neg, sign) = match text.first() {
+                    Some(b'-') => (true, 1),
+                    Some(b'+') => (false, 1),
+                    _ => (false, 0),
+                };
+                let fast = decimal_prefix(&text);
+                let slow = decimal_prefix_bytewise(&text, neg, sign);
+                assert_eq!(
+                    fast.0.map(f64::to_bits),
+                    slow.0.map(f64::to_bits),
+                    "{text:?}"
+                );
+                assert_eq!(fast.1, slow.1, "{text:?}");
+                // The length alone, as the checked-not-converted reader sees it.
+                assert_eq!(plain_decimal_len(&text), fast.0.map(|_| fast.1), "{text:?}");
+                assert_eq!(
+                    plain_decimal_len(&short),
+                    decimal_prefix(&short).0.map(|_| decimal_prefix(&short).1),
+                    "{short:?}"
+                );
+                // Cut right after the number (fewer than 16 bytes left): the same reading.
+                let (v, n) = decimal_prefix(&short);
+                let (w, m) = decimal_prefix_bytewise(&short, neg, sign);
+                assert_eq!((v.map(f64::to_bits), n), (w.map(f64::to_bits), m));
+                if !after.starts_with(|c: char| c.is_ascii_digit() || c == '.') {
+                    assert_eq!((v.map(f64::to_bits), n), (slow.0.map(f64::to_bits), slow.1));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn decimal_edge_cases() {
+        assert_eq!(parse_decimal(b"0"), Some(0.0));
+        assert_eq!(
+            parse_decimal(b"-0.0000").map(f64::to_bits),
+            Some((-0.0f64).to_bits())
+        );
+        assert_eq!(parse_decimal(b"+0012.5000"), Some(12.5));
+        assert_eq!(parse_decimal(b"-179.9999"), Some(-179.9999));
+        assert_eq!(
+            parse_decimal(b"12345678.87654321"),
+            Some(12_345_678.876_543_21)
+        );
+        // 19 digits (the fast path's most), 20 (the standard parser's), a long fraction.
+        assert_eq!(
+            parse_decimal(b"1234567890.123456789"),
+            Some(1_234_567_890.123_456_8)
+        );
+        assert_eq!(parse_decimal(b"9999999999999999999"), Some(1e19));
+        assert_eq!(
+            parse_decimal(b"0.100000000000000000000000000001"),
+            Some(0.1)
+        );
+        // 2^53 + 1 has no exact double: rounded as the standard parser rounds it.
+        assert_eq!(
+            parse_decimal(b"9007199254740993"),
+            Some(9_007_199_254_740_992.0)
+        );
+        for bad in [
+            &b"--1"[..],
+            b"+-1",
+            b"1-",
+            b"1e-3",
+            b"1E3",
+            b"1.5e",
+            b"0x1",
+            b".",
+            b"+.",
+            b"1,5",
+            b" 1",
+            b"1 ",
+            b"\xff1",
+        ] {
+            assert_eq!(parse_decimal(bad), None, "{bad:?}");
+        }
+        // What the layout's reader sees: the value, and the byte it stopped at.
+        assert_eq!(decimal_prefix(b"445.1234\" Y="), (Some(445.1234), 8));
+        assert_eq!(decimal_prefix(b"-.5<"), (Some(-0.5), 3));
+        assert_eq!(decimal_prefix(b"-x"), (None, 1));
+    }
+
+    #[test]
+    fn written_decimals_read_back_exactly() {
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        for _ in 0..20_000 {
+            // xorshift: magnitudes from 1e-6 to 1e6, both signs.
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let mag = 10f64.powi((x % 13) as i32 - 6);
+            let v = ((x >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0 * mag;
+            for d in [0u8, 1, 3, 4, 6, 9] {
+                let text = write_one(v, d);
+                let scale = POW10[d as usize] as f64;
+                let want = (v.abs() * scale).round() / scale;
+                let got = parse_decimal(text.as_bytes()).unwrap();
+                assert_eq!(got.abs(), want, "{v} at {d} decimals wrote {text}");
+                assert_eq!(text.starts_with('-'), v < 0.0 && want != 0.0, "{text}");
+            }
+        }
+    }
+
     proptest::proptest! {
         /// Plain decimals read as `str::parse` reads them (correctly rounded), any digit counts.
         #[test]
@@ -999,6 +1489,48 @@ mod tests {
             let has_digit = text.bytes().any(|c| c.is_ascii_digit());
             let got = parse_decimal(text.as_bytes());
             proptest::prop_assert_eq!(got.map(f64::to_bits), expected.filter(|_| has_digit).map(f64::to_bits));
+        }
+
+        /// Inside a datagram (16 bytes or more follow): the value the standard parser reads, and
+        /// the number's length.
+        #[test]
+        fn decimals_inside_a_datagram_read_as_the_standard_parser_reads_them(
+            text in "[+-]?[0-9]{0,10}(\\.[0-9]{0,10})?",
+            after in "[\"/<. x0-9]{16,20}",
+        ) {
+            let expected = text.parse::<f64>().ok().filter(|v| v.is_finite());
+            let has_digit = text.bytes().any(|c| c.is_ascii_digit());
+            let joined = format!("{text}{after}");
+            let (got, n) = decimal_prefix(joined.as_bytes());
+            proptest::prop_assert_eq!(plain_decimal_len(joined.as_bytes()), got.map(|_| n));
+            if after.as_bytes()[0].is_ascii_digit() || (after.starts_with('.') && !text.contains('.')) {
+                // The number runs on into what follows: compare with the bytewise reading.
+                let sign = usize::from(text.starts_with(['+', '-']));
+                let slow = decimal_prefix_bytewise(joined.as_bytes(), text.starts_with('-'), sign);
+                proptest::prop_assert_eq!(got.map(f64::to_bits), slow.0.map(f64::to_bits));
+                proptest::prop_assert_eq!(n, slow.1);
+            } else {
+                proptest::prop_assert_eq!(got.map(f64::to_bits), expected.filter(|_| has_digit).map(f64::to_bits));
+                proptest::prop_assert_eq!(n, text.len());
+            }
+        }
+
+        /// Any bytes: a decimal where the standard parser reads a plain one, nothing otherwise.
+        #[test]
+        fn any_bytes_read_as_plain_decimals_or_not_at_all(
+            bytes in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..40),
+        ) {
+            let plain = bytes.iter().enumerate().all(|(k, &c)| {
+                c.is_ascii_digit() || c == b'.' || (k == 0 && (c == b'+' || c == b'-'))
+            }) && bytes.iter().filter(|&&c| c == b'.').count() <= 1
+                && bytes.iter().any(u8::is_ascii_digit);
+            let expected = core::str::from_utf8(&bytes)
+                .ok()
+                .filter(|_| plain)
+                .and_then(|t| t.parse::<f64>().ok())
+                .filter(|v| v.is_finite());
+            let got = parse_decimal(&bytes);
+            proptest::prop_assert_eq!(got.map(f64::to_bits), expected.map(f64::to_bits));
         }
     }
 

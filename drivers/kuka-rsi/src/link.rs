@@ -5,10 +5,11 @@ use core::fmt;
 use core::time::Duration;
 use std::io::{self, IoSliceMut};
 use std::net::{IpAddr, SocketAddr, UdpSocket};
-use std::os::fd::AsRawFd;
+use std::os::fd::{AsFd, AsRawFd};
 use std::time::{Instant, SystemTime};
 
 use hal::{Correction, Cycle, ErrorKind, RobotLink};
+use nix::poll::{PollFd, PollFlags, ppoll};
 use nix::sys::socket::{
     ControlMessageOwned, MsgFlags, MultiHeaders, SockaddrStorage, recvmmsg, setsockopt, sockopt,
 };
@@ -83,6 +84,12 @@ pub struct LinkConfig {
     /// the last plausible one than this speed allows in the IPOC time between them is a counted fault
     /// (`implausible`), never a control input.
     pub max_speed: f64,
+    /// Poll for the next datagram instead of sleeping from this long before it is due (one period
+    /// after the last one arrived) until this long after; zero (the default): always sleep in the
+    /// receive call. Polling keeps the loop's CPU from idling (and its caches warm) when the
+    /// datagram lands, at the cost of that CPU time each cycle; it only helps when the loop has a
+    /// CPU of its own (docs/performance.md). At most a quarter of the period.
+    pub spin: Duration,
 }
 
 impl LinkConfig {
@@ -107,6 +114,7 @@ impl LinkConfig {
             precision: 4,
             late_after: Duration::from_millis(2),
             max_speed: Self::DEFAULT_MAX_SPEED,
+            spin: Duration::ZERO,
         }
     }
 
@@ -133,6 +141,13 @@ impl LinkConfig {
         }
         if self.precision > 9 {
             return Err(format!("precision must be 0..=9, got {}", self.precision));
+        }
+        if self.spin > self.period / 4 {
+            return Err(format!(
+                "spin must be at most a quarter of the period ({:?}), got {:?}",
+                self.period / 4,
+                self.spin
+            ));
         }
         if !(self.max_speed.is_finite() && self.max_speed > 0.0 && self.max_speed <= 100.0) {
             return Err(format!(
@@ -250,7 +265,9 @@ const BATCH: usize = 16;
 /// receives and sends. Two system calls per cycle in the steady state: one blocking `recvmmsg`
 /// (`MSG_WAITFORONE`: it waits for the first datagram, then also takes whatever else is queued, so a
 /// backlog is drained in the same call), and one `sendto`. The socket stays blocking; the watchdog is
-/// its receive timeout (`SO_RCVTIMEO`), set only when its value changes.
+/// its receive timeout (`SO_RCVTIMEO`), set only when its value changes. With
+/// [`LinkConfig::spin`] a `ppoll` comes first and the datagram is taken by non-blocking `recvmmsg`
+/// calls (as many as the polling makes).
 ///
 /// The socket asks the kernel for each datagram's arrival time (`SO_TIMESTAMPNS`: a software stamp
 /// taken when the datagram reaches the network stack, delivered in the same `recvmmsg` as a control
@@ -459,6 +476,32 @@ impl RsiLink {
         Ok(())
     }
 
+    /// One receive call, waiting (up to the socket's timeout) for the first datagram when `wait`,
+    /// and the rest of a burst with it (a full batch means there may be more queued, read without
+    /// waiting); every datagram read is offered to the session. Returns how many were read (0 on a
+    /// timeout or nothing queued).
+    fn receive_burst(&mut self, wait: bool) -> Result<usize, LinkError> {
+        let mut wait = wait;
+        let mut total = 0;
+        loop {
+            match self.rx.recv(&self.sock, wait, self.stamps) {
+                Ok(n) => {
+                    // Both clocks read together (vDSO: no system call): the kernel stamps are on
+                    // the wall clock, the session's times on the monotonic one.
+                    let (rx_at, wall) = (Instant::now(), SystemTime::now());
+                    self.offer_batch(n, rx_at, wall);
+                    total += n;
+                    if n < BATCH {
+                        return Ok(total);
+                    }
+                    wait = false;
+                }
+                Err(e) if is_transient(&e) => return Ok(total),
+                Err(e) => return Err(LinkError::Io(e)),
+            }
+        }
+    }
+
     /// Hand the `n` datagrams just read to the session, oldest first, each with its arrival on the
     /// monotonic clock (from the kernel's stamp; `wall` is the wall clock read with `rx_at`).
     fn offer_batch(&mut self, n: usize, rx_at: Instant, wall: SystemTime) {
@@ -512,26 +555,39 @@ impl RobotLink for RsiLink {
                     None => None,
                 },
             };
-            self.set_timeout(remaining)?;
-            // One call waits for the first datagram and takes the rest of a burst with it; a full
-            // batch means there may be more queued, read without waiting.
-            let mut wait = true;
-            loop {
-                match self.rx.recv(&self.sock, wait, self.stamps) {
-                    Ok(n) => {
-                        // Both clocks read together (vDSO: no system call): the kernel stamps are
-                        // on the wall clock, the session's times on the monotonic one.
-                        let (rx_at, wall) = (Instant::now(), SystemTime::now());
-                        self.offer_batch(n, rx_at, wall);
-                        if n < BATCH {
-                            break;
-                        }
-                        wait = false;
+            // With `spin`: sleep only until shortly before the datagram is due, then poll for it.
+            let spin = self.session.config().spin;
+            let due = self.session.next_due().filter(|_| !spin.is_zero());
+            if let (Some(due), Some(budget)) = (due, remaining) {
+                let sleep_until = due.checked_sub(spin).unwrap_or(due);
+                if now < sleep_until {
+                    // Until then, or until a datagram is there (whichever first): `ppoll`, whose
+                    // timeout is in nanoseconds (the socket's counts in scheduler ticks, up to 4 ms).
+                    let wait = budget.min(sleep_until - now);
+                    let mut fds = [PollFd::new(self.sock.as_fd(), PollFlags::POLLIN)];
+                    match ppoll(&mut fds, Some(TimeSpec::from_duration(wait)), None) {
+                        Ok(_) | Err(nix::errno::Errno::EINTR) => {}
+                        Err(e) => return Err(LinkError::Io(io::Error::from(e))),
                     }
-                    Err(e) if is_transient(&e) => break,
-                    Err(e) => return Err(LinkError::Io(e)),
                 }
+                let until = due + spin;
+                while Instant::now() < until {
+                    if self.receive_burst(false)? == 0 {
+                        core::hint::spin_loop();
+                    } else if let Some(c) = self.session.take_cycle() {
+                        return Ok(c);
+                    }
+                }
+                // Not there yet: sleep in the receive call as without `spin`.
+                now = Instant::now();
+                let Some(remaining) = self.session.wait_budget(now)? else {
+                    continue;
+                };
+                self.set_timeout(Some(remaining))?;
+            } else {
+                self.set_timeout(remaining)?;
             }
+            self.receive_burst(true)?;
             if let Some(c) = self.session.take_cycle() {
                 return Ok(c);
             }

@@ -118,6 +118,13 @@ pub struct CommandSlots {
 }
 
 impl CommandSlots {
+    /// The four slots as a mask (bit `slot` set).
+    pub(crate) fn mask(&self) -> u128 {
+        [self.mode, self.force, self.ramp, self.seg]
+            .iter()
+            .fold(0, |m, &s| m | 1u128 << s)
+    }
+
     /// The slots in `rob` (the `<Rob>` schema); `Ok(None)` when the config declares no `FcCmd`.
     pub fn find(rob: &Schema) -> Result<Option<Self>, String> {
         Ok(

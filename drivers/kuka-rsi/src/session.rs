@@ -102,9 +102,22 @@ struct SenSlots {
     process: Option<StateSlots>,
 }
 
+impl RobSlots {
+    /// Every slot the session reads from a `<Rob>` (bit `slot` set).
+    fn read_mask(&self) -> u128 {
+        let six = |s: &[usize; 6]| s.iter().fold(0u128, |m, &k| m | 1u128 << k);
+        six(&self.rist)
+            | six(&self.rsol)
+            | self.delay.map_or(0, |d| 1u128 << d)
+            | self.process.map_or(0, |p| p.mask())
+    }
+}
+
 struct Track {
     last_ipoc: u64,
     last_rx: Instant,
+    /// When the last datagram arrived (its kernel stamp; else when it was read).
+    last_arrival: Instant,
     peer: SocketAddr,
     /// The last plausible `RIst` and `RSol` positions (m) and their IPOC.
     plausible: Option<([hal::Vector3<f64>; 2], u64)>,
@@ -212,7 +225,9 @@ impl RsiSession {
         let shaper = Shaper::new(cfg.limits, sen_slots.rkorr.map(|s| s.is_some()));
         Ok(Self {
             rob,
-            rob_layout: Box::new(Layout::new(cfg.max_datagram)),
+            // Only the values the session reads are converted; the others (the axis positions
+            // AIPos and ASPos of forcecell's config, a user's extra SEND channels) are checked.
+            rob_layout: Box::new(Layout::reading(cfg.max_datagram, rob_slots.read_mask())),
             sen,
             rob_slots,
             sen_slots,
@@ -384,12 +399,23 @@ impl RsiSession {
             }
         })?;
         a.arrived = arrived.map(|t| t.min(rx_at));
+        if let Some(t) = self.track.as_mut() {
+            t.last_arrival = a.arrived.unwrap_or(rx_at);
+        }
         if let Some(old) = self.candidate.take() {
             self.diag.counters.skipped += 1;
             a.cycle.new_session |= old.cycle.new_session;
         }
         self.candidate = Some(a);
         Ok(())
+    }
+
+    /// When the robot's next datagram is due: one period after the last one arrived (`None`: no
+    /// session).
+    pub fn next_due(&self) -> Option<Instant> {
+        self.track
+            .as_ref()
+            .map(|t| t.last_arrival + self.cfg.period)
     }
 
     /// The newest good datagram offered since the last call, as the cycle to answer next.
@@ -466,6 +492,7 @@ impl RsiSession {
             self.track = Some(Track {
                 last_ipoc: v,
                 last_rx: rx_at,
+                last_arrival: rx_at,
                 peer: from,
                 plausible: None,
                 n: 0,
