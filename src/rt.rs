@@ -2,7 +2,7 @@
 //! cycle's thread and a lower one for the sensor's reader, the cycle pinned to a CPU, and memory
 //! locked with the stack touched before the first cycle. Each is applied where the system grants
 //! it; where it refuses, the run says so once, naming the fix, and goes on: a run without the
-//! settings is still correct, only later in its tail (docs/deploying.md, "Real-time settings").
+//! settings is still correct, only later in its tail (docs/realtime.md).
 
 use std::fmt;
 
