@@ -120,6 +120,7 @@ fn a_removed_parameter_is_refused_by_name() {
         ("contact", "retract_speed"),
         ("contact", "retract_distance"),
         ("observer", "deadband_floor"),
+        ("estimator", "dead_zone"),
     ] {
         let text =
             format!("extends = \"robust\"\nname = \"old\"\n[law.{section}]\n{key} = 0.001\n");
