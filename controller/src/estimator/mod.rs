@@ -75,6 +75,10 @@ const LEADING_SPEED: f64 = 0.85;
 #[derive(Clone, Debug, PartialEq)]
 pub struct StiffnessEstimator {
     p: EstimatorParams,
+    /// The least force noise assumed, N: the dead-zone on the prediction error and the floor of the
+    /// contradiction test (`response.noise_floor`, the predictor's; it was the parameter
+    /// `estimator.dead_zone`, of the same 0.02 N: docs/robust-law.md, "Fewer parameters").
+    noise_floor: f64,
     /// Position scale `s`, m.
     scale: f64,
     /// The recursion on `θ = [k_c·s, k_c·(x₀ − x_c(t₀)), −k_c·ẋ_c·memory]` (N) and its covariance
@@ -114,10 +118,12 @@ const COV_MAX: f64 = 1.0e4;
 const STEADY_COV_MAX: f64 = COV_MAX * COV_MAX;
 
 impl StiffnessEstimator {
-    /// An estimator at `k̂_c(0)` with position scale `scale` (m, typically `f_r/k̂_c(0)`).
-    pub fn new(p: EstimatorParams, scale: f64) -> Self {
+    /// An estimator at `k̂_c(0)` with position scale `scale` (m, typically `f_r/k̂_c(0)`), taking
+    /// force errors within `noise_floor` (N) for noise.
+    pub fn new(p: EstimatorParams, scale: f64, noise_floor: f64) -> Self {
         Self {
             scale,
+            noise_floor,
             rls: Rls::new(
                 Vector3::new(p.kc0 * scale, 0.0, 0.0),
                 Matrix3::zeros(),
@@ -140,8 +146,9 @@ impl StiffnessEstimator {
     }
 
     /// Change the configuration keeping the estimate (projected into the new bounds).
-    pub fn set_params(&mut self, p: EstimatorParams) {
+    pub fn set_params(&mut self, p: EstimatorParams, noise_floor: f64) {
         self.p = p;
+        self.noise_floor = noise_floor;
         let k = self.kc().clamp(p.kc_min, p.kc_max);
         self.rls.theta[0] = k * self.scale;
     }
@@ -149,7 +156,7 @@ impl StiffnessEstimator {
     /// Start over at `k̂_c(0)`, as [`new`](Self::new) left it: no fit's variance survives (it would
     /// claim the tuning's guess known to that fit's precision).
     pub fn reset(&mut self) {
-        *self = Self::new(self.p, self.scale);
+        *self = Self::new(self.p, self.scale, self.noise_floor);
     }
 
     /// Contact begins at measured position `x` (m) with measured force `f` (N): re-anchor the model there

@@ -19,8 +19,6 @@ pub struct EstimatorParams {
     pub excitation: f64,
     /// Time constant of the slow position average `x̄` the excitation is measured from, s.
     pub excitation_window: f64,
-    /// Dead-zone on the prediction error, N.
-    pub dead_zone: f64,
     /// Initial relative uncertainty of `k̂_c` at each contact onset (1 = ±100 %).
     pub initial_uncertainty: f64,
     /// Adapt only while the observed surface moves slower than this, m/s (see
@@ -54,7 +52,6 @@ impl EstimatorParams {
         pos("initial_uncertainty", self.initial_uncertainty)?;
         pos("max_surface_speed", self.max_surface_speed)?;
         nonneg("excitation", self.excitation)?;
-        nonneg("dead_zone", self.dead_zone)?;
         if self.kc_min > self.kc_max {
             return Err(format!(
                 "estimator.kc_min {} N/m is above kc_max {} N/m",

@@ -11,7 +11,6 @@ fn params() -> EstimatorParams {
         memory: 0.5,
         excitation: 0.1,
         excitation_window: 0.05,
-        dead_zone: 0.0,
         initial_uncertainty: 1.0,
         max_surface_speed: 1e-3,
     }
@@ -25,7 +24,7 @@ fn params() -> EstimatorParams {
 fn a_limited_uncertainty_keeps_the_estimate() {
     let k = 200_000.0;
     let run = |limit: Option<f64>| {
-        let mut e = StiffnessEstimator::new(params(), 2.5e-5);
+        let mut e = StiffnessEstimator::new(params(), 2.5e-5, 0.0);
         e.set_kc(k, 0.0);
         e.begin_contact(0.01, 0.0);
         if let Some(rel) = limit {
@@ -53,7 +52,7 @@ fn a_limited_uncertainty_keeps_the_estimate() {
 #[test]
 fn the_estimate_falls_slower_than_it_rises() {
     let step = |factor: f64| {
-        let mut e = StiffnessEstimator::new(params(), 1e-4);
+        let mut e = StiffnessEstimator::new(params(), 1e-4, 0.0);
         e.begin_contact(0.0100, 0.0);
         e.update(0.0100, 0.0, 0.0, 0.0, 1e-3, false);
         let x = 0.0101;
@@ -73,7 +72,7 @@ fn the_estimate_falls_slower_than_it_rises() {
 #[test]
 fn learns_stiffness_and_surface_from_a_transient() {
     let (k, xc) = (70_000.0, 0.010);
-    let mut e = StiffnessEstimator::new(params(), 1e-4);
+    let mut e = StiffnessEstimator::new(params(), 1e-4, 0.0);
     e.begin_contact(0.01001, k * 0.00001);
     for i in 0..300 {
         let t = i as f64 * 1e-3;
@@ -111,6 +110,7 @@ fn a_surface_moving_in_after_a_re_contact_is_no_stiffness() {
                 ..params()
             },
             1e-4,
+            0.0,
         );
         let (k, mut x, mut xc) = (70_000.0, 0.01003, 0.01);
         e.begin_contact(x, k * (x - xc));
@@ -143,7 +143,7 @@ fn a_surface_moving_in_after_a_re_contact_is_no_stiffness() {
 
 #[test]
 fn static_contact_does_not_adapt() {
-    let mut e = StiffnessEstimator::new(params(), 1e-4);
+    let mut e = StiffnessEstimator::new(params(), 1e-4, 0.0);
     e.begin_contact(0.0101, 5.0);
     for i in 0..1000 {
         // Drifting force at a still position: bias drift, no information about k_c.
@@ -159,7 +159,7 @@ fn an_excursion_within_the_noise_is_no_excitation() {
     // Position and force move together by 0.2 N-equivalent steps over a second: excitation for
     // a clean sensor (`excitation` 0.1 N), none within four deviations of 0.5 N of noise.
     let run = |noise_sd: f64| {
-        let mut e = StiffnessEstimator::new(params(), 1e-4);
+        let mut e = StiffnessEstimator::new(params(), 1e-4, 0.0);
         e.begin_contact(0.0101, 5.0);
         let mut adapted = false;
         for i in 0..1000 {
@@ -175,7 +175,7 @@ fn an_excursion_within_the_noise_is_no_excitation() {
 
 #[test]
 fn projection_holds_the_bounds_and_says_so() {
-    let mut e = StiffnessEstimator::new(params(), 1e-4);
+    let mut e = StiffnessEstimator::new(params(), 1e-4, 0.0);
     e.begin_contact(0.0, 0.0);
     let mut projected = false;
     for i in 0..200 {

@@ -66,7 +66,7 @@ impl StiffnessEstimator {
         // in, and `k̂_c` fell from 70 to 37 kN/m on P1 within 30 ms).
         let (dx, df) = (x - self.last.0, f - self.last.1);
         self.last = (x, f);
-        let floor = self.p.dead_zone.max(noise);
+        let floor = self.noise_floor.max(noise);
         let contradicts = dx * df < 0.0 && df.abs() > floor && self.p.kc_max * dx.abs() > floor;
         let excited = excited && !contradicts;
         let phi = self.regressor(x);
@@ -75,7 +75,7 @@ impl StiffnessEstimator {
         // misled by a wrong k̂_c itself, reports a moving surface.
         let strong = (f_gate - self.f_slow).abs() >= STRONG_EXCITATION * excitation;
         let still = !moving || strong;
-        if !excited || !still || err.abs() <= self.p.dead_zone {
+        if !excited || !still || err.abs() <= self.noise_floor {
             return up;
         }
         let lambda = (-dt / self.p.memory).exp();

@@ -87,11 +87,12 @@ pub struct Identifier {
 }
 
 impl Identifier {
-    /// Identification from the estimator's initial guess; `scale` is the estimator's position scale, m.
-    pub fn new(p: IdentifyParams, est: EstimatorParams, scale: f64) -> Self {
+    /// Identification from the estimator's initial guess; `scale` is the estimator's position scale, m,
+    /// `noise_floor` the least force noise assumed, N.
+    pub fn new(p: IdentifyParams, est: EstimatorParams, noise_floor: f64, scale: f64) -> Self {
         Self {
             p,
-            est: StiffnessEstimator::new(est, scale),
+            est: StiffnessEstimator::new(est, scale, noise_floor),
             onset: OnsetFit::new(),
             steady: SteadyEstimator::new(p.steady_memory),
             steady_var0: f64::INFINITY,
@@ -108,8 +109,8 @@ impl Identifier {
     }
 
     /// Take new parameters, keeping the estimates.
-    pub fn set_params(&mut self, p: IdentifyParams, est: EstimatorParams) {
-        self.est.set_params(est);
+    pub fn set_params(&mut self, p: IdentifyParams, est: EstimatorParams, noise_floor: f64) {
+        self.est.set_params(est, noise_floor);
         self.p = p;
     }
 

@@ -112,7 +112,7 @@ impl RobustLaw {
             signals: Conditioner::new(p.conditioning),
             noise: NoiseMeter::new(p.noise),
             contact: ContactMachine::new(p.contact),
-            identify: Identifier::new(p.identify, p.estimator, p.scale()),
+            identify: Identifier::new(p.identify, p.estimator, p.response.noise_floor, p.scale()),
             observer: SurfaceObserver::new(p.observer),
             response: Response::new(p.response, p.f_r),
             limiter: Limiter::new(p.limits),
@@ -146,7 +146,8 @@ impl RobustLaw {
         self.signals.set_params(p.conditioning);
         self.noise.set_params(p.noise);
         self.contact.set_params(p.contact);
-        self.identify.set_params(p.identify, p.estimator);
+        self.identify
+            .set_params(p.identify, p.estimator, p.response.noise_floor);
         self.observer.set_params(p.observer);
         self.response.set_params(p.response);
         self.limiter.set_params(p.limits);

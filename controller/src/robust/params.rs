@@ -82,7 +82,10 @@ impl RobustParams {
         for (n, v) in [
             ("contact.approach_speed", c.approach_speed),
             ("contact.reacquire_speed", c.reacquire_speed),
-            ("contact.retract_speed", c.retract_speed),
+            (
+                "the force limit's retract speed",
+                super::contact::RETRACT_SPEED,
+            ),
         ] {
             if v > l.max_velocity {
                 return Err(format!(

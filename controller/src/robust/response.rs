@@ -5,6 +5,12 @@ use serde::{Deserialize, Serialize};
 
 use super::{at_least, non_negative, positive};
 
+/// Largest magnitude of the integral term, m: a guard against wind-up, no tuning. It was the parameter
+/// `response.integral_limit` (0.3 mm); at half of it no B, pass or range figure changed, nor at 1 m
+/// (the clamp binds in none of them: the integral acts only within `integration_band` of the set-point
+/// and its gain falls with the noise), so it left the tuning (docs/robust-law.md, "Fewer parameters").
+pub const INTEGRAL_LIMIT: f64 = 3e-4;
+
 /// How the law responds in contact.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -14,8 +20,6 @@ pub struct ResponseParams {
     pub kappa: f64,
     /// Integral gain `k_i`, 1/s (0: none).
     pub integral: f64,
-    /// Largest magnitude of the integral term, m.
-    pub integral_limit: f64,
     /// Sensor noise, relative to the set-point, at which the integral's gain is halved (advanced): the
     /// gain is `integral / (1 + (σ / (integral_noise·f_r))²)`. The integral pulls in what the
     /// proportional path leaves standing (a servo that stops short of its command); inside the noise
@@ -84,7 +88,6 @@ impl ResponseParams {
             return Err(format!("response.kappa must be <= 1, got {}", self.kappa));
         }
         non_negative("response.integral", self.integral)?;
-        non_negative("response.integral_limit", self.integral_limit)?;
         positive("response.integral_noise", self.integral_noise)?;
         positive("response.surface_bandwidth", self.surface_bandwidth)?;
         positive("response.surface_jerk", self.surface_jerk)?;
@@ -174,7 +177,7 @@ impl Response {
         // While the set-point moves, the error is the ramp's lag, which the set-point feed-forward
         // answers: integrating it would wind up and overshoot the ramp's end.
         if e.abs() <= r.integration_band * force_scale && self.rate == 0.0 {
-            let lim = r.integral_limit;
+            let lim = INTEGRAL_LIMIT;
             let gain = r.integral / (1.0 + noise_var / (r.integral_noise * force_scale).powi(2));
             self.integ = (self.integ + dt * gain * delta).clamp(-lim, lim);
         }
@@ -189,7 +192,6 @@ mod tests {
     const P: ResponseParams = ResponseParams {
         kappa: 0.8,
         integral: 1.5,
-        integral_limit: 0.0003,
         integral_noise: 0.1,
         surface_bandwidth: 8.0,
         surface_jerk: 0.001,

@@ -1,6 +1,6 @@
 //! The contact state machine: `Approach` (bounded speed, anchored to the measured position) → `Contact`
 //! when the conditioned force reaches `contact_force` (confirmed by the raw one), or one raw sample
-//! `strong_contact` times that → `Reacquire` when the raw force stays below `lift_force` for `lift_time`
+//! `strong_contact` times that → `Reacquire` when the raw force stays below `lift_force` for `samples` in a row
 //! (fast back to where contact was lost and for `reacquire_distance` beyond, optionally bounded by what
 //! the cell can stop near it, then at what stops within `2·f_r`: `search.rs`) → `Contact` … and from
 //! anywhere `Retract` when the conditioned force exceeds the force limit and the raw one confirms it.
@@ -45,8 +45,8 @@ pub struct Search {
 pub struct ContactMachine {
     p: ContactParams,
     state: ContactState,
-    /// Time the raw force has been below the lift force, s, and for how many samples.
-    below: f64,
+    /// For how many samples in a row the raw force has been below the lift force (at least two, see
+    /// `Thresholds::samples`: the time it held, `contact.lift_time` of 2 ms once, is that at 1 kHz).
     below_samples: u32,
     /// Distance the command travelled in the current re-acquire or retract, m: what the limits let
     /// through, not what was asked for (near a stop the limiter brakes the command).
@@ -87,7 +87,6 @@ impl ContactMachine {
         let mut m = Self {
             p,
             state: ContactState::Approach,
-            below: 0.0,
             below_samples: 0,
             travelled: 0.0,
             last_u: f64::NAN,
@@ -114,7 +113,6 @@ impl ContactMachine {
     /// Back to the approach.
     pub fn reset(&mut self) {
         self.state = ContactState::Approach;
-        self.below = 0.0;
         self.below_samples = 0;
         self.travelled = 0.0;
         self.last_u = f64::NAN;
@@ -187,7 +185,6 @@ impl ContactMachine {
                     self.fitted = false;
                     self.evidence.reset();
                     self.state = ContactState::Contact;
-                    self.below = 0.0;
                     self.below_samples = 0;
                     self.in_contact = 0.0;
                     return Transition::Contact { from_approach };
@@ -204,9 +201,8 @@ impl ContactMachine {
                     (th.lift, th.samples)
                 };
                 if s.f < lift {
-                    self.below += dt;
                     self.below_samples += 1;
-                    if self.below >= c.lift_time && self.below_samples >= samples {
+                    if self.below_samples >= samples {
                         let shown = self.evidence.shown();
                         if self.landing && (self.in_contact < c.bounce_time || !shown) {
                             // A touch-down lost before its stiffness was identified and shown by
@@ -237,12 +233,11 @@ impl ContactMachine {
                         return Transition::LiftOff;
                     }
                 } else {
-                    self.below = 0.0;
                     self.below_samples = 0;
                 }
             }
             ContactState::Retract => {
-                if self.travelled >= c.retract_distance && s.ff < th.lift {
+                if self.travelled >= RETRACT_DISTANCE && s.ff < th.lift {
                     self.state = ContactState::Approach;
                 }
             }
@@ -258,6 +253,6 @@ mod search;
 mod tests;
 mod thresholds;
 
-pub use params::ContactParams;
+pub use params::{ContactParams, RETRACT_DISTANCE, RETRACT_SPEED};
 pub use search::Speeds;
 pub use thresholds::{LIFT_NOISE, SIGNIFICANCE, Thresholds};

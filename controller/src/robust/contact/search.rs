@@ -18,7 +18,7 @@
 //! `reacquire_margin·T_s/2`. With `reacquire_margin = inf` (the `robust-gentle` tuning) every speed
 //! of the search towards a surface not found yet is gentle.
 
-use super::{ContactMachine, Thresholds};
+use super::{ContactMachine, RETRACT_SPEED, Thresholds};
 use crate::law::ContactState;
 use crate::robust::Stopping;
 use crate::robust::guards::STIFFNESS_GUARD;
@@ -198,7 +198,7 @@ impl ContactMachine {
             }
             ContactState::Retract => {
                 self.travelled += (-moved).max(0.0);
-                Some(u - c.retract_speed * dt)
+                Some(u - RETRACT_SPEED * dt)
             }
             ContactState::Contact => None,
         }

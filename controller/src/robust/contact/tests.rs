@@ -7,11 +7,8 @@ fn params() -> ContactParams {
         approach_speed: 0.002,
         contact_force: 1.0,
         lift_force: 0.3,
-        lift_time: 0.002,
         reacquire_speed: 0.05,
         reacquire_distance: 0.002,
-        retract_speed: 0.01,
-        retract_distance: 0.001,
         bounce_time: 0.5,
         strong_contact: 3.0,
         reacquire_margin: 1.0,
@@ -49,7 +46,7 @@ fn sig(f: f64, ff: f64) -> Signals {
 }
 
 #[test]
-fn contact_lift_off_after_lift_time_and_force_limit() {
+fn contact_lift_off_after_samples_in_a_row_and_force_limit() {
     let mut m = ContactMachine::new(params());
     assert_eq!(
         m.step(&sig(0.5, 0.5), &TH, 60.0, 0.0, 1e-3),
@@ -63,7 +60,7 @@ fn contact_lift_off_after_lift_time_and_force_limit() {
     );
     m.identified();
     land(&mut m, 0.010, 0.010, true, 1.1, 0.0);
-    // One low sample is not a lift-off; `lift_time` of them is.
+    // One low sample is not a lift-off; `TH.samples` of them in a row are.
     assert_eq!(
         m.step(&sig(0.0, 1.0), &TH, 60.0, 0.0, 1e-3),
         Transition::None

@@ -11,7 +11,6 @@ fn est() -> EstimatorParams {
         memory: 0.3,
         excitation: 1.5,
         excitation_window: 0.05,
-        dead_zone: 0.02,
         initial_uncertainty: 1.0,
         max_surface_speed: 0.001,
     }
@@ -19,7 +18,7 @@ fn est() -> EstimatorParams {
 
 #[test]
 fn the_onset_of_a_contact_from_the_approach_is_fitted() {
-    let mut id = Identifier::new(IdentifyParams::default(), est(), 5.0 / 50_000.0);
+    let mut id = Identifier::new(IdentifyParams::default(), est(), 0.02, 5.0 / 50_000.0);
     let k: f64 = 70_000.0;
     let mut x: f64 = 0.0095;
     let (mut seeded, mut contact) = (false, false);
@@ -82,7 +81,7 @@ fn touch_down_on(
     steps: usize,
     moving: bool,
 ) -> (Identifier, bool, f64) {
-    let mut id = Identifier::new(IdentifyParams::default(), est(), f_r / 50_000.0);
+    let mut id = Identifier::new(IdentifyParams::default(), est(), 0.02, f_r / 50_000.0);
     let force = |x: f64| (k * (x - 0.010)).max(0.0);
     let mut x = 0.0099;
     while force(x) < 1.0 {
@@ -132,7 +131,7 @@ fn a_bounce_within_the_onset_window_is_not_on_the_line() {
     let k: f64 = 354_694.0;
     let force = |x_mm: f64| (k * (x_mm - 10.0) * 1e-3).max(0.0);
     let fit = |skip_off_surface: bool| {
-        let mut id = Identifier::new(IdentifyParams::default(), est(), 5.0 / 50_000.0);
+        let mut id = Identifier::new(IdentifyParams::default(), est(), 0.02, 5.0 / 50_000.0);
         // The approach at 2 mm/s, 24 µm a cycle, up to the sample that declares contact.
         for i in (0..12).rev() {
             let x_mm = 10.02166 - 0.024 * i as f64;
@@ -177,7 +176,7 @@ fn a_bounce_within_the_onset_window_is_not_on_the_line() {
 fn a_filtered_force_s_tail_behind_the_surface_is_not_on_the_line() {
     let k: f64 = 500_000.0;
     let fit = |tail: bool| {
-        let mut id = Identifier::new(IdentifyParams::default(), est(), 2.0 / 50_000.0);
+        let mut id = Identifier::new(IdentifyParams::default(), est(), 0.02, 2.0 / 50_000.0);
         for i in (1..12).rev() {
             id.remember((10.0172 - 0.024 * i as f64) * 1e-3, 0.0, 2e-3, 0.012);
         }
@@ -233,7 +232,7 @@ fn change(k: f64, k2: f64, xc2: f64, c_e: f64) -> f64 {
 /// [`change`] with the re-fit judged from `early` s on.
 fn change_judged(k: f64, k2: f64, xc2: f64, c_e: f64, early: f64) -> f64 {
     let (xc, f_r, dt) = (0.010, 5.0, 1e-3);
-    let mut id = Identifier::new(IdentifyParams::default(), est(), f_r / 50_000.0);
+    let mut id = Identifier::new(IdentifyParams::default(), est(), 0.02, f_r / 50_000.0);
     let mut x = xc + f_r / k;
     id.begin_contact(x, f_r, false);
     for _ in 0..1000 {
@@ -301,7 +300,7 @@ fn a_contact_declared_on_noise_is_not_fitted() {
     use rand_distr::{Distribution, Normal};
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
     let noise = Normal::new(0.0, 0.9).unwrap();
-    let mut id = Identifier::new(IdentifyParams::default(), est(), 20.0 / 50_000.0);
+    let mut id = Identifier::new(IdentifyParams::default(), est(), 0.02, 20.0 / 50_000.0);
     // Free air at 2 mm/s on a 4 ms cycle, 0.9 N of noise: no force rises with the position.
     let mut x = 0.0095;
     for _ in 0..60 {
@@ -373,7 +372,7 @@ fn search(x_lost: f64, t_lost: f64, fast: bool) -> Search {
 /// after `steps` of 1 ms, the contact re-acquired at `x` after a search from `x_lost` of 0.26 s.
 fn re_contact_on_a_surface_moving_in(x_lost: f64, steps: usize) -> (Identifier, f64) {
     let k = 50_000.0;
-    let mut id = Identifier::new(IdentifyParams::default(), est(), 5.0 / k);
+    let mut id = Identifier::new(IdentifyParams::default(), est(), 0.02, 5.0 / k);
     let (v_tool, v_surface) = (-4.3e-3, -3.35e-3);
     let (mut x, mut xc) = (0.011, 0.011 - 7.0 / k);
     id.begin_contact(x, 7.0, false);
@@ -418,7 +417,7 @@ fn a_re_contact_that_found_the_surface_moved_learns_nothing_while_it_may_move() 
     let (id, _) = re_contact_on_a_surface_moving_in(0.010, 501);
     assert!(!id.held(), "the wait ends after motion_hold");
     // Found where it was lost, but by the fast search: its momentum's transient is no stiffness.
-    let mut id = Identifier::new(IdentifyParams::default(), est(), 1e-4);
+    let mut id = Identifier::new(IdentifyParams::default(), est(), 0.02, 1e-4);
     id.begin_contact(0.011, 30.0, false);
     id.recontact(0.011, 30.0, &search(0.011, 0.02, true), 5.0, 0.001, 0.5);
     assert!(id.held(), "a re-contact the fast search made waits");
@@ -433,7 +432,7 @@ fn a_re_contact_that_found_the_surface_moved_learns_nothing_while_it_may_move() 
 fn a_bounce_in_a_re_fit_s_window_is_not_on_the_line() {
     let fit = |flagged: bool| {
         let (xc, f_r, dt, k, k2) = (0.010, 5.0, 1e-3, 50_000.0, 100_000.0);
-        let mut id = Identifier::new(IdentifyParams::default(), est(), f_r / 50_000.0);
+        let mut id = Identifier::new(IdentifyParams::default(), est(), 0.02, f_r / 50_000.0);
         let mut x = xc + f_r / k;
         id.begin_contact(x, f_r, false);
         for _ in 0..1000 {

@@ -43,8 +43,6 @@ pub struct ObserverParams {
     /// still one, but for the recursion's wait on motion that began after a calm contact
     /// (`robust/motion.rs`).
     pub feedforward_speed: f64,
-    /// Smallest dead-band on the fallback feed-forward velocity, m/s.
-    pub deadband_floor: f64,
     /// The fallback feed-forward's dead-band is at least this many times the velocity scale of the
     /// sensor's noise seen through the observer, `σ_f̃/k̂_c·2π·surface_bandwidth` (`σ_f̃` the
     /// conditioned force's noise). The observer's velocity under noise alone has a standard deviation
@@ -71,7 +69,6 @@ impl Default for ObserverParams {
             opposed_confirm: 0.01,
             motion_significance: 3.0,
             feedforward_speed: 0.0001,
-            deadband_floor: 0.0001,
             deadband_significance: 2.0,
             damping: 0.8,
         }
@@ -90,7 +87,6 @@ impl ObserverParams {
         positive("observer.opposed_confirm", self.opposed_confirm)?;
         positive("observer.motion_significance", self.motion_significance)?;
         positive("observer.feedforward_speed", self.feedforward_speed)?;
-        positive("observer.deadband_floor", self.deadband_floor)?;
         non_negative("observer.deadband_significance", self.deadband_significance)?;
         positive("observer.damping", self.damping)
     }
@@ -99,10 +95,13 @@ impl ObserverParams {
 impl ObserverParams {
     /// The fallback feed-forward's dead-band on the observer's velocity, m/s, under response `r` with
     /// sensor noise `sigma` (N), of which `gain` passes the conditioning, at stiffness `k` (N/m).
+    /// Never below `feedforward_speed`: a surface slower than that is fed forward by neither the
+    /// predictor nor this fallback (the floor was the parameter `observer.deadband_floor`, of the
+    /// same 0.1 mm/s: docs/robust-law.md, "Fewer parameters").
     pub fn deadband(&self, r: &ResponseParams, sigma: f64, gain: f64, k: f64) -> f64 {
         let velocity_noise = sigma * gain / k * core::f64::consts::TAU * r.surface_bandwidth;
         (r.feedforward_deadband * sigma)
             .max(self.deadband_significance * velocity_noise)
-            .max(self.deadband_floor)
+            .max(self.feedforward_speed)
     }
 }

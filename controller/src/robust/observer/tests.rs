@@ -73,7 +73,6 @@ fn response() -> crate::robust::ResponseParams {
     crate::robust::ResponseParams {
         kappa: 0.8,
         integral: 1.5,
-        integral_limit: 3e-4,
         integral_noise: 0.1,
         surface_bandwidth: 8.0,
         surface_jerk: 1e-3,
@@ -182,7 +181,7 @@ fn a_step_below_the_floor_that_nothing_else_explains_is_no_motion() {
 fn the_fallback_dead_band_is_outside_the_velocity_noise() {
     let (p, r) = (ObserverParams::default(), response());
     // Noise-free: the floor.
-    assert_eq!(p.deadband(&r, 0.0, 0.7, 10_000.0), p.deadband_floor);
+    assert_eq!(p.deadband(&r, 0.0, 0.7, 10_000.0), p.feedforward_speed);
     // σ 1 N, 73 % through the conditioning (a 12 ms cycle), 10 kN/m: beyond the per-newton dead-band.
     let soft = p.deadband(&r, 1.0, 0.73, 10_000.0);
     let scale = 0.73 / 10_000.0 * core::f64::consts::TAU * r.surface_bandwidth;
