@@ -1272,7 +1272,7 @@ mod tests {
             }
         }
         assert_eq!(write_one(99_999_999.5, 0), "100000000");
-        assert_eq!(write_one(-99_999_999.99995, 4), "-100000000.0000");
+        assert_eq!(write_one(-99_999_999.999_95, 4), "-100000000.0000");
         assert_eq!(write_one(12_345_678.123_456_78, 8), "12345678.12345678");
         assert_eq!(write_one(0.5, 0), "1");
         assert_eq!(write_one(-0.5, 0), "-1");
