@@ -85,6 +85,7 @@ struct Opts {
     realtime: bool,
     standin_priority: u8,
     spin_us: u64,
+    settle: bool,
 }
 
 fn parse_opts() -> Result<Opts> {
@@ -103,6 +104,7 @@ fn parse_opts() -> Result<Opts> {
         realtime: false,
         standin_priority: 0,
         spin_us: 0,
+        settle: false,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -122,6 +124,7 @@ fn parse_opts() -> Result<Opts> {
             "--recorder-sched" => o.recorder_sched = Some(val()?),
             "--realtime" => o.realtime = true,
             "--standin-priority" => o.standin_priority = val()?.parse()?,
+            "--settle" => o.settle = true,
             _ => bail!("unknown option {a} (see the file's documentation)"),
         }
     }
@@ -227,6 +230,63 @@ impl Standin {
     }
 }
 
+/// `--settle`: before each timed send the stand-in waits until forcecell's loop thread and the echo
+/// thread are both asleep (state `S` in `/proc/self/task/TID/stat`), yielding its CPU meanwhile, so
+/// neither round trip starts while the other's program is still finishing its cycle on the CPU they
+/// share: the work a program does after its reply (forcecell's record, the echo's return to its
+/// receive call) is then not charged to the next round trip, as it is not on a cell whose robot is
+/// another machine. Threads are found by name (`loop`, `echo`).
+struct Settle {
+    stats: Vec<std::fs::File>,
+    buf: [u8; 512],
+    waits: u64,
+}
+
+impl Settle {
+    fn new(on: bool) -> Result<Self> {
+        let mut stats = Vec::new();
+        if on {
+            for e in std::fs::read_dir("/proc/self/task")? {
+                let dir = e?.path();
+                let name = std::fs::read_to_string(dir.join("comm")).unwrap_or_default();
+                if matches!(name.trim(), "loop" | "echo") {
+                    stats.push(std::fs::File::open(dir.join("stat"))?);
+                }
+            }
+            if stats.is_empty() {
+                bail!("--settle: no thread named loop or echo");
+            }
+        }
+        Ok(Self {
+            stats,
+            buf: [0; 512],
+            waits: 0,
+        })
+    }
+
+    /// Yield until every watched thread is asleep (at most 100 000 yields: a thread that never
+    /// sleeps is not waited for forever).
+    fn wait(&mut self) {
+        use std::os::unix::fs::FileExt;
+        for _ in 0..100_000 {
+            let mut running = false;
+            for f in &self.stats {
+                let n = f.read_at(&mut self.buf, 0).unwrap_or(0);
+                let line = &self.buf[..n];
+                // The state follows the command name's closing parenthesis and a space.
+                if let Some(p) = line.iter().rposition(|&b| b == b')') {
+                    running |= line.get(p + 2) == Some(&b'R');
+                }
+            }
+            if !running {
+                return;
+            }
+            self.waits += 1;
+            thread::yield_now();
+        }
+    }
+}
+
 struct Times {
     echo: Vec<u32>,
     cell: Vec<u32>,
@@ -241,6 +301,7 @@ fn stand_in(
     world: Option<SharedWorld>,
 ) -> Result<Times> {
     let mut s = Standin::new()?;
+    let mut settle = Settle::new(o.settle)?;
     let mut out = [0u8; 2048];
     let mut inp = [0u8; 4096];
     let mut times = Times {
@@ -262,6 +323,7 @@ fn stand_in(
         let echo_first = o.period.is_zero();
         let timed = k >= o.warmup;
         if !echo_first {
+            settle.wait();
             let stop = cell_round(
                 &mut s,
                 &out[..n],
@@ -281,6 +343,7 @@ fn stand_in(
             }
         }
         if let Some(addr) = echo {
+            settle.wait();
             let t0 = Instant::now();
             s.sock.send_to(&out[..n], addr)?;
             s.sock.recv_from(&mut inp)?;
@@ -290,6 +353,9 @@ fn stand_in(
                     .echo
                     .push(u32::try_from(dt.as_nanos()).unwrap_or(u32::MAX));
             }
+        }
+        if echo_first && o.settle {
+            settle.wait();
         }
         if echo_first
             && cell_round(
@@ -305,6 +371,12 @@ fn stand_in(
         {
             break;
         }
+    }
+    if o.settle {
+        eprintln!(
+            "settle: {} yields waiting for a thread to sleep",
+            settle.waits
+        );
     }
     Ok(times)
 }

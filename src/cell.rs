@@ -870,7 +870,7 @@ impl RecordSink {
 
     fn show(&mut self, r: &controller::CycleReport) {
         self.late = r.cycle.late_replies;
-        if let Some(p) = &self.status {
+        if let Some(p) = &mut self.status {
             p.offer(r);
         }
     }

@@ -43,6 +43,16 @@ impl Status {
     /// Take one answered cycle. Returns the line to show when one is due, and — once — a warning when
     /// the robot's late replies pass half its budget.
     pub fn observe(&mut self, r: &CycleReport) -> (Option<String>, Option<String>) {
+        let due = self.tick(r);
+        (
+            due.line.then(|| self.line(r)),
+            due.warning.then(|| self.warning(r.cycle.late_replies)),
+        )
+    }
+
+    /// Count one answered cycle and say what is due, formatting nothing (the cycle's thread calls this
+    /// on every cycle: a few comparisons, no allocation, no system call).
+    pub fn tick(&mut self, r: &CycleReport) -> Due {
         self.cycles += 1;
         if Condition::of(r.fault) != Condition::None {
             self.conditions += 1;
@@ -51,23 +61,35 @@ impl Status {
         let warning = match self.budget {
             Some(b) if !self.warned_half && 2 * late >= b && b > 0 => {
                 self.warned_half = true;
-                Some(format!(
-                    "warning: the robot counts {late} late replies of the {b} its Timeout allows \
-                     before it stops (half used): keep other load off the cycle's CPU, check the \
-                     real-time settings"
-                ))
+                true
             }
-            _ => None,
+            _ => false,
         };
         let t = r.cycle.t;
         if t + 1e-9 < self.next {
-            return (None, warning);
+            return Due {
+                line: false,
+                warning,
+            };
         }
         // On a grid of the period from the first line: a slow cycle does not shift the lines after it.
         while self.next <= t + 1e-9 {
             self.next += self.period;
         }
-        (Some(self.line(r)), warning)
+        Due {
+            line: true,
+            warning,
+        }
+    }
+
+    /// The warning for `late` late replies against the budget.
+    pub fn warning(&self, late: u32) -> String {
+        format!(
+            "warning: the robot counts {late} late replies of the {} its Timeout allows \
+             before it stops (half used): keep other load off the cycle's CPU, check the \
+             real-time settings",
+            self.budget.unwrap_or(0)
+        )
     }
 
     /// The line for the cycle `r`.
@@ -114,14 +136,27 @@ impl Status {
     }
 }
 
-/// Reports the queue to the status line's thread holds: a second of 4 ms cycles.
-pub const QUEUE: usize = 256;
+/// What one cycle made due ([`Status::tick`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Due {
+    /// A status line.
+    pub line: bool,
+    /// The half-budget warning (once).
+    pub warning: bool,
+}
 
-/// The status line's own thread. The cycle hands it each report without waiting — a full queue drops
-/// the report (the line's counts then miss it), so a slow terminal or a full pipe never holds a cycle —
-/// and the thread paces, formats and prints: nothing is formatted or written on the cycle's thread.
+/// Lines the queue to the status line's thread holds.
+pub const QUEUE: usize = 16;
+
+/// The status line's own thread. The cycle counts each report itself ([`Status::tick`]: a few
+/// comparisons) and hands the thread a report only when a line or the warning is due — four times a
+/// second on a terminal, once in five seconds in a log — so the cycle makes no system call for the
+/// status line on the other cycles (handing every report over woke the thread, a `futex` call or two
+/// each cycle). The hand-over never waits: a full queue drops the line, so a slow terminal or a full
+/// pipe never holds a cycle; the thread formats and prints.
 pub struct Printer {
-    tx: Option<std::sync::mpsc::SyncSender<CycleReport>>,
+    status: Status,
+    tx: Option<std::sync::mpsc::SyncSender<(CycleReport, Status, Due)>>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
@@ -136,21 +171,20 @@ impl Printer {
         } else {
             LOG_PERIOD
         };
-        let (tx, rx) = std::sync::mpsc::sync_channel::<CycleReport>(QUEUE);
+        let (tx, rx) = std::sync::mpsc::sync_channel::<(CycleReport, Status, Due)>(QUEUE);
         let thread = std::thread::Builder::new()
             .name("status".into())
             .spawn(move || {
-                let mut status = Status::new(period, budget);
                 let mut shown = false;
-                for r in rx {
-                    let (line, warning) = status.observe(&r);
-                    if let Some(w) = warning {
+                for (r, status, due) in rx {
+                    if due.warning {
                         if terminal && shown {
                             println!();
                         }
-                        eprintln!("{w}");
+                        eprintln!("{}", status.warning(r.cycle.late_replies));
                     }
-                    if let Some(line) = line {
+                    if due.line {
+                        let line = status.line(&r);
                         if terminal {
                             print!("\r{line}\x1b[K");
                             let _ = std::io::stdout().flush();
@@ -165,15 +199,20 @@ impl Printer {
                 }
             })?;
         Ok(Self {
+            status: Status::new(period, budget),
             tx: Some(tx),
             thread: Some(thread),
         })
     }
 
-    /// Hand over one answered cycle; never waits (no allocation: the queue is preallocated).
-    pub fn offer(&self, r: &CycleReport) {
-        if let Some(tx) = &self.tx {
-            let _ = tx.try_send(*r);
+    /// Count one answered cycle; hand it to the thread when a line or the warning is due. Never
+    /// waits, never allocates.
+    pub fn offer(&mut self, r: &CycleReport) {
+        let due = self.status.tick(r);
+        if due.line || due.warning {
+            if let Some(tx) = &self.tx {
+                let _ = tx.try_send((*r, self.status.clone(), due));
+            }
         }
     }
 
