@@ -425,6 +425,7 @@ fn stand_in_egm(
     let mut core = sim::irc5::Irc5Core::new(cfg, sim::irc5::RapidVariables::default())
         .map_err(|e| anyhow!(e))?;
     let mut inp = [0u8; 4096];
+    let mut settle = Settle::new(o.settle)?;
     let mut times = Times {
         echo: Vec::with_capacity(o.cycles),
         cell: Vec::with_capacity(o.cycles),
@@ -442,6 +443,7 @@ fn stand_in_egm(
             .next_cycle(&mut world)
             .map_err(|e| anyhow!("the simulated IRC5 ended: {e:?}"))?;
         if let Some(addr) = echo {
+            settle.wait();
             let t0 = Instant::now();
             sock.send_to(out, addr)?;
             sock.recv_from(&mut inp)?;
@@ -451,6 +453,7 @@ fn stand_in_egm(
                     .push(u32::try_from(t0.elapsed().as_nanos()).unwrap_or(u32::MAX));
             }
         }
+        settle.wait();
         let t0 = Instant::now();
         sock.send_to(out, cell)?;
         let (m, from) = sock
