@@ -26,6 +26,15 @@ RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --release
 step "cargo test (unit, integration, loopback UDP, in-memory CAN; release build: closed-loop simulations are long)"
 cargo test --workspace --release
 
+step "Robot Web Services against curl, Python's https server and an openssl certificate (installed when missing)"
+missing=()
+for tool in curl python3 openssl; do command -v "$tool" >/dev/null || missing+=("$tool"); done
+if [ ${#missing[@]} -gt 0 ]; then
+    sudo=""; [ "$(id -u)" -eq 0 ] || sudo="sudo"
+    $sudo apt-get update -qq && DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" ca-certificates >/dev/null
+fi
+cargo test --release --test rws_peers -- --ignored
+
 step "robust-law censuses (the #[ignore]d counts of known failures: each asserts no more than measured; ~15 s)"
 cargo test --release -p forcecell-controller --test ranges --test gentle_search --test sensor_filter -- --ignored
 

@@ -265,14 +265,47 @@ fn egm_limits(cell: &CellConfig, o: &EgmOptions, t: &controller::Tuning) -> Vec<
         )),
     }
     if cell.robot.process {
-        out.push(Finding::warn(
-            "robot.process = true over EGM: the process state goes to robot.state_to, which only \
-             the simulated IRC5 receives (a real controller's transport, Robot Web Services, is not \
-             implemented)",
-            "on a real robot run with robot.process = false",
-        ));
+        out.push(rws_reachable(o));
     }
     out
+}
+
+/// With the process contract over EGM: the controller's Robot Web Services answers a read of
+/// `fc_phase` with the cell file's credentials, over TLS with the pinned certificate (nothing is written).
+fn rws_reachable(o: &EgmOptions) -> Finding {
+    let cfg = match o.rws_config() {
+        Ok(Some(c)) => c,
+        Ok(None) => {
+            return Finding::fail(
+                "robot.process = true over EGM without robot.rws: the process state has no way back",
+                "set robot.rws = \"https://IP\" (the controller's Robot Web Services 2.0)",
+            );
+        }
+        Err(e) => return Finding::fail(format!("{e:#}"), "fix robot.rws* in the cell file"),
+    };
+    let url = format!("https://{}", cfg.addr);
+    match abb_egm::rws_channel::probe(&cfg) {
+        Ok(_) if cfg.fingerprint.is_some() => Finding::ok(format!(
+            "Robot Web Services at {url}: {}/{} readable, the pinned certificate presented",
+            cfg.target.module,
+            abb_egm::rws::STATE_SYMBOLS[0]
+        )),
+        Ok(fp) => Finding::warn(
+            format!(
+                "Robot Web Services at {url}: {}/{} readable, but its certificate is not pinned \
+                 (SHA-256 {})",
+                cfg.target.module,
+                abb_egm::rws::STATE_SYMBOLS[0],
+                abb_egm::rws::fingerprint_text(&fp)
+            ),
+            "after checking it on the controller, set robot.rws_fingerprint to that SHA-256",
+        ),
+        Err(e) => Finding::fail(
+            format!("Robot Web Services at {url}: {e}"),
+            "check robot.rws, the user and password, that the generated module is loaded in the \
+             task, and that the controller runs RobotWare 7 (RWS 2.0)",
+        ),
+    }
 }
 
 /// A signal-flow context (`.rsix`) beside the Ethernet config: its POSCORR against the cell file's.

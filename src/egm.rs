@@ -220,8 +220,9 @@ pub fn egm_config(a: &crate::args::EgmConfigArgs) -> Result<Vec<std::path::PathB
 /// applies the path corrections it gets to the scenario's plant and workpiece; a simulated FT 300 on
 /// a pseudo-terminal (linked at `sensor_link`) measures that workpiece for the client's `[sensor]`;
 /// the scenario's robot program, if any, runs on the controller (its command in `RAPIDfromRobot`),
-/// and reads its state from a UDP port standing in for Robot Web Services (the client's
-/// `robot.state_to`). The controller starts once the client's sensor has started its stream (the
+/// and reads its state from the controller's Robot Web Services endpoint (the simulated one,
+/// [`sim::rws::RwsServer`]: HTTPS on loopback; the client's `robot.rws` and `rws_fingerprint`, which
+/// this prints). The controller starts once the client's sensor has started its stream (the
 /// client is then about to listen), and stops after the scenario's duration. Loopback only.
 /// Returns the exit status: 0 when the controller ran its course, 3 when it ended early.
 pub fn dry_run(
@@ -263,10 +264,9 @@ pub fn dry_run(
         sim::ati_node::WorldSource::measured(world.clone()),
     )
     .context("simulated FT 300")?;
-    let state_sock =
-        std::net::UdpSocket::bind((Ipv4Addr::LOCALHOST, 0)).context("the process state's port")?;
-    state_sock.set_read_timeout(Some(Duration::from_millis(50)))?;
-    let state_addr = state_sock.local_addr()?;
+    let mut rws =
+        sim::rws::RwsServer::start(sim::rws::RwsServerConfig::default(), irc5.rapid_variables())
+            .context("the simulated controller's Robot Web Services")?;
     println!(
         "simulated IRC5 ({} ms, path-correction range {:.1} mm) sending EgmRobot to {client} from {}",
         period.as_millis(),
@@ -279,8 +279,10 @@ pub fn dry_run(
     );
     match process {
         Some(_) => println!(
-            "robot program: {} (its command in RAPIDfromRobot.dnum); its state from robot.state_to = \"{state_addr}\"",
-            spec.scenario.name
+            "robot program: {} (its command in RAPIDfromRobot.dnum); its state over Robot Web Services: robot.rws = \"{}\", rws_fingerprint = \"{}\"",
+            spec.scenario.name,
+            rws.url(),
+            abb_egm::rws::fingerprint_text(&rws.fingerprint())
         ),
         None => {
             println!("robot program: none (the client runs force control from its first cycle)")
@@ -300,39 +302,32 @@ pub fn dry_run(
     }
     thread::sleep(Duration::from_millis(500));
     println!("client's sensor streaming: EGM starts");
-    let vars = irc5.rapid_variables();
     let abort = irc5.abort_handle();
     let done = Arc::new(AtomicBool::new(false));
     let helper = {
         let done = done.clone();
         thread::Builder::new()
-            .name("sim-irc5-rws".into())
+            .name("sim-irc5-stop".into())
             .spawn(move || {
-                let mut buf = [0u8; 64];
-                let mut states = 0u64;
                 while !done.load(Ordering::Relaxed) {
                     if stop.load(Ordering::Relaxed) {
                         abort.store(true, Ordering::Relaxed);
                     }
-                    if let Ok((n, _)) = state_sock.recv_from(&mut buf)
-                        && let Some(v) = crate::robot::UdpState::decode(&buf[..n])
-                    {
-                        vars.write(v);
-                        states += 1;
-                    }
+                    thread::sleep(Duration::from_millis(20));
                 }
-                states
             })?
     };
     let mut mech = world.clone();
     let report = irc5.run(&mut mech);
     done.store(true, Ordering::Relaxed);
-    let states = helper.join().unwrap_or(0);
+    let _ = helper.join();
+    rws.stop();
+    let states = rws.stats().writes.load(Ordering::Relaxed);
     let s = device.stats();
     device.stop().context("simulated FT 300")?;
     print_irc5(&report);
     println!(
-        "  process states received: {states}; FT 300 frames sent: {}",
+        "  process variables written over RWS: {states}; FT 300 frames sent: {}",
         s.frames
     );
     let w = sim::world::lock(&world);

@@ -31,7 +31,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, anyhow, bail};
 use controller::Tuning;
-use hal::{Correction, Cycle, ErrorKind, ProcessState, RobotLink};
+use hal::{Correction, Cycle, ErrorKind, RobotLink};
 use serde::Deserialize;
 use serde::de::Error as _;
 
@@ -57,7 +57,17 @@ const RSI: &[&str] = &[
     "spin_us",
 ];
 /// ABB EGM's own options.
-const EGM: &[&str] = &["correction_mm", "egm_settings", "command_slot", "state_to"];
+const EGM: &[&str] = &[
+    "correction_mm",
+    "egm_settings",
+    "command_slot",
+    "rws",
+    "rws_user",
+    "rws_password",
+    "rws_task",
+    "rws_module",
+    "rws_fingerprint",
+];
 
 /// The robot side of a cell.
 #[derive(Clone, Debug, PartialEq)]
@@ -172,11 +182,118 @@ pub struct EgmOptions {
     /// Index in `RAPIDfromRobot.dnum` of the process mode (force, ramp and segment follow).
     #[serde(default)]
     pub command_slot: usize,
-    /// Where the process state goes back to the RAPID program. EGM's path correction cannot carry it
-    /// and the Robot Web Services transport is not implemented: the only receiver is the simulated
-    /// IRC5 of `forcecell sim --external-robot ADDR --robot egm`, which prints its address.
+    /// Where the process state goes back to the RAPID program: the controller's Robot Web Services
+    /// 2.0, `https://IP[:PORT]` (EGM's path correction cannot carry it; [`abb_egm::rws`]).
     #[serde(default)]
-    pub state_to: Option<SocketAddr>,
+    pub rws: Option<String>,
+    /// RWS user (the controller's shipped "Default User" when absent).
+    #[serde(default)]
+    pub rws_user: Option<String>,
+    /// RWS password (the shipped "robotics" when absent).
+    #[serde(default)]
+    pub rws_password: Option<String>,
+    /// The RAPID task of the module (`T_ROB1` when absent).
+    #[serde(default)]
+    pub rws_task: Option<String>,
+    /// The module declaring `fc_phase`, `fc_force`, `fc_fault` (`egm-config`'s `FcEgm` when absent).
+    #[serde(default)]
+    pub rws_module: Option<String>,
+    /// The controller certificate's SHA-256 (`openssl x509 -fingerprint -sha256`); without it the
+    /// first certificate is accepted and its fingerprint printed at the end, to be pinned.
+    #[serde(default)]
+    pub rws_fingerprint: Option<String>,
+}
+
+impl EgmOptions {
+    /// The state channel's configuration, checked (`None`: no `rws`).
+    pub fn rws_config(&self) -> Result<Option<abb_egm::RwsConfig>> {
+        use abb_egm::rws;
+        let Some(url) = &self.rws else {
+            if self.rws_user.is_some()
+                || self.rws_password.is_some()
+                || self.rws_task.is_some()
+                || self.rws_module.is_some()
+                || self.rws_fingerprint.is_some()
+            {
+                bail!(
+                    "robot.rws_* options need robot.rws = \"https://IP[:PORT]\" (the controller's Robot Web Services)"
+                );
+            }
+            return Ok(None);
+        };
+        let bad = |why: &str| {
+            anyhow!(
+                "robot.rws = {url:?}: {why}; write it as \"https://IP\" or \"https://IP:PORT\" \
+                 (the controller's Robot Web Services 2.0, HTTPS; port {} when absent)",
+                rws::DEFAULT_PORT
+            )
+        };
+        let rest = url.strip_prefix("https://").ok_or_else(|| {
+            bad("not https:// (RWS 2.0 is HTTPS only; RobotWare 6's RWS 1.0 is not supported)")
+        })?;
+        let rest = rest.strip_suffix('/').unwrap_or(rest);
+        let addr: SocketAddr = match rest.parse::<SocketAddr>() {
+            Ok(a) => a,
+            Err(_) => match rest
+                .trim_start_matches('[')
+                .trim_end_matches(']')
+                .parse::<IpAddr>()
+            {
+                Ok(ip) => SocketAddr::new(ip, rws::DEFAULT_PORT),
+                Err(_) => return Err(bad("not an IP address with an optional port")),
+            },
+        };
+        if addr.port() == 0 || addr.ip().is_unspecified() {
+            return Err(bad("port 0 or an unspecified address"));
+        }
+        let user = self
+            .rws_user
+            .clone()
+            .unwrap_or_else(|| rws::DEFAULT_USER.into());
+        let password = self
+            .rws_password
+            .clone()
+            .unwrap_or_else(|| rws::DEFAULT_PASSWORD.into());
+        if user.is_empty() || user.contains(':') || user.chars().any(char::is_control) {
+            bail!("robot.rws_user must be a non-empty name without ':' or control characters");
+        }
+        if password.chars().any(char::is_control) {
+            bail!("robot.rws_password must not hold control characters");
+        }
+        let task = self
+            .rws_task
+            .clone()
+            .unwrap_or_else(|| rws::DEFAULT_TASK.into());
+        let module = self
+            .rws_module
+            .clone()
+            .unwrap_or_else(|| abb_egm::rapid::DEFAULT_MODULE.into());
+        for (key, v) in [("rws_task", &task), ("rws_module", &module)] {
+            abb_egm::rapid::rapid_name(v).map_err(|e| anyhow!("robot.{key}: {e}"))?;
+        }
+        let fingerprint = match &self.rws_fingerprint {
+            Some(t) => Some(rws::parse_fingerprint(t).ok_or_else(|| {
+                anyhow!(
+                    "robot.rws_fingerprint must be a SHA-256 as 64 hex digits (colons allowed), as \
+                     `openssl x509 -noout -fingerprint -sha256` prints it, got {t:?}"
+                )
+            })?),
+            None => None,
+        };
+        Ok(Some(abb_egm::RwsConfig {
+            addr,
+            server_name: None,
+            target: rws::RwsTarget {
+                authority: addr.to_string(),
+                user,
+                password,
+                task,
+                module,
+            },
+            fingerprint,
+            timeout: abb_egm::rws_channel::DEFAULT_TIMEOUT,
+        }))
+    }
 }
 
 /// The largest late-reply budget accepted (`robot.timeout`): more than a minute of late replies at
@@ -405,12 +522,12 @@ impl RobotConfig {
                         o.command_slot
                     );
                 }
-                if self.process && o.state_to.is_none() {
+                let rws = o.rws_config()?;
+                if self.process && rws.is_none() {
                     bail!(
-                        "robot.process = true over EGM needs robot.state_to: a path correction cannot \
-                         carry the process state back to RAPID and the Robot Web Services transport is \
-                         not implemented (a simulated IRC5 prints its address; on a real robot run with \
-                         process = false)"
+                        "robot.process = true over EGM needs robot.rws = \"https://IP\": a path \
+                         correction cannot carry the process state back to RAPID, Robot Web Services \
+                         writes it (RobotWare 7; or run with process = false)"
                     );
                 }
             }
@@ -475,7 +592,7 @@ impl RobotConfig {
         lc.validate().map_err(|e| anyhow!("robot: {e}"))?;
         Ok(RobotSpec::Egm {
             link: lc,
-            state_to: o.state_to,
+            state: if self.process { o.rws_config()? } else { None },
         })
     }
 }
@@ -526,8 +643,8 @@ pub enum RobotSpec {
     Egm {
         /// The link.
         link: abb_egm::LinkConfig,
-        /// The state channel's receiver.
-        state_to: Option<SocketAddr>,
+        /// The process state's way back (Robot Web Services), with `process = true`.
+        state: Option<abb_egm::RwsConfig>,
     },
 }
 
@@ -538,70 +655,16 @@ impl RobotSpec {
             Self::Rsi(lc) => {
                 CellRobot::Rsi(Box::new(kuka_rsi::RsiLink::bind(lc).context("RSI link")?))
             }
-            Self::Egm { link, state_to } => {
+            Self::Egm { link, state } => {
                 let mut l = abb_egm::EgmLink::bind(link).context("EGM link")?;
-                if let Some(to) = state_to {
-                    l.set_state_channel(Box::new(UdpState::new(to)?));
+                if let Some(cfg) = state {
+                    l.set_state_channel(Box::new(
+                        abb_egm::RwsChannel::start(cfg).context("the RWS writer")?,
+                    ));
                 }
                 CellRobot::Egm(Box::new(l))
             }
         })
-    }
-}
-
-/// The process state as three little-endian `f64` (phase, force, fault: `process::state_to_numbers`)
-/// in one datagram to the simulated IRC5's stand-in for Robot Web Services.
-pub struct UdpState {
-    sock: std::net::UdpSocket,
-    to: SocketAddr,
-}
-
-/// Bytes of one state datagram.
-pub const STATE_DATAGRAM: usize = 8 * abb_egm::process::STATE_NUMBERS;
-
-impl UdpState {
-    /// A sender to `to`.
-    pub fn new(to: SocketAddr) -> Result<Self> {
-        let bind: SocketAddr = if to.is_ipv4() {
-            "0.0.0.0:0".parse()?
-        } else {
-            "[::]:0".parse()?
-        };
-        let sock = std::net::UdpSocket::bind(bind).context("state channel socket")?;
-        Ok(Self { sock, to })
-    }
-
-    /// The datagram of `state`.
-    pub fn encode(state: &ProcessState) -> [u8; STATE_DATAGRAM] {
-        let mut out = [0u8; STATE_DATAGRAM];
-        for (chunk, v) in out
-            .chunks_exact_mut(8)
-            .zip(abb_egm::process::state_to_numbers(state))
-        {
-            chunk.copy_from_slice(&v.to_le_bytes());
-        }
-        out
-    }
-
-    /// The numbers of a datagram (`None`: not a state datagram).
-    pub fn decode(bytes: &[u8]) -> Option<[f64; abb_egm::process::STATE_NUMBERS]> {
-        if bytes.len() != STATE_DATAGRAM {
-            return None;
-        }
-        let mut v = [0.0; abb_egm::process::STATE_NUMBERS];
-        for (x, chunk) in v.iter_mut().zip(bytes.chunks_exact(8)) {
-            *x = f64::from_le_bytes(chunk.try_into().ok()?);
-        }
-        Some(v)
-    }
-}
-
-impl abb_egm::StateChannel for UdpState {
-    fn publish(&mut self, state: &ProcessState) -> Result<(), String> {
-        self.sock
-            .send_to(&Self::encode(state), self.to)
-            .map(|_| ())
-            .map_err(|e| format!("state to {}: {e}", self.to))
     }
 }
 
@@ -697,7 +760,12 @@ impl CellRobot {
                     println!("{w}");
                 }
             }
-            Self::Egm(l) => crate::egm::print_link(l.diagnostics()),
+            Self::Egm(l) => {
+                crate::egm::print_link(l.diagnostics());
+                if let Some(r) = l.state_report() {
+                    println!("  {r}");
+                }
+            }
         }
     }
 }
@@ -784,26 +852,29 @@ mod tests {
             ("cycle_ms = 6\n", "multiple of 4"),
             ("correction_mm = 0.0\n", "robot.correction_mm"),
             ("correction_mm = nan\n", "robot.correction_mm"),
-            ("process = true\n", "robot.state_to"),
+            ("process = true\n", "robot.rws"),
+            ("rws = \"http://10.0.0.1\"\n", "https"),
+            ("rws = \"https://robot.local\"\n", "IP address"),
+            ("rws = \"https://10.0.0.1:0\"\n", "port 0"),
+            ("rws_user = \"x\"\n", "need robot.rws"),
+            (
+                "rws = \"https://10.0.0.1\"\nrws_fingerprint = \"AB:CD\"\n",
+                "SHA-256",
+            ),
+            (
+                "rws = \"https://10.0.0.1\"\nrws_module = \"1x\"\n",
+                "rws_module",
+            ),
+            (
+                "rws = \"https://10.0.0.1\"\nrws_user = \"a:b\"\n",
+                "rws_user",
+            ),
             ("watchdog_cycles = 0\n", "watchdog_cycles"),
         ] {
             let r = parse(&format!("{base}{extra}")).unwrap();
             let e = r.validate().unwrap_err().to_string();
             assert!(e.contains(want), "{extra}: {e}");
         }
-    }
-
-    #[test]
-    fn the_state_datagram_round_trips() {
-        let s = ProcessState {
-            phase: hal::ProcessPhase::Pressing,
-            force: 19.5,
-            fault: hal::ProcessFault::None,
-        };
-        let bytes = UdpState::encode(&s);
-        let v = UdpState::decode(&bytes).unwrap();
-        assert_eq!(v, abb_egm::process::state_to_numbers(&s));
-        assert_eq!(UdpState::decode(&bytes[1..]), None);
     }
 
     #[test]

@@ -209,10 +209,10 @@ impl Printer {
     /// waits, never allocates.
     pub fn offer(&mut self, r: &CycleReport) {
         let due = self.status.tick(r);
-        if due.line || due.warning {
-            if let Some(tx) = &self.tx {
-                let _ = tx.try_send((*r, self.status.clone(), due));
-            }
+        if (due.line || due.warning)
+            && let Some(tx) = &self.tx
+        {
+            let _ = tx.try_send((*r, self.status.clone(), due));
         }
     }
 

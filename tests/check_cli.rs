@@ -294,5 +294,69 @@ fn each_broken_egm_cell_is_not_ready_and_names_its_problem() {
     });
     let (code, text) = check(&path);
     assert_eq!(code, Some(2), "{text}");
-    assert!(text.contains("needs robot.state_to"), "{text}");
+    assert!(text.contains("needs robot.rws"), "{text}");
+}
+
+/// With the process contract over EGM, `check` reads `fc_phase` from the controller's Robot Web
+/// Services (the simulated one here, HTTPS on loopback) and writes nothing: ready with the pinned
+/// certificate, a warning naming the certificate without a pin, not ready with a wrong pin or password.
+#[test]
+fn check_reads_the_controllers_robot_web_services_with_the_pinned_certificate() {
+    let dir = tempfile::tempdir().unwrap();
+    let _sensor = ft300(dir.path(), "0.0");
+    let vars = sim::irc5::RapidVariables::default();
+    let server =
+        sim::rws::RwsServer::start(sim::rws::RwsServerConfig::default(), vars.clone()).unwrap();
+    let url = server.url();
+    let pin = abb_egm::rws::fingerprint_text(&server.fingerprint());
+    let with = |extra: String| {
+        let url = url.clone();
+        move |s: String| {
+            s.replace(
+                "process = false",
+                &format!("process = true\nrws = \"{url}\"\n{extra}"),
+            )
+        }
+    };
+    let path = egm_cell(
+        dir.path(),
+        49331,
+        None,
+        with(format!("rws_fingerprint = \"{pin}\"")),
+    );
+    let (code, text) = check(&path);
+    assert_eq!(code, Some(0), "{text}");
+    assert!(
+        text.contains(&format!(
+            "ok    Robot Web Services at {url}: FcEgm/fc_phase readable, the pinned certificate presented"
+        )),
+        "{text}"
+    );
+    let path = egm_cell(dir.path(), 49331, None, with(String::new()));
+    let (code, text) = check(&path);
+    assert_eq!(code, Some(0), "{text}");
+    assert!(
+        text.contains(&format!("its certificate is not pinned (SHA-256 {pin})")),
+        "{text}"
+    );
+    for (extra, want) in [
+        (
+            format!("rws_fingerprint = \"{}\"", "00:".repeat(31) + "00"),
+            "is not the pinned one",
+        ),
+        (
+            format!("rws_fingerprint = \"{pin}\"\nrws_password = \"nope\""),
+            "401",
+        ),
+        (
+            format!("rws_fingerprint = \"{pin}\"\nrws_module = \"Other\""),
+            "404",
+        ),
+    ] {
+        let path = egm_cell(dir.path(), 49331, None, with(extra.clone()));
+        let (code, text) = check(&path);
+        assert_eq!(code, Some(1), "{extra}: {text}");
+        assert!(text.contains(want), "{extra}: {want} in\n{text}");
+    }
+    assert_eq!(vars.read(), None, "check writes nothing");
 }

@@ -38,13 +38,17 @@ fn run_with_an_egm_cell_holds_the_programmed_force_against_the_dry_run() {
         ],
         dir.path(),
     );
-    let (robot_seen, robot_out) = read_until(&mut robot, "robot.state_to = \"");
-    let state_to = robot_seen
-        .split("robot.state_to = \"")
-        .nth(1)
-        .and_then(|r| r.split('"').next())
-        .unwrap()
-        .to_string();
+    let (robot_seen, robot_out) = read_until(&mut robot, "rws_fingerprint = \"");
+    let quoted = |key: &str| {
+        robot_seen
+            .split(&format!("{key} = \""))
+            .nth(1)
+            .and_then(|r| r.split('"').next())
+            .unwrap_or_else(|| panic!("no {key} in {robot_seen}"))
+            .to_string()
+    };
+    let (rws, fingerprint) = (quoted("robot.rws"), quoted("rws_fingerprint"));
+    assert!(rws.starts_with("https://127.0.0.1:"), "{rws}");
     let cell = format!(
         r#"tuning = "robust-100hz"
 record = "rec"
@@ -55,7 +59,8 @@ listen = "{listen}"
 robot_ip = "127.0.0.1"
 correction_mm = 10.0
 process = true
-state_to = "{state_to}"
+rws = "{rws}"
+rws_fingerprint = "{fingerprint}"
 
 [sensor]
 kind = "robotiq"
@@ -87,6 +92,28 @@ effective_radius = 0.02
     );
     assert!(text.contains("Stop "), "{text}");
     assert!(text.contains("EGM link: "), "{text}");
+    // The process state went back over Robot Web Services (HTTPS, the pinned certificate): every
+    // state written, none failed; the controller counted the variables.
+    let rws_line = text
+        .lines()
+        .find(|l| l.contains("RWS: "))
+        .unwrap_or_else(|| panic!("an RWS line in {text}"));
+    assert!(rws_line.contains(" 0 failures"), "{rws_line}");
+    let states: u64 = rws_line
+        .split("RWS: ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap();
+    // APPROACH, RAMP, PRESSING, RELEASE, OFF at least (force changes are written too).
+    assert!(states >= 5, "{rws_line}");
+    assert!(
+        robot_text.contains(&format!(
+            "process variables written over RWS: {}",
+            3 * states
+        )),
+        "{robot_text}\n{rws_line}"
+    );
 
     // The recording: MCAP, CSV, PNG and the summary beside it.
     let names: Vec<String> = std::fs::read_dir(dir.path().join("rec"))

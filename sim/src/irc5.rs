@@ -51,6 +51,17 @@ impl RapidVariables {
     pub fn write(&self, v: [f64; STATE_NUMBERS]) {
         *self.0.lock().unwrap_or_else(|e| e.into_inner()) = Some(v);
     }
+
+    /// Write number `index` alone (one `PERS num`, as Robot Web Services writes it); the others keep
+    /// their values, the module's initial zeros (OFF, 0 N, no fault) before any write.
+    pub fn write_one(&self, index: usize, value: f64) {
+        let mut v = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        let mut all = v.unwrap_or([0.0; STATE_NUMBERS]);
+        if let Some(slot) = all.get_mut(index) {
+            *slot = value;
+            *v = Some(all);
+        }
+    }
 }
 
 impl StateChannel for RapidVariables {

@@ -10,6 +10,7 @@ pub mod irc5;
 pub mod krc;
 pub mod plant;
 pub mod program;
+pub mod rws;
 pub mod sensor_model;
 pub mod vcan_env;
 pub mod world;

@@ -8,6 +8,8 @@
 //! * [`process`] — the force process's command in `RAPIDfromRobot`, and the state's way back.
 //! * [`limits`] — the envelope and rate limit inside the robot's configured range.
 //! * [`rapid`] — the robot controller's side as text: UDPUC entry, settings, the RAPID module.
+//! * [`rws`], [`rws_channel`] — the process state back to RAPID over Robot Web Services 2.0 (HTTPS):
+//!   the requests and responses without I/O, and the writer thread with its pinned TLS.
 //! * [`wire`] — the one place SI becomes mm and ms and the tool frame becomes the sensor frame.
 //!
 //! The simulated IRC5 in `forcecell-sim` uses the same codec for the opposite direction. None of it
@@ -20,6 +22,8 @@ pub mod link;
 pub mod msg;
 pub mod process;
 pub mod rapid;
+pub mod rws;
+pub mod rws_channel;
 pub mod session;
 pub mod wire;
 
@@ -27,5 +31,6 @@ pub use diag::{Counters, Diagnostics, Latency, RobotStatus};
 pub use limits::{CorrectionRange, Limits};
 pub use link::{EgmLink, LinkConfig, LinkError, RobotFilter};
 pub use process::{CommandSlots, ProcessError, StateChannel};
+pub use rws_channel::{RwsChannel, RwsConfig, RwsReport};
 pub use session::{EgmSession, Malformed, Outgoing, Rejected};
 pub use wire::SensorFrame;

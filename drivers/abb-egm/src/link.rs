@@ -391,6 +391,11 @@ impl EgmLink {
         })
     }
 
+    /// What the state channel did, if it has something to say ([`StateChannel::report`]).
+    pub fn state_report(&self) -> Option<String> {
+        self.state.as_ref().and_then(|c| c.report())
+    }
+
     /// Where the process state goes back to the RAPID program (see [`crate::process`]). Without one,
     /// the state of each correction is dropped.
     pub fn set_state_channel(&mut self, channel: Box<dyn StateChannel>) {

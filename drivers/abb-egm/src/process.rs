@@ -15,11 +15,11 @@
 //! does not read). The state therefore goes back on a second channel, on change only: a
 //! [`StateChannel`] the link calls from `reply` whenever the state differs from the one last published,
 //! before the correction is sent. Its numbers for RAPID are [`state_to_numbers`]: phase code, force in
-//! N, fault code. The transport to a real controller is **not implemented yet**: the intended one is Robot
-//! Web Services writing three RAPID variables (or signals) that the program's bounded `WaitUntil`s read
-//! (RobotWare 6 with RWS 1.0 over HTTP, RobotWare 7 with RWS 2.0 over HTTPS; a request takes milliseconds
-//! to tens of milliseconds, well inside a phase change but nothing for every cycle). The simulated IRC5
-//! implements the channel as its RAPID variables, in process.
+//! N, fault code. To a controller they go over Robot Web Services 2.0 (RobotWare 7, HTTPS:
+//! [`crate::rws`], [`crate::rws_channel`]), written to three `PERS num` that the program's bounded
+//! `WaitUntil`s read (a request takes milliseconds, well inside a phase change but nothing for every
+//! cycle). The simulated IRC5 serves the same requests (`forcecell-sim`'s `rws` module) and also takes
+//! the channel in process as its RAPID variables.
 
 use core::fmt;
 
@@ -157,6 +157,11 @@ pub fn state_from_numbers(v: [f64; STATE_NUMBERS]) -> Result<ProcessState, Proce
 pub trait StateChannel: Send {
     /// Publish `state`.
     fn publish(&mut self, state: &ProcessState) -> Result<(), String>;
+
+    /// One line on what the channel did, for the end of a run (`None`: nothing to say).
+    fn report(&self) -> Option<String> {
+        None
+    }
 }
 
 #[cfg(test)]

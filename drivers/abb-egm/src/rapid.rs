@@ -80,6 +80,9 @@ impl SettingsFacts {
     }
 }
 
+/// The generated module's default name (its state variables' module for Robot Web Services).
+pub const DEFAULT_MODULE: &str = "FcEgm";
+
 impl EgmCellConfig {
     /// Defaults for a robot controller reaching forcecell at `host`.
     pub fn new(host: Ipv4Addr) -> Self {
@@ -88,7 +91,7 @@ impl EgmCellConfig {
             port: DEFAULT_PORT,
             device: "FcEgmDevice".into(),
             ext_motion: "FcPathCorr".into(),
-            module: "FcEgm".into(),
+            module: DEFAULT_MODULE.into(),
             robot: "ROB_1".into(),
             tool: "tool0".into(),
             wobj: "wobj0".into(),
@@ -220,8 +223,10 @@ impl EgmCellConfig {
              argument is refused, and the pass can only run without the process command (cell file\n   \
              robot.process = false). RobotWare 6 (IRC5) has no RAPIDfromRobot at all. The state\n   \
              (fc_phase, fc_force, fc_fault) has no way back in a path correction (EgmSensorPathCorr\n   \
-             carries no RAPID data): Robot Web Services writing those PERS numbers is intended and\n   \
-             not implemented, so on a real controller the handshake's bounded waits time out."
+             carries no RAPID data): forcecell writes those PERS numbers over Robot Web Services 2.0\n   \
+             (HTTPS; cell file robot.rws = \"https://CONTROLLER-IP\", rws_user, rws_password,\n   \
+             rws_fingerprint), in AUTO (in manual mode the pendant must grant write access). Tested\n   \
+             against the project's simulated controller, curl and Python only: unverified on a controller."
         );
         s
     }
@@ -252,7 +257,8 @@ impl EgmCellConfig {
     !
     ! RobotWare 7: \DataToSensor fills RAPIDfromRobot.dnum from fc_cmd every EGM cycle. *Unverified*
     ! that EGMActMove takes \DataToSensor (public RAPID shows it on EGMActPose and EGMActJoint), and
-    ! how forcecell writes fc_phase/fc_force/fc_fault (Robot Web Services is intended, not implemented).
+    ! forcecell writes fc_phase/fc_force/fc_fault over Robot Web Services 2.0 (HTTPS; unverified on a
+    ! controller; in manual mode the pendant must grant write access).
 
     CONST num FC_OFF := 0;
     CONST num FC_PRESS := 1;
