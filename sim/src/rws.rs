@@ -440,8 +440,10 @@ mod tests {
         let addr = probe.local_addr().unwrap();
         drop(probe);
         let vars = RapidVariables::default();
-        let mut sc = RwsServerConfig::default();
-        sc.bind = addr;
+        let sc = RwsServerConfig {
+            bind: addr,
+            ..RwsServerConfig::default()
+        };
         let mut cfg = {
             let s =
                 RwsServer::start(RwsServerConfig::default(), RapidVariables::default()).unwrap();
