@@ -2,7 +2,8 @@
 //! thresholds, the re-identification and the command in contact. Each takes the step's [`Context`]
 //! and the typed outputs of the stages before it ([`Signals`], [`SurfaceStatus`], [`Estimate`]).
 
-use super::identify::{Estimate, StepState};
+use super::contact::{LandInput, Search, SearchInput};
+use super::identify::{Estimate, InContact, StepState, TouchDown};
 use super::noise::NoiseEstimate;
 use super::observer::{SurfaceStatus, View};
 use super::{Context, RobustLaw, Signals, contact};
@@ -95,19 +96,18 @@ impl RobustLaw {
     /// A contact declared at the raw `(s.x, s.f)`: identification begins (a re-contact tells it how
     /// the search went: a surface found moved, or the fast search's momentum, holds the recursion),
     /// the observers restart at the surface `k̂_c` puts there, the integral at zero.
-    pub(super) fn begin_contact(&mut self, s: &Signals, from_approach: bool) {
-        let (x, f) = (s.x, s.f);
-        self.identify.begin_contact(x, f, from_approach);
-        self.observer.restart(s.xf - s.ff / self.identify.kc());
+    pub(super) fn begin_contact(&mut self, s: &Signals, from_approach: bool, search: &Search) {
+        let kc = self.identify.touch_down(&TouchDown {
+            x: s.x,
+            f: s.f,
+            from_approach,
+            search,
+            f_r: self.p.f_r,
+            max_surface_speed: self.p.estimator.max_surface_speed,
+            hold: self.p.observer.motion_hold,
+        });
+        self.observer.restart(s.xf - s.ff / kc);
         self.response.begin_contact();
-        if !from_approach {
-            let (v, hold) = (
-                self.p.estimator.max_surface_speed,
-                self.p.observer.motion_hold,
-            );
-            self.identify
-                .recontact(x, f, &self.contact.search(), self.p.f_r, v, hold);
-        }
     }
 
     /// In contact: re-identify `k̂_c` when the environment changed under a steady contact, and run the
@@ -118,62 +118,62 @@ impl RobustLaw {
         s: &Signals,
         ctx: &Context,
         lift: f64,
+        steady: bool,
         surface: &SurfaceStatus,
         ev: &mut Events,
-    ) {
+    ) -> bool {
         let dt = ctx.dt;
         let before = self.identify.estimate();
         // The environment changed under a steady contact on a still surface: the observed
         // surface jumped, or the force left its band (a stiffness change the observer follows
         // smoothly). Re-identify from the transient that follows.
         let off = (s.ff - ctx.set_point).abs() > ctx.band(ctx.sigma_filtered());
-        let persist = ctx.step_time / 2.0;
-        let calm = self.contact.steady()
+        let calm = steady
             && !surface.moving
             && !before.fitting
             && !before.held
             && !surface.drifted
             && surface.still;
-        let excursion = self.identify.excursion(off, calm, persist, dt);
-        if excursion || (calm && surface.jump_on_still_surface) {
-            // The loop answers the jump within its lead time and the conditioning's step time.
-            let early = ctx.lead + ctx.step_time;
-            let slowest = self.p.observer.feedforward_speed;
-            self.identify.refit(s.x, s.f, early, slowest);
-        }
-        let disturbed = surface.disturbed;
         let jumped = calm && (s.f - ctx.set_point).abs() > ctx.band(ctx.noise.std);
-        let id = self.identify.step(
-            s.x,
-            s.f,
-            s.v_raw,
-            s.ff,
+        let id = self.identify.in_contact(&InContact {
+            x: s.x,
+            f: s.f,
+            v: s.v_raw,
+            ff: s.ff,
             dt,
+            off,
+            calm,
+            persist: ctx.step_time / 2.0,
+            jump_on_still_surface: surface.jump_on_still_surface,
+            // The loop answers the jump within its lead time and the conditioning's step time.
+            early: ctx.lead + ctx.step_time,
+            slowest: self.p.observer.feedforward_speed,
             // The recursion learns nothing while the observer holds the surface for a moving one that
             // started after a calm contact, also on the samples where the predictor's own test does
             // not pass: the tool's answer to the force hides a surface that just started to move on
             // some of them, and learnt in between a sine starting at 3.1 mm/s on 300 kN/m read as a
             // surface 26 % softer. (Right after a touch-down the motion the observer sees is as often
             // a fresh `k̂_c`'s ringing, which the recursion must learn from.)
-            StepState {
+            state: StepState {
                 moving: surface.moving || surface.moving_after_calm,
                 drifted: surface.drifted,
                 first: ev.contact,
                 lifted: s.f < lift,
-                disturbed,
+                disturbed: surface.disturbed,
                 jumped,
                 filtered: self.p.cell.sensor_delay > 0.0,
             },
-            ctx.noise.var,
-            self.p.response.noise_floor,
-        );
+            noise_var: ctx.noise.var,
+            noise_floor: self.p.response.noise_floor,
+        });
         if id.seeded {
             // The observed surface is x − f/k̂_c: a k̂_c that moves would show it moving. While the
             // transient is identified the observers restart on every new k̂_c, at rest.
-            self.observer.restart(s.xf - s.ff / self.identify.kc());
-            self.contact.identified();
+            self.observer
+                .restart(s.xf - s.ff / self.identify.estimate().kc);
         }
         ev.estimator_bound |= id.projected;
+        id.seeded
     }
 
     /// The command before limits: out of contact the state machine's (approach, search, retract), in
@@ -185,6 +185,7 @@ impl RobustLaw {
         th: &contact::Thresholds,
         ctx: &Context,
         est: &Estimate,
+        identified: bool,
     ) -> f64 {
         let (anchor, dt) = (ctx.anchor_time(), ctx.dt);
         self.stopping
@@ -197,18 +198,29 @@ impl RobustLaw {
             th.strong,
             &self.stopping,
         );
-        match self
-            .contact
-            .command(x, self.limiter.command(), &speeds, anchor, dt)
-        {
+        let u = self.limiter.command();
+        let search = self.contact.search_command(&SearchInput {
+            x,
+            u,
+            speeds: &speeds,
+            anchor,
+            dt,
+            identified,
+        });
+        match search {
             Some(u) => u,
             None => {
                 let want = self.in_contact(s, ctx, est);
-                let open = est.onset_open;
-                let confirm = ctx.step_time;
-                let touching = self.contact.touch(s.ff, th, confirm, dt);
-                self.contact
-                    .land(want, self.limiter.command(), &speeds, open, touching, dt)
+                self.contact.landing_command(&LandInput {
+                    want,
+                    u,
+                    speeds: &speeds,
+                    open: est.onset_open,
+                    ff: s.ff,
+                    th,
+                    confirm: ctx.step_time,
+                    dt,
+                })
             }
         }
     }

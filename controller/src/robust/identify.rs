@@ -21,6 +21,7 @@ mod moved;
 mod params;
 mod refit;
 mod steady;
+pub use landing::TouchDown;
 pub use params::{IdentifyParams, StepState};
 use refit::Refit;
 
@@ -34,6 +35,39 @@ pub struct Identified {
     pub seeded: bool,
     /// An estimate was projected into the configured bounds.
     pub projected: bool,
+}
+
+/// A step in contact's input ([`Identifier::in_contact`]).
+#[derive(Clone, Copy, Debug)]
+pub struct InContact {
+    /// The raw position, m.
+    pub x: f64,
+    /// The raw force, N.
+    pub f: f64,
+    /// The raw position's velocity, m/s.
+    pub v: f64,
+    /// The conditioned force, N.
+    pub ff: f64,
+    /// The step, s.
+    pub dt: f64,
+    /// The force is out of its band around the set-point.
+    pub off: bool,
+    /// A steady contact on a still surface, no transient being fitted or held.
+    pub calm: bool,
+    /// How long an excursion must last to be one, s.
+    pub persist: f64,
+    /// The observer saw a still surface jump.
+    pub jump_on_still_surface: bool,
+    /// A re-fit's samples begin this long after its start, s.
+    pub early: f64,
+    /// The slowest surface motion a re-fit tells from a change of stiffness, m/s.
+    pub slowest: f64,
+    /// What the law knows of the step.
+    pub state: StepState,
+    /// The sensor's noise variance, N².
+    pub noise_var: f64,
+    /// Its floor, N.
+    pub noise_floor: f64,
 }
 
 /// The identification's output for the rest of a step ([`Identifier::estimate`]).
@@ -163,15 +197,35 @@ impl Identifier {
     }
 
     /// Contact is lost: the transient is over.
-    pub fn lost(&mut self) {
+    fn lost(&mut self) {
         self.onset.stop();
+    }
+
+    /// One step in contact: a re-fit begins when the environment changed under a steady contact
+    /// ([`excursion`](Self::excursion), or a jump of a still surface), then the recursion's step
+    /// ([`step`](Self::step)).
+    pub fn in_contact(&mut self, i: &InContact) -> Identified {
+        let excursion = self.excursion(i.off, i.calm, i.persist, i.dt);
+        if excursion || (i.calm && i.jump_on_still_surface) {
+            self.refit(i.x, i.f, i.early, i.slowest);
+        }
+        self.step(
+            i.x,
+            i.f,
+            i.v,
+            i.ff,
+            i.dt,
+            i.state,
+            i.noise_var,
+            i.noise_floor,
+        )
     }
 
     /// One step in contact with the raw `(x, f)`, the raw position's velocity `v` and conditioned force
     /// `ff`, what the law knows of the step (`state`), and the sensor's noise `noise_var`, N², and its
     /// floor `noise_floor`, N.
     #[allow(clippy::too_many_arguments)]
-    pub fn step(
+    fn step(
         &mut self,
         x: f64,
         f: f64,

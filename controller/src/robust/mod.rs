@@ -101,6 +101,8 @@ pub struct RobustLaw {
     limiter: Limiter,
     stopping: Stopping,
     counts: EventCounts,
+    /// The contact state the last step ended in (its [`Output::state`]): the next step's input.
+    last_state: ContactState,
 }
 
 impl RobustLaw {
@@ -118,6 +120,7 @@ impl RobustLaw {
             limiter: Limiter::new(p.limits),
             stopping: Stopping::new(),
             counts: EventCounts::default(),
+            last_state: ContactState::Approach,
             p,
         })
     }
@@ -162,7 +165,8 @@ impl RobustLaw {
         self.set_params(p)
     }
 
-    fn output(&self, events: Events) -> Output {
+    fn output(&mut self, events: Events) -> Output {
+        self.last_state = self.contact.state();
         let k = self.identify.kc();
         let zc = self.observer.surface();
         Output {
@@ -187,6 +191,7 @@ impl ForceLaw for RobustLaw {
         self.response.reset(self.p.f_r);
         self.limiter.reset(x);
         self.counts = EventCounts::default();
+        self.last_state = ContactState::Approach;
     }
 
     fn step(&mut self, x: f64, f: f64, dt: f64) -> Output {
@@ -203,42 +208,38 @@ impl ForceLaw for RobustLaw {
         let noise = self.noise.step(f, dt);
         let ctx = self.context(dt, cycle, set_point, noise);
         if matches!(
-            self.contact.state(),
+            self.last_state,
             ContactState::Approach | ContactState::Reacquire
         ) {
             self.identify.remember(x, f, s.v_raw, cycle);
         }
         let receding = self.observer.receding();
         let th = self.thresholds(&ctx);
-        match self
+        let c = self
             .contact
-            .step(&s, &th, self.p.limits.max_force, receding, dt)
-        {
+            .step(&s, &th, self.p.limits.max_force, receding, dt);
+        match c.transition {
             Transition::None => {}
             Transition::ForceLimit => ev.force_limit = true,
             Transition::Contact { from_approach } => {
-                self.begin_contact(&s, from_approach);
+                self.begin_contact(&s, from_approach, &c.search);
                 ev.contact = true;
             }
             Transition::LiftOff => {
-                self.identify.lost();
-                if self.contact.state() == ContactState::Approach {
-                    // A touch-down taken back: nothing was learnt of a surface.
-                    self.identify.forget_touch_down();
-                }
+                // Back in the approach: a touch-down taken back, nothing was learnt of a surface.
+                self.identify.lift_off(c.state == ContactState::Approach);
                 self.signals.reset_force(f);
                 ev.lift_off = true;
             }
         }
-        let in_contact = self.contact.state() == ContactState::Contact;
+        let in_contact = c.state == ContactState::Contact;
         let surface = self
             .observer
             .hold(s.v_x, self.p.estimator.max_surface_speed, in_contact, dt);
-        if in_contact {
-            self.identify_in_contact(&s, &ctx, th.lift, &surface, &mut ev);
-        }
+        let identified =
+            in_contact && self.identify_in_contact(&s, &ctx, th.lift, c.steady, &surface, &mut ev);
         let est = self.identify.estimate();
-        let want = self.command(x, &s, &th, &ctx, &est);
+        let want = self.command(x, &s, &th, &ctx, &est, identified);
         if want.is_finite() {
             self.limiter.step(want, dt, &mut ev);
         } else {

@@ -28,6 +28,20 @@ pub enum Transition {
     ForceLimit,
 }
 
+/// What one step of the contact machine gives the rest of the law: the transition, and the state,
+/// the steadiness and the search as they are after it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ContactStep {
+    /// What the step did.
+    pub transition: Transition,
+    /// The state after it.
+    pub state: ContactState,
+    /// The contact has lasted longer than a bounce.
+    pub steady: bool,
+    /// The search that ended in this step's re-contact (meaningful on a re-contact).
+    pub search: Search,
+}
+
 /// The search that ended in a re-contact: where it began and how.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Search {
@@ -129,12 +143,12 @@ impl ContactMachine {
     }
 
     /// Whether the contact has lasted longer than a bounce (a steady contact), s.
-    pub fn steady(&self) -> bool {
+    fn steady(&self) -> bool {
         self.state == ContactState::Contact && self.in_contact >= self.p.bounce_time
     }
 
     /// The search that ended in a re-contact this step.
-    pub fn search(&self) -> Search {
+    fn search(&self) -> Search {
         Search {
             x_lost: self.x_lost,
             t_lost: self.t_lost,
@@ -150,6 +164,23 @@ impl ContactMachine {
     /// Advance with this step's signals; `max_force` is the force limit, N, and `receding` the observed
     /// surface's velocity away from the tool, m/s.
     pub fn step(
+        &mut self,
+        s: &Signals,
+        th: &Thresholds,
+        max_force: f64,
+        receding: f64,
+        dt: f64,
+    ) -> ContactStep {
+        let transition = self.advance(s, th, max_force, receding, dt);
+        ContactStep {
+            transition,
+            state: self.state,
+            steady: self.steady(),
+            search: self.search(),
+        }
+    }
+
+    fn advance(
         &mut self,
         s: &Signals,
         th: &Thresholds,
@@ -254,5 +285,5 @@ mod tests;
 mod thresholds;
 
 pub use params::{ContactParams, RETRACT_DISTANCE, RETRACT_SPEED};
-pub use search::Speeds;
+pub use search::{LandInput, SearchInput, Speeds};
 pub use thresholds::{LIFT_NOISE, SIGNIFICANCE, Thresholds};

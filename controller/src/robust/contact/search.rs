@@ -87,16 +87,32 @@ impl ContactMachine {
         }
     }
 
+    /// The command out of contact, `None` in contact ([`command`](Self::command)), after taking in
+    /// whether this step identified the stiffness touched down on ([`identified`](Self::identified)).
+    pub fn search_command(&mut self, i: &SearchInput<'_>) -> Option<f64> {
+        if i.identified {
+            self.identified();
+        }
+        self.command(i.x, i.u, i.speeds, i.anchor, i.dt)
+    }
+
+    /// The command in contact: the law's `want` through the touch-down's bounds
+    /// ([`touch`](Self::touch), then [`land`](Self::land)).
+    pub fn landing_command(&mut self, i: &LandInput<'_>) -> f64 {
+        let touching = self.touch(i.ff, i.th, i.confirm, i.dt);
+        self.land(i.want, i.u, i.speeds, i.open, touching, i.dt)
+    }
+
     /// The stiffness of the surface touched down on is identified: the landing is over once the force
     /// shows the contact too (see [`land`](Self::land)).
-    pub fn identified(&mut self) {
+    pub(super) fn identified(&mut self) {
         self.fitted = true;
     }
 
     /// Whether the conditioned force `ff` (N) touches this contact step (above `th.contact`), and
     /// what it shows of the contact: above it for `confirm` s without a break, or once above
     /// `th.strong` (`evidence.rs`). Called once a step in contact, before [`land`](Self::land).
-    pub fn touch(&mut self, ff: f64, th: &Thresholds, confirm: f64, dt: f64) -> bool {
+    pub(super) fn touch(&mut self, ff: f64, th: &Thresholds, confirm: f64, dt: f64) -> bool {
         self.evidence.conditioned(ff, th, confirm, dt)
     }
 
@@ -119,7 +135,7 @@ impl ContactMachine {
     /// of the surface, with the `k̂_c` of a fit of noise or the tuning's guess, would otherwise drive
     /// in at the force error over that stiffness per cycle (on the 12 ms cell 27 mm/s, into 44 N; on
     /// P2 45 mm/s into a 500 kN/m surface, 102 N).
-    pub fn land(
+    pub(super) fn land(
         &mut self,
         want: f64,
         u: f64,
@@ -143,7 +159,14 @@ impl ContactMachine {
 
     /// The command out of contact (`None` in contact): from the last command `u` and the measured
     /// position `x`, never more than `anchor` (s at approach speed) ahead of the robot.
-    pub fn command(&mut self, x: f64, u: f64, sp: &Speeds, anchor: f64, dt: f64) -> Option<f64> {
+    pub(super) fn command(
+        &mut self,
+        x: f64,
+        u: f64,
+        sp: &Speeds,
+        anchor: f64,
+        dt: f64,
+    ) -> Option<f64> {
         let c = self.p;
         // The travel counts the command the limits let through (the last one, `u`).
         let moved = if self.last_u.is_nan() {
@@ -203,4 +226,42 @@ impl ContactMachine {
             ContactState::Contact => None,
         }
     }
+}
+
+/// The out-of-contact command's input ([`ContactMachine::search_command`]).
+#[derive(Clone, Copy, Debug)]
+pub struct SearchInput<'a> {
+    /// The measured position, m.
+    pub x: f64,
+    /// The last command the limits let through, m.
+    pub u: f64,
+    /// The speeds now.
+    pub speeds: &'a Speeds,
+    /// How far ahead of the robot the command may run, s at approach speed.
+    pub anchor: f64,
+    /// The step, s.
+    pub dt: f64,
+    /// This step's identification set `k̂_c` from the touch-down's fit.
+    pub identified: bool,
+}
+
+/// The in-contact command's input ([`ContactMachine::landing_command`]).
+#[derive(Clone, Copy, Debug)]
+pub struct LandInput<'a> {
+    /// The law's command in contact, m.
+    pub want: f64,
+    /// The last command the limits let through, m.
+    pub u: f64,
+    /// The speeds now.
+    pub speeds: &'a Speeds,
+    /// The identification's onset window is open.
+    pub open: bool,
+    /// The conditioned force, N.
+    pub ff: f64,
+    /// The detector's thresholds.
+    pub th: &'a Thresholds,
+    /// How long the force must show the contact, s.
+    pub confirm: f64,
+    /// The step, s.
+    pub dt: f64,
 }

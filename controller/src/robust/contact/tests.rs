@@ -49,11 +49,11 @@ fn sig(f: f64, ff: f64) -> Signals {
 fn contact_lift_off_after_samples_in_a_row_and_force_limit() {
     let mut m = ContactMachine::new(params());
     assert_eq!(
-        m.step(&sig(0.5, 0.5), &TH, 60.0, 0.0, 1e-3),
+        m.advance(&sig(0.5, 0.5), &TH, 60.0, 0.0, 1e-3),
         Transition::None
     );
     assert_eq!(
-        m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3),
+        m.advance(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3),
         Transition::Contact {
             from_approach: true
         }
@@ -62,16 +62,16 @@ fn contact_lift_off_after_samples_in_a_row_and_force_limit() {
     land(&mut m, 0.010, 0.010, true, 1.1, 0.0);
     // One low sample is not a lift-off; `TH.samples` of them in a row are.
     assert_eq!(
-        m.step(&sig(0.0, 1.0), &TH, 60.0, 0.0, 1e-3),
+        m.advance(&sig(0.0, 1.0), &TH, 60.0, 0.0, 1e-3),
         Transition::None
     );
     assert_eq!(
-        m.step(&sig(5.0, 1.0), &TH, 60.0, 0.0, 1e-3),
+        m.advance(&sig(5.0, 1.0), &TH, 60.0, 0.0, 1e-3),
         Transition::None
     );
-    m.step(&sig(0.0, 1.0), &TH, 60.0, 0.0, 1e-3);
+    m.advance(&sig(0.0, 1.0), &TH, 60.0, 0.0, 1e-3);
     assert_eq!(
-        m.step(&sig(0.0, 1.0), &TH, 60.0, 0.0, 1e-3),
+        m.advance(&sig(0.0, 1.0), &TH, 60.0, 0.0, 1e-3),
         Transition::LiftOff
     );
     assert_eq!(m.state(), ContactState::Reacquire);
@@ -79,10 +79,10 @@ fn contact_lift_off_after_samples_in_a_row_and_force_limit() {
     let u = m.command(0.0, 0.0, &SP, 0.1, 1e-3).unwrap();
     assert!((u - SP.approach * 1e-3).abs() < 1e-15, "{u}");
     // The conditioning's overshoot of a step the raw force does not confirm is no force limit.
-    let overshoot = m.step(&sig(54.7, 60.05), &TH, 60.0, 0.0, 1e-3);
+    let overshoot = m.advance(&sig(54.7, 60.05), &TH, 60.0, 0.0, 1e-3);
     assert_ne!(overshoot, Transition::ForceLimit);
     assert_eq!(
-        m.step(&sig(70.0, 61.0), &TH, 60.0, 0.0, 1e-3),
+        m.advance(&sig(70.0, 61.0), &TH, 60.0, 0.0, 1e-3),
         Transition::ForceLimit
     );
     assert!(m.command(0.0, 0.0, &SP, 0.1, 1e-3).unwrap() < 0.0);
@@ -168,10 +168,10 @@ fn land(m: &mut ContactMachine, want: f64, u: f64, open: bool, ff: f64, confirm:
 
 /// A steady contact at 5 N for 0.6 s, identified and shown by the force, as the law steps it.
 fn hold(m: &mut ContactMachine, s: &Signals) {
-    m.step(s, &TH, 60.0, 0.0, 1e-3);
+    m.advance(s, &TH, 60.0, 0.0, 1e-3);
     m.identified();
     for _ in 0..600 {
-        m.step(s, &TH, 60.0, 0.0, 1e-3);
+        m.advance(s, &TH, 60.0, 0.0, 1e-3);
         land(m, s.x, s.x, true, s.ff, 0.004);
     }
 }
@@ -181,7 +181,7 @@ fn lost_at(x: f64) -> ContactMachine {
     let mut m = ContactMachine::new(params());
     let at = |f: f64| Signals { x, ..sig(f, f) };
     hold(&mut m, &at(5.0));
-    while m.step(&at(0.0), &TH, 60.0, 0.0, 1e-3) != Transition::LiftOff {}
+    while m.advance(&at(0.0), &TH, 60.0, 0.0, 1e-3) != Transition::LiftOff {}
     m
 }
 
@@ -291,7 +291,7 @@ fn the_search_is_fast_back_to_where_contact_was_lost() {
         ..sig(f, f)
     };
     hold(&mut m, &at(5.0, 0.0));
-    while m.step(&at(0.0, -0.01), &TH, 60.0, 0.0, 1e-3) != Transition::LiftOff {}
+    while m.advance(&at(0.0, -0.01), &TH, 60.0, 0.0, 1e-3) != Transition::LiftOff {}
     // The delay line took the tool 2 mm back.
     let mut u = 0.008;
     while u < 0.0101 {
@@ -319,7 +319,7 @@ fn validation_names_the_field() {
 #[test]
 fn a_touch_down_goes_on_at_approach_speed_until_the_stiffness_is_identified() {
     let mut m = ContactMachine::new(params());
-    m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
+    m.advance(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
     assert_eq!(m.state(), ContactState::Contact);
     // A guess too soft wants 1 mm in; the landing goes on at 2 mm/s.
     let capped = land(&mut m, 0.011, 0.010, true, 1.1, 0.004);
@@ -330,7 +330,7 @@ fn a_touch_down_goes_on_at_approach_speed_until_the_stiffness_is_identified() {
     // `confirm`, 4 ms); until then the landing goes on at approach speed: a contact declared on
     // noise short of the surface whose fit never concluded went on at the speed that stops within
     // 2·f_r at the tuning's guess of `k̂_c` (f_r 20 N, 500 kN/m, P2, σ 1 N: 45 mm/s, into 102 N).
-    m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 0.2);
+    m.advance(&sig(1.2, 1.1), &TH, 60.0, 0.0, 0.2);
     let unshown = land(&mut m, 0.011, 0.010, false, 0.5, 0.004);
     assert!((unshown - (0.010 + 0.002e-3)).abs() < 1e-15, "{unshown}");
     for _ in 0..3 {
@@ -345,7 +345,7 @@ fn a_touch_down_goes_on_at_approach_speed_until_the_stiffness_is_identified() {
     // without a break: a contact declared on a noise spike, with a `k̂_c` fitted to that noise, does
     // not drive in at the force error over that stiffness.
     let mut m = ContactMachine::new(params());
-    m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
+    m.advance(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
     m.identified();
     for ff in [1.1, 1.1, 0.5, 1.1, 1.1, 1.1] {
         let capped = land(&mut m, 0.011, 0.010, true, ff, 0.004);
@@ -357,7 +357,7 @@ fn a_touch_down_goes_on_at_approach_speed_until_the_stiffness_is_identified() {
     assert!((untouched - (0.010 + SP.near * 1e-3)).abs() < 1e-15);
     // A force no noise spike reaches (`strong`) shows the contact at once.
     let mut m = ContactMachine::new(params());
-    m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
+    m.advance(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
     m.identified();
     assert_eq!(land(&mut m, 0.011, 0.010, true, 3.5, 0.004), 0.011);
 }
@@ -365,17 +365,17 @@ fn a_touch_down_goes_on_at_approach_speed_until_the_stiffness_is_identified() {
 #[test]
 fn a_touch_down_lost_before_it_is_identified_is_no_contact() {
     let mut m = ContactMachine::new(params());
-    m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
+    m.advance(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
     assert_eq!(m.state(), ContactState::Contact);
-    m.step(&sig(0.0, 0.5), &TH, 60.0, 0.0, 1e-3);
+    m.advance(&sig(0.0, 0.5), &TH, 60.0, 0.0, 1e-3);
     assert_eq!(
-        m.step(&sig(0.0, 0.5), &TH, 60.0, 0.0, 1e-3),
+        m.advance(&sig(0.0, 0.5), &TH, 60.0, 0.0, 1e-3),
         Transition::LiftOff
     );
     // Back to the approach: the next contact is a touch-down, fitted.
     assert_eq!(m.state(), ContactState::Approach);
     assert_eq!(
-        m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3),
+        m.advance(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3),
         Transition::Contact {
             from_approach: true
         }
@@ -385,13 +385,13 @@ fn a_touch_down_lost_before_it_is_identified_is_no_contact() {
     let th = Thresholds { noise: 0.5, ..TH };
     for i in 1..=600 {
         let f = if i % 2 == 0 { 0.5 } else { -0.5 };
-        m.step(&sig(f, 0.5), &th, 60.0, 0.0, 1e-3);
+        m.advance(&sig(f, 0.5), &th, 60.0, 0.0, 1e-3);
         let touching = m.touch(0.5, &th, 0.004, 1e-3);
         m.land(0.011, 0.010, &SP, true, touching, 1e-3);
     }
-    m.step(&sig(0.0, 0.5), &th, 60.0, 0.0, 1e-3);
+    m.advance(&sig(0.0, 0.5), &th, 60.0, 0.0, 1e-3);
     assert_eq!(
-        m.step(&sig(0.0, 0.5), &th, 60.0, 0.0, 1e-3),
+        m.advance(&sig(0.0, 0.5), &th, 60.0, 0.0, 1e-3),
         Transition::LiftOff
     );
     assert_eq!(m.state(), ContactState::Approach);
@@ -411,11 +411,11 @@ fn a_held_contact_shows_in_the_mean_where_the_threshold_is_beyond_the_set_point(
         noise: 1.0,
     };
     let mut m = ContactMachine::new(params());
-    m.step(&sig(2.5, 2.5), &th, 60.0, 0.0, 1e-3);
+    m.advance(&sig(2.5, 2.5), &th, 60.0, 0.0, 1e-3);
     m.identified();
     let mut shown_after = None;
     for i in 0..50 {
-        m.step(&sig(2.0, 2.0), &th, 60.0, 0.0, 1e-3);
+        m.advance(&sig(2.0, 2.0), &th, 60.0, 0.0, 1e-3);
         // Landed: past the approach speed (at the near search's, the conditioned force below its
         // threshold).
         let touching = m.touch(2.0, &th, 0.004, 1e-3);
@@ -439,17 +439,17 @@ fn a_surface_seen_receding_is_chased_at_its_speed_over_the_gentle_one() {
     let at = |x: f64, f: f64| Signals { x, ..sig(f, f) };
     // Found again 1 mm further on after 50 ms: receding at about 20 mm/s.
     for _ in 0..50 {
-        m.step(&at(0.01, 0.0), &TH, 60.0, 0.0, 1e-3);
+        m.advance(&at(0.01, 0.0), &TH, 60.0, 0.0, 1e-3);
     }
     let x = 0.011;
     assert_eq!(
-        m.step(&at(x, 5.0), &TH, 60.0, 0.0, 1e-3),
+        m.advance(&at(x, 5.0), &TH, 60.0, 0.0, 1e-3),
         Transition::Contact {
             from_approach: false
         }
     );
     // A bounce: lost again at once.
-    while m.step(&at(x, 0.0), &TH, 60.0, 0.0, 1e-3) != Transition::LiftOff {}
+    while m.advance(&at(x, 0.0), &TH, 60.0, 0.0, 1e-3) != Transition::LiftOff {}
     // Without a margin (the shipped tuning) over the speed that stops within 2·f_r; within a margin
     // over the gentle speed.
     let v_seen = 0.001 / 0.051;
@@ -477,21 +477,21 @@ fn a_steady_contact_lost_under_noise_is_declared_lost_within_a_few_samples() {
     let zero_noise = [0.9, -0.7, 1.1, 0.2, -1.2, 0.8, 1.0, -0.3, 0.6, 1.2];
     let mut m = ContactMachine::new(params());
     let held = sig(5.0, 5.0);
-    m.step(&held, &th, 60.0, 0.0, 1e-3);
+    m.advance(&held, &th, 60.0, 0.0, 1e-3);
     m.identified();
     for _ in 0..600 {
-        m.step(&held, &th, 60.0, 0.0, 1e-3);
+        m.advance(&held, &th, 60.0, 0.0, 1e-3);
         land(&mut m, 0.0, 0.0, true, 5.0, 0.004);
     }
     assert!(m.steady());
     let lost_after = zero_noise
         .iter()
-        .position(|&f| m.step(&sig(f, 1.0), &th, 60.0, 0.0, 1e-3) == Transition::LiftOff);
+        .position(|&f| m.advance(&sig(f, 1.0), &th, 60.0, 0.0, 1e-3) == Transition::LiftOff);
     assert_eq!(lost_after, Some(5), "the sixth sample");
     // Not steady: a contact just made (from the search) is lost only on `samples` below `lift`.
     let mut m = lost_at(0.0);
     assert_eq!(
-        m.step(&held, &th, 60.0, 0.0, 1e-3),
+        m.advance(&held, &th, 60.0, 0.0, 1e-3),
         Transition::Contact {
             from_approach: false
         }
@@ -499,6 +499,24 @@ fn a_steady_contact_lost_under_noise_is_declared_lost_within_a_few_samples() {
     assert!(!m.steady());
     let lost = zero_noise
         .iter()
-        .any(|&f| m.step(&sig(f, 1.0), &th, 60.0, 0.0, 1e-3) == Transition::LiftOff);
+        .any(|&f| m.advance(&sig(f, 1.0), &th, 60.0, 0.0, 1e-3) == Transition::LiftOff);
     assert!(!lost, "{th:?}");
+}
+
+/// `step` gives the transition of `advance` and the state, steadiness and search after it.
+#[test]
+fn a_step_reports_the_state_it_leaves() {
+    let mut m = ContactMachine::new(params());
+    let c = m.step(&sig(1.2, 1.1), &TH, 60.0, 0.0, 1e-3);
+    assert_eq!(
+        c.transition,
+        Transition::Contact {
+            from_approach: true
+        }
+    );
+    assert_eq!(c.state, m.state());
+    assert_eq!(c.state, ContactState::Contact);
+    assert_eq!(c.steady, m.steady());
+    assert!(!c.steady, "a contact of one step is no steady one");
+    assert_eq!(c.search, m.search());
 }

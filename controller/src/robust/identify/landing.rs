@@ -13,6 +13,27 @@ use super::Identifier;
 use crate::onset::{LineFit, OnsetFit};
 
 impl Identifier {
+    /// Contact is declared ([`begin_contact`](Self::begin_contact)); on a re-contact the search that
+    /// ended in it is judged ([`recontact`](Self::recontact)). Returns `k̂_c` as the touch-down left
+    /// it, before that judgement (where the observers restart).
+    pub fn touch_down(&mut self, t: &TouchDown<'_>) -> f64 {
+        self.begin_contact(t.x, t.f, t.from_approach);
+        let kc = self.kc();
+        if !t.from_approach {
+            self.recontact(t.x, t.f, t.search, t.f_r, t.max_surface_speed, t.hold);
+        }
+        kc
+    }
+
+    /// Contact is lost ([`lost`](Self::lost)); `back_to_approach`: the touch-down is taken back and
+    /// what it identified forgotten ([`forget_touch_down`](Self::forget_touch_down)).
+    pub fn lift_off(&mut self, back_to_approach: bool) {
+        self.lost();
+        if back_to_approach {
+            self.forget_touch_down();
+        }
+    }
+
     /// Keep a raw sample `(x, f)` of the approach, at velocity `v` (m/s), for the onset fit: the last
     /// `approach_memory` at control cycle `cycle` (s).
     pub fn remember(&mut self, x: f64, f: f64, v: f64, cycle: f64) {
@@ -21,7 +42,7 @@ impl Identifier {
     }
 
     /// Contact is declared at `(x, f)`; `from_approach`: on a still surface, so the transient is fitted.
-    pub fn begin_contact(&mut self, x: f64, f: f64, from_approach: bool) {
+    pub(super) fn begin_contact(&mut self, x: f64, f: f64, from_approach: bool) {
         self.before_touch_down = from_approach.then(|| (self.est.clone(), self.c_e));
         self.est.begin_contact(x, f);
         self.onset_seeded = false;
@@ -42,7 +63,7 @@ impl Identifier {
     /// the estimate is the one before it (a fit of the noise a contact was declared on is no
     /// stiffness: f_r 5 N on 50 kN/m on the 12 ms cell under σ 1 N kept 10 kN/m from one, and the
     /// next touch-down, its fit not significant, rang with it).
-    pub fn forget_touch_down(&mut self) {
+    pub(super) fn forget_touch_down(&mut self) {
         if let Some((est, c_e)) = self.before_touch_down.take() {
             self.est = est;
             self.c_e = c_e;
@@ -71,4 +92,23 @@ impl Identifier {
         }
         fit
     }
+}
+
+/// A declared contact ([`Identifier::touch_down`]).
+#[derive(Clone, Copy, Debug)]
+pub struct TouchDown<'a> {
+    /// The raw position, m.
+    pub x: f64,
+    /// The raw force, N.
+    pub f: f64,
+    /// From the approach (a still surface: the transient is fitted), or a re-contact.
+    pub from_approach: bool,
+    /// The search that ended in a re-contact.
+    pub search: &'a crate::robust::contact::Search,
+    /// The set-point, N.
+    pub f_r: f64,
+    /// The fastest surface the law follows, m/s.
+    pub max_surface_speed: f64,
+    /// How long the recursion waits after a surface found moved, s.
+    pub hold: f64,
 }

@@ -25,7 +25,7 @@ impl Identifier {
     /// `max_surface_speed` (m/s) over the search's time and twice the penetration of `f` or the
     /// set-point `f_r` (N) at `k̂_c`, or the fast search made the contact, the recursion waits for
     /// `hold` (s).
-    pub fn recontact(
+    pub(super) fn recontact(
         &mut self,
         x: f64,
         f: f64,

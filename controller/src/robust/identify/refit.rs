@@ -117,7 +117,7 @@ impl Identifier {
     /// may be taken before the window's end once `early` s have passed (the loop's answer to the jump)
     /// and it is conclusive. `slowest`: the slowest surface speed the law counts as motion, m/s (the
     /// moving surface the window is also fitted as is no slower).
-    pub fn refit(&mut self, x: f64, f: f64, early: f64, slowest: f64) {
+    pub(super) fn refit(&mut self, x: f64, f: f64, early: f64, slowest: f64) {
         self.onset.clear();
         self.onset.begin(x, self.est.scale(), self.p.refit_window);
         self.onset
@@ -210,7 +210,7 @@ impl Identifier {
     /// Count whether the force is out of its band this step (`calm`: the contact is steady, on a
     /// still surface); true when it has just been out for `persist` s after leaving it in a calm
     /// contact (noise leaves the band for a sample, a changed environment for a transient).
-    pub fn excursion(&mut self, off: bool, calm: bool, persist: f64, dt: f64) -> bool {
+    pub(super) fn excursion(&mut self, off: bool, calm: bool, persist: f64, dt: f64) -> bool {
         let before = self.off_band;
         if off && before == 0.0 {
             self.calm_at_start = calm;
