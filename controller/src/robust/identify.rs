@@ -202,8 +202,8 @@ impl Identifier {
     }
 
     /// One step in contact: a re-fit begins when the environment changed under a steady contact
-    /// ([`excursion`](Self::excursion), or a jump of a still surface), then the recursion's step
-    /// ([`step`](Self::step)).
+    /// (`excursion`, or a jump of a still surface), then the recursion's step
+    /// (`step`).
     pub fn in_contact(&mut self, i: &InContact) -> Identified {
         let excursion = self.excursion(i.off, i.calm, i.persist, i.dt);
         if excursion || (i.calm && i.jump_on_still_surface) {

@@ -87,8 +87,8 @@ impl ContactMachine {
         }
     }
 
-    /// The command out of contact, `None` in contact ([`command`](Self::command)), after taking in
-    /// whether this step identified the stiffness touched down on ([`identified`](Self::identified)).
+    /// The command out of contact, `None` in contact (`command`), after taking in
+    /// whether this step identified the stiffness touched down on (`identified`).
     pub fn search_command(&mut self, i: &SearchInput<'_>) -> Option<f64> {
         if i.identified {
             self.identified();
@@ -97,7 +97,7 @@ impl ContactMachine {
     }
 
     /// The command in contact: the law's `want` through the touch-down's bounds
-    /// ([`touch`](Self::touch), then [`land`](Self::land)).
+    /// (`touch`, then `land`).
     pub fn landing_command(&mut self, i: &LandInput<'_>) -> f64 {
         let touching = self.touch(i.ff, i.th, i.confirm, i.dt);
         self.land(i.want, i.u, i.speeds, i.open, touching, i.dt)

@@ -13,8 +13,8 @@ use super::Identifier;
 use crate::onset::{LineFit, OnsetFit};
 
 impl Identifier {
-    /// Contact is declared ([`begin_contact`](Self::begin_contact)); on a re-contact the search that
-    /// ended in it is judged ([`recontact`](Self::recontact)). Returns `k̂_c` as the touch-down left
+    /// Contact is declared (`begin_contact`); on a re-contact the search that
+    /// ended in it is judged (`recontact`). Returns `k̂_c` as the touch-down left
     /// it, before that judgement (where the observers restart).
     pub fn touch_down(&mut self, t: &TouchDown<'_>) -> f64 {
         self.begin_contact(t.x, t.f, t.from_approach);
@@ -25,8 +25,8 @@ impl Identifier {
         kc
     }
 
-    /// Contact is lost ([`lost`](Self::lost)); `back_to_approach`: the touch-down is taken back and
-    /// what it identified forgotten ([`forget_touch_down`](Self::forget_touch_down)).
+    /// Contact is lost (`lost`); `back_to_approach`: the touch-down is taken back and
+    /// what it identified forgotten (`forget_touch_down`).
     pub fn lift_off(&mut self, back_to_approach: bool) {
         self.lost();
         if back_to_approach {

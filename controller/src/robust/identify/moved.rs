@@ -40,7 +40,7 @@ impl Identifier {
         }
     }
 
-    /// Whether the recursion waits after a re-contact (see [`recontact`](Self::recontact)).
+    /// Whether the recursion waits after a re-contact (set by a re-contact: `recontact`).
     pub fn held(&self) -> bool {
         self.recontact_hold > 0.0
     }

@@ -95,7 +95,7 @@ impl IdentifyParams {
 }
 
 /// What the law knows of a contact step besides its sample (see
-/// [`Identifier::step`](super::Identifier::step)).
+/// [`Identifier::in_contact`](super::Identifier::in_contact)).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct StepState {
     /// The surface moves: no stiffness to learn (a re-fit is judged by its own consistency instead,
