@@ -243,18 +243,30 @@ struct Settle {
 }
 
 impl Settle {
-    fn new(on: bool) -> Result<Self> {
+    /// Watch the threads named `loop` and `echo`, `want` of them (a thread names itself once it runs:
+    /// wait up to 2 s for them).
+    fn new(on: bool, want: usize) -> Result<Self> {
         let mut stats = Vec::new();
         if on {
-            for e in std::fs::read_dir("/proc/self/task")? {
-                let dir = e?.path();
-                let name = std::fs::read_to_string(dir.join("comm")).unwrap_or_default();
-                if matches!(name.trim(), "loop" | "echo") {
-                    stats.push(std::fs::File::open(dir.join("stat"))?);
+            for _ in 0..200 {
+                stats.clear();
+                for e in std::fs::read_dir("/proc/self/task")? {
+                    let dir = e?.path();
+                    let name = std::fs::read_to_string(dir.join("comm")).unwrap_or_default();
+                    if matches!(name.trim(), "loop" | "echo") {
+                        stats.push(std::fs::File::open(dir.join("stat"))?);
+                    }
                 }
+                if stats.len() >= want {
+                    break;
+                }
+                thread::sleep(Duration::from_millis(10));
             }
-            if stats.is_empty() {
-                bail!("--settle: no thread named loop or echo");
+            if stats.len() < want {
+                bail!(
+                    "--settle: found {} of the {want} threads named loop or echo",
+                    stats.len()
+                );
             }
         }
         Ok(Self {
@@ -301,7 +313,10 @@ fn stand_in(
     world: Option<SharedWorld>,
 ) -> Result<Times> {
     let mut s = Standin::new()?;
-    let mut settle = Settle::new(o.settle)?;
+    let mut settle = Settle::new(
+        o.settle,
+        usize::from(echo.is_some()) + usize::from(cell.is_some()),
+    )?;
     let mut out = [0u8; 2048];
     let mut inp = [0u8; 4096];
     let mut times = Times {
@@ -425,7 +440,7 @@ fn stand_in_egm(
     let mut core = sim::irc5::Irc5Core::new(cfg, sim::irc5::RapidVariables::default())
         .map_err(|e| anyhow!(e))?;
     let mut inp = [0u8; 4096];
-    let mut settle = Settle::new(o.settle)?;
+    let mut settle = Settle::new(o.settle, usize::from(echo.is_some()) + 1)?;
     let mut times = Times {
         echo: Vec::with_capacity(o.cycles),
         cell: Vec::with_capacity(o.cycles),
