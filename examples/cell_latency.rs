@@ -18,6 +18,8 @@
 //!   driver ([`abb_egm::EgmLink`]) in place of RSI; the stand-in is then the simulated IRC5's sans-IO
 //!   core ([`sim::irc5::Irc5Core`]): it writes `EgmRobot`, judges the `EgmSensorPathCorr` and moves
 //!   the spring world, each cycle sending the same `EgmRobot` to the echo and to forcecell.
+//! * `--cell egm-driver`: the EGM driver alone (no law, no sensor, no recorder): the link decodes
+//!   each `EgmRobot`, runs its session and answers a fixed correction — the driver's own turnaround.
 //! * `--cell none`: the echo alone.
 //! * `--sensor inproc` (the world's sensor model read in the cycle), `robotiq` (the FT 300 driver
 //!   reading a simulated FT 300 that streams at 100 Hz on a pseudo-terminal, as on a cell) or, with
@@ -753,7 +755,8 @@ fn main() -> Result<()> {
                 thread::sleep(Duration::from_millis(300));
                 (Some(addr), None, Some(h))
             }
-            "egm" => {
+            "egm" | "egm-driver" => {
+                let driver_only = o.cell == "egm-driver";
                 let cfg = forcecell::cell::CellConfig::from_toml(CELL, "cell.toml")?;
                 let tuning = cfg.tuning()?;
                 let (limits, range) = forcecell::egm::cell_limits(&tuning.loop_cfg);
@@ -770,7 +773,7 @@ fn main() -> Result<()> {
                 let addr = link.local_addr()?;
                 let world = spring_world();
                 let sensor = RunSensor::open(&o.sensor, &world)?;
-                let recorder = if o.record {
+                let recorder = if o.record && !driver_only {
                     Some(forcecell::recorder::start(
                         &dir.join("egm.mcap"),
                         forcecell::recorder::RecorderOptions::default(),
@@ -783,6 +786,24 @@ fn main() -> Result<()> {
                 let h = thread::Builder::new().name("loop".into()).spawn(
                     move || -> Result<String> {
                         pin(cpu)?;
+                        if driver_only {
+                            // The driver alone: decode, session, a fixed correction encoded.
+                            use hal::RobotLink as _;
+                            let mut n = 0u64;
+                            let end = loop {
+                                match link.next_cycle() {
+                                    Ok(_) => {
+                                        link.reply(&Correction::along_z(0.0))?;
+                                        n += 1;
+                                    }
+                                    Err(e) => break e,
+                                }
+                            };
+                            *driver.lock().unwrap() =
+                                Some((link.diagnostics().latency.clone(), None));
+                            drop(sensor);
+                            return Ok(format!("the EGM driver alone: {n} cycles, ended: {end}"));
+                        }
                         let stop = AtomicBool::new(false);
                         let (tx, rec) = recorder.map_or((None, None), |(t, r)| (Some(t), Some(r)));
                         let out = forcecell::cell::run_cell_recorded(
@@ -802,7 +823,7 @@ fn main() -> Result<()> {
                 )?;
                 (Some(addr), Some(world), Some(h))
             }
-            c => bail!("--cell {c}: run, egm, external or none"),
+            c => bail!("--cell {c}: run, egm, egm-driver, external or none"),
         };
     if let Some(how) = &o.recorder_sched {
         // The writer thread exists once the cell started.
@@ -822,7 +843,7 @@ fn main() -> Result<()> {
             eprintln!("warning: stand-in: {r}");
         }
     }
-    let mut times = if o.cell == "egm" {
+    let mut times = if o.cell.starts_with("egm") {
         let (cell, world) = cell_addr.zip(world).context("the EGM cell")?;
         stand_in_egm(&o, echo, cell, world)?
     } else {
