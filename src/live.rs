@@ -136,34 +136,12 @@ pub fn advertise() -> Value {
                 "topic": c.topic,
                 "encoding": ENCODING,
                 "schemaName": c.schema_name(),
-                "schema": base64(&::scenario::telemetry::file_descriptor_set(c)),
+                "schema": abb_egm::rws::base64(&::scenario::telemetry::file_descriptor_set(c)),
                 "schemaEncoding": ENCODING,
             })
         })
         .collect();
     json!({"op": "advertise", "channels": channels})
-}
-
-/// Standard base64 with padding (RFC 4648), as the protocol carries a binary schema.
-pub fn base64(data: &[u8]) -> String {
-    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::with_capacity(data.len().div_ceil(3) * 4);
-    for chunk in data.chunks(3) {
-        let b = [
-            chunk[0],
-            chunk.get(1).copied().unwrap_or(0),
-            chunk.get(2).copied().unwrap_or(0),
-        ];
-        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
-        for k in 0..4 {
-            if k <= chunk.len() {
-                out.push(char::from(ALPHABET[(n >> (18 - 6 * k)) as usize & 63]));
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
 }
 
 fn server_info() -> Value {
@@ -278,27 +256,5 @@ fn handle(me: &Arc<Mutex<Client>>, text: &str) {
             c.subs.retain(|_, sub| !ids.contains(&u64::from(*sub)));
         }
         _ => {}
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn base64_is_rfc_4648() {
-        // RFC 4648's own test vectors.
-        for (raw, enc) in [
-            ("", ""),
-            ("f", "Zg=="),
-            ("fo", "Zm8="),
-            ("foo", "Zm9v"),
-            ("foob", "Zm9vYg=="),
-            ("fooba", "Zm9vYmE="),
-            ("foobar", "Zm9vYmFy"),
-        ] {
-            assert_eq!(base64(raw.as_bytes()), enc);
-        }
-        assert_eq!(base64(&[0xfb, 0xff]), "+/8=");
     }
 }

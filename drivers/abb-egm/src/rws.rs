@@ -455,7 +455,8 @@ fn url_decode(s: &str) -> Option<String> {
 
 const B64: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
 
-/// Standard base64 with padding (RFC 4648), for the `Basic` credentials.
+/// Standard base64 with padding (RFC 4648): the `Basic` credentials here; the application's Foxglove
+/// server sends its binary schemas with it too (`forcecell::live`).
 pub fn base64(data: &[u8]) -> String {
     let mut out = String::with_capacity(data.len().div_ceil(3) * 4);
     for chunk in data.chunks(3) {
