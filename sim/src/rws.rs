@@ -374,12 +374,25 @@ mod tests {
         false
     }
 
-    #[test]
-    fn states_written_over_https_land_in_the_rapid_variables_newest_last() {
+    /// A simulated controller and a channel to it logging in with `password`.
+    fn session(
+        password: &str,
+    ) -> (
+        RapidVariables,
+        RwsServer,
+        RwsChannel,
+        abb_egm::rws_channel::RwsReportHandle,
+    ) {
         let vars = RapidVariables::default();
         let server = RwsServer::start(RwsServerConfig::default(), vars.clone()).unwrap();
-        let mut ch = RwsChannel::start(target(&server, "robotics")).unwrap();
+        let ch = RwsChannel::start(target(&server, password)).unwrap();
         let report = ch.report_handle();
+        (vars, server, ch, report)
+    }
+
+    #[test]
+    fn states_written_over_https_land_in_the_rapid_variables_newest_last() {
+        let (vars, server, mut ch, report) = session("robotics");
         ch.publish(&state(ProcessPhase::Approach, 0.0, ProcessFault::None))
             .unwrap();
         ch.publish(&state(ProcessPhase::Pressing, 19.5, ProcessFault::None))
@@ -402,10 +415,7 @@ mod tests {
 
     #[test]
     fn a_wrong_password_or_certificate_is_a_failure_said_and_nothing_written() {
-        let vars = RapidVariables::default();
-        let server = RwsServer::start(RwsServerConfig::default(), vars.clone()).unwrap();
-        let mut ch = RwsChannel::start(target(&server, "wrong")).unwrap();
-        let report = ch.report_handle();
+        let (vars, server, mut ch, report) = session("wrong");
         ch.publish(&state(ProcessPhase::Off, 0.0, ProcessFault::None))
             .unwrap();
         assert!(eventually(|| report.report().failures >= 1));
