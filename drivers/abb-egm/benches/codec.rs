@@ -1,14 +1,16 @@
 //! Codec speed per message with allocations counted (`cargo bench -p forcecell-abb-egm --bench codec`):
-//! the decode of `EgmRobot` into one kept message, on the simulated IRC5's message (`false`: poses,
-//! states, process numbers) and on one carrying what a controller also sends (`true`: joints, time,
-//! euler angles); and the path correction's encode into a fixed buffer.
+//! the decode of `EgmRobot` into one kept message, on what the simulated IRC5 sends with process channels
+//! (`false`: header, poses, states, process numbers) and on one that also carries what a controller adds
+//! (`true`: joints, clocks, Euler angles); and the path correction's encode into a fixed buffer.
 
 use abb_egm::msg::{
     EgmCartesian, EgmClock, EgmEuler, EgmFeedBack, EgmHeader, EgmJoints, EgmMciState,
-    EgmMotorState, EgmPathCorr, EgmPlanned, EgmPose, EgmQuaternion, EgmRapidCtrlExecState,
-    EgmRapiddata, EgmRobot, EgmSensorPathCorr, MessageType,
+    EgmMotorState, EgmPathCorr, EgmPlanned, EgmPose, EgmRapidCtrlExecState, EgmRapiddata, EgmRobot,
+    EgmSensorPathCorr, MessageType,
 };
+use abb_egm::wire;
 use divan::{AllocProfiler, Bencher, black_box};
+use hal::{Pose, UnitQuaternion, Vector3};
 use prost::Message;
 
 #[global_allocator]
@@ -18,28 +20,26 @@ fn main() {
     divan::main();
 }
 
-fn pose(z: f64, euler: bool) -> EgmPose {
+/// A pose as the simulated IRC5 writes it (`wire::pose_to_wire`), with Euler angles where a controller
+/// adds them.
+fn pose(z_m: f64, euler: bool) -> EgmPose {
+    let p = Pose {
+        position: Vector3::new(0.445_123_4, -0.0125, z_m),
+        orientation: UnitQuaternion::from_euler_angles(core::f64::consts::PI, 0.0, 0.5),
+    };
+    let (pos, orient) = wire::pose_to_wire(&p);
     EgmPose {
-        pos: Some(EgmCartesian {
-            x: Some(445.123_4),
-            y: Some(-12.5),
-            z: Some(z),
-        }),
-        orient: Some(EgmQuaternion {
-            u0: Some(0.0),
-            u1: Some(core::f64::consts::FRAC_1_SQRT_2),
-            u2: Some(core::f64::consts::FRAC_1_SQRT_2),
-            u3: Some(0.0),
-        }),
+        pos: Some(pos),
+        orient: Some(orient),
         euler: euler.then_some(EgmEuler {
             x: Some(180.0),
             y: Some(0.0),
-            z: Some(90.0),
+            z: Some(28.6),
         }),
     }
 }
 
-/// The simulated IRC5's message (`full = false`) or one with joints, clocks and euler angles as well.
+/// The simulated IRC5's message (`full = false`) or one with joints, clocks and Euler angles as well.
 fn robot(full: bool) -> Vec<u8> {
     let joints = full.then(|| EgmJoints {
         joints: vec![0.5, 12.25, 20.0, -0.75, 60.5, 90.0],
@@ -56,13 +56,13 @@ fn robot(full: bool) -> Vec<u8> {
         }),
         feed_back: Some(EgmFeedBack {
             joints: joints.clone(),
-            cartesian: Some(pose(890.000_1, full)),
+            cartesian: Some(pose(0.890_000_1, full)),
             external_joints: None,
             time,
         }),
         planned: Some(EgmPlanned {
             joints,
-            cartesian: Some(pose(890.0, full)),
+            cartesian: Some(pose(0.890, full)),
             external_joints: None,
             time,
         }),
