@@ -1,19 +1,14 @@
 //! [`EgmLink`]: the external-device side of EGM path correction over a real UDP socket, as a
 //! [`hal::RobotLink`].
 
-use core::cell::RefCell;
 use core::fmt;
 use core::time::Duration;
-use std::io::{self, IoSliceMut};
+use std::io;
 use std::net::{IpAddr, SocketAddr, UdpSocket};
-use std::os::fd::AsRawFd;
-use std::time::{Instant, SystemTime};
+use std::time::Instant;
 
 use hal::{Correction, Cycle, ErrorKind, ProcessState, RobotLink};
-use nix::sys::socket::{
-    ControlMessageOwned, MsgFlags, MultiHeaders, SockaddrStorage, recvmmsg, setsockopt, sockopt,
-};
-use nix::sys::time::TimeSpec;
+use udp::{BATCH, Receiver};
 
 use crate::diag::Diagnostics;
 use crate::limits::{CorrectionRange, Limits};
@@ -238,128 +233,26 @@ impl hal::Error for LinkError {
 /// Largest datagram the link can be configured to take.
 const RX_BUFFER: usize = 65536;
 const TX_BUFFER: usize = 512;
-/// Datagrams read by one receive call.
-const BATCH: usize = 16;
-
-/// Receive buffers for `recvmmsg`, allocated once.
-struct RxBatch {
-    bufs: [Box<[u8]>; BATCH],
-    got: [Got; BATCH],
-}
-
-/// One datagram read: its length, its source and the kernel's arrival stamp (`CLOCK_REALTIME`).
-type Got = (usize, Option<SocketAddr>, Option<SystemTime>);
-
-/// Ask the kernel to stamp every datagram's arrival (`SO_TIMESTAMPNS`, as the RSI link does and for
-/// the same reasons: see `docs/wire-rsi.md`). False where the kernel refuses.
-fn enable_stamps(sock: &UdpSocket) -> bool {
-    setsockopt(sock, sockopt::ReceiveTimestampns, &true).is_ok()
-}
-
-/// A kernel stamp (`CLOCK_REALTIME`) on the monotonic clock, from the two clocks read together just
-/// after the receive call; `None` for a stamp after `wall` or more than a second before it.
-fn arrival(stamp: SystemTime, wall: SystemTime, read_at: Instant) -> Option<Instant> {
-    let waited = wall.duration_since(stamp).ok()?;
-    if waited > Duration::from_secs(1) {
-        return None;
-    }
-    read_at.checked_sub(waited)
-}
-
-fn system_time(ts: &TimeSpec) -> Option<SystemTime> {
-    let secs = u64::try_from(ts.tv_sec()).ok()?;
-    let nanos = u32::try_from(ts.tv_nsec()).ok()?;
-    SystemTime::UNIX_EPOCH.checked_add(Duration::new(secs, nanos))
-}
-
-thread_local! {
-    /// `recvmmsg`'s message headers, once per receiving thread (nix's `MultiHeaders` is not `Send`).
-    static HEADERS: RefCell<Option<MultiHeaders<SockaddrStorage>>> = const { RefCell::new(None) };
-}
-
-impl RxBatch {
-    fn new(max_datagram: usize) -> Self {
-        Self {
-            // One byte more than the largest accepted datagram: a longer one shows as oversized.
-            bufs: core::array::from_fn(|_| vec![0; max_datagram + 1].into_boxed_slice()),
-            got: [(0, None, None); BATCH],
-        }
-    }
-
-    /// One `recvmmsg`, with the kernel's arrival stamps where the socket has them (`stamped`).
-    fn recv(&mut self, sock: &UdpSocket, wait: bool, stamped: bool) -> io::Result<usize> {
-        let flags = if wait {
-            MsgFlags::MSG_WAITFORONE
-        } else {
-            MsgFlags::MSG_DONTWAIT
-        };
-        let (bufs, got) = (&mut self.bufs, &mut self.got);
-        HEADERS.with(|cell| {
-            let mut iovs = bufs.each_mut().map(|b| [IoSliceMut::new(&mut b[..])]);
-            let mut held = cell.borrow_mut();
-            // Room for one SCM_TIMESTAMPNS per datagram (allocated once per thread).
-            let headers = held.get_or_insert_with(|| {
-                MultiHeaders::preallocate(BATCH, Some(nix::cmsg_space!(TimeSpec)))
-            });
-            let results = recvmmsg(sock.as_raw_fd(), headers, &mut iovs, flags, None)
-                .map_err(io::Error::from)?;
-            let mut n = 0;
-            let mut unstamped = false;
-            for (slot, r) in got.iter_mut().zip(results) {
-                let from = r.address.and_then(|a: SockaddrStorage| {
-                    a.as_sockaddr_in()
-                        .map(|v4| SocketAddr::from(*v4))
-                        .or_else(|| a.as_sockaddr_in6().map(|v6| SocketAddr::from(*v6)))
-                });
-                let stamp = r.cmsgs().ok().and_then(|mut cm| {
-                    cm.find_map(|m| match m {
-                        ControlMessageOwned::ScmTimestampns(ts) => system_time(&ts),
-                        _ => None,
-                    })
-                });
-                *slot = (r.bytes, from, stamp);
-                unstamped |= stamp.is_none();
-                n += 1;
-            }
-            // The kernel writes each header's used control length back into it: after a datagram
-            // without a stamp, fresh headers (never in the steady state).
-            if stamped && unstamped {
-                *held = None;
-            }
-            Ok(n)
-        })
-    }
-}
-
-/// A UDP receive error that only means "nothing usable arrived yet".
-pub fn is_transient(e: &io::Error) -> bool {
-    matches!(
-        e.kind(),
-        io::ErrorKind::WouldBlock
-            | io::ErrorKind::TimedOut
-            | io::ErrorKind::Interrupted
-            | io::ErrorKind::ConnectionRefused
-            | io::ErrorKind::ConnectionReset
-    )
-}
+/// A UDP receive error that only means "nothing usable arrived yet"; shared with the simulated
+/// controller.
+pub use udp::is_transient;
 
 /// The external-device side of EGM path correction: a UDP server answering the robot's cycles.
 ///
 /// A thin shell around [`EgmSession`], which makes every decision: the shell reads the clock, receives
-/// and sends. Two system calls per cycle in the steady state: one blocking `recvmmsg`
-/// (`MSG_WAITFORONE`: it waits for the first datagram, then takes whatever else is queued) and one
-/// `sendto`. The watchdog is the socket's receive timeout, set only when its value changes. Each
+/// and sends. Two system calls per cycle in the steady state: one blocking `recvmsg` and one
+/// `sendto` ([`udp::Receiver`]: only a datagram that had already waited in the socket may have
+/// company, and only then is the queue drained). The watchdog is the socket's receive timeout, set only when its value changes. Each
 /// datagram's arrival comes with it (`SO_TIMESTAMPNS`, in the same call): a reply's lateness runs
 /// from there, as on the RSI link.
 pub struct EgmLink {
     session: EgmSession,
     sock: UdpSocket,
-    rx: RxBatch,
+    rx: Receiver,
     tx: Box<[u8]>,
     timeout_set: Option<Duration>,
     state: Option<Box<dyn StateChannel>>,
     published: Option<ProcessState>,
-    stamps: bool,
 }
 
 impl fmt::Debug for EgmLink {
@@ -378,10 +271,8 @@ impl EgmLink {
         let cfg = session.config();
         let addr = cfg.bind;
         let sock = UdpSocket::bind(addr).map_err(|source| LinkError::Bind { addr, source })?;
-        let stamps = enable_stamps(&sock);
         Ok(Self {
-            stamps,
-            rx: RxBatch::new(cfg.max_datagram),
+            rx: Receiver::new(&sock, cfg.max_datagram),
             tx: vec![0; TX_BUFFER].into_boxed_slice(),
             sock,
             session,
@@ -442,12 +333,10 @@ impl EgmLink {
         Ok(())
     }
 
-    fn offer_batch(&mut self, n: usize, rx_at: Instant, wall: SystemTime) {
+    fn offer_batch(&mut self, n: usize, rx_at: Instant) {
         for k in 0..n {
-            let (len, from, stamp) = self.rx.got[k];
+            let (bytes, from, arrived) = self.rx.datagram(k);
             let Some(from) = from else { continue };
-            let bytes = &self.rx.bufs[k][..len.min(self.rx.bufs[k].len())];
-            let arrived = stamp.and_then(|s| arrival(s, wall, rx_at));
             // Rejected datagrams are counted by the session.
             let _ = self.session.offer_arrived(bytes, from, rx_at, arrived);
         }
@@ -456,7 +345,7 @@ impl EgmLink {
     /// True when the kernel stamps each datagram's arrival (`SO_TIMESTAMPNS` accepted): replies'
     /// lateness is measured from it. False: from the receive call's return (say so once).
     pub fn kernel_stamps(&self) -> bool {
-        self.stamps
+        self.rx.stamped()
     }
 
     fn publish(&mut self, state: &ProcessState) {
@@ -509,17 +398,15 @@ impl RobotLink for EgmLink {
                 },
             };
             self.set_timeout(remaining)?;
-            let mut wait = true;
+            let mut waiting_since = Some(now);
             loop {
-                match self.rx.recv(&self.sock, wait, self.stamps) {
-                    Ok(n) => {
-                        // Both clocks together (vDSO): the stamps are on the wall clock.
-                        let (rx_at, wall) = (Instant::now(), SystemTime::now());
-                        self.offer_batch(n, rx_at, wall);
+                match self.rx.recv(&self.sock, waiting_since) {
+                    Ok((n, rx_at)) => {
+                        self.offer_batch(n, rx_at);
                         if n < BATCH {
                             break;
                         }
-                        wait = false;
+                        waiting_since = None;
                     }
                     Err(e) if is_transient(&e) => break,
                     Err(e) => return Err(LinkError::Io(e)),
@@ -561,47 +448,6 @@ impl RobotLink for EgmLink {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// The kernel's stamp is the datagram's arrival: between the peer's clock reads before and after
-    /// its `send` (both `CLOCK_REALTIME`).
-    #[test]
-    fn the_socket_returns_the_kernel_arrival_stamp() {
-        let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
-        assert!(enable_stamps(&sock), "SO_TIMESTAMPNS refused");
-        sock.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
-        let peer = UdpSocket::bind("127.0.0.1:0").unwrap();
-        let to = sock.local_addr().unwrap();
-        let mut rx = RxBatch::new(1024);
-        // The kernel switches its stamping on through a deferred work item the first time a socket
-        // asks; until then datagrams are stamped when read. Wait for it (bounded).
-        let mut on = false;
-        for _ in 0..500 {
-            peer.send_to(&[0; 40], to).unwrap();
-            let after = SystemTime::now();
-            assert_eq!(rx.recv(&sock, true, true).unwrap(), 1);
-            if rx.got[0].2.is_some_and(|s| s <= after) {
-                on = true;
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(1));
-        }
-        assert!(on, "the kernel never stamped a datagram on arrival");
-        for k in 0..3u8 {
-            let before = SystemTime::now();
-            peer.send_to(&[k; 40], to).unwrap();
-            let after = SystemTime::now();
-            assert_eq!(rx.recv(&sock, true, true).unwrap(), 1);
-            let stamp = rx.got[0].2.expect("a kernel stamp");
-            assert!(
-                before <= stamp && stamp <= after,
-                "{before:?} {stamp:?} {after:?}"
-            );
-        }
-        let ms = Duration::from_millis;
-        let (wall, now) = (SystemTime::now(), Instant::now());
-        assert_eq!(arrival(wall - ms(3), wall, now), Some(now - ms(3)));
-        assert_eq!(arrival(wall + ms(1), wall, now), None);
-    }
 
     #[test]
     fn link_and_session_can_move_to_another_thread() {

@@ -1,19 +1,16 @@
 //! [`RsiLink`]: the PC side of RSI over a real UDP socket, as a [`hal::RobotLink`].
 
-use core::cell::RefCell;
 use core::fmt;
 use core::time::Duration;
-use std::io::{self, IoSliceMut};
+use std::io;
 use std::net::{IpAddr, SocketAddr, UdpSocket};
-use std::os::fd::{AsFd, AsRawFd};
-use std::time::{Instant, SystemTime};
+use std::os::fd::AsFd;
+use std::time::Instant;
 
 use hal::{Correction, Cycle, ErrorKind, RobotLink};
 use nix::poll::{PollFd, PollFlags, ppoll};
-use nix::sys::socket::{
-    ControlMessageOwned, MsgFlags, MultiHeaders, SockaddrStorage, recvmmsg, setsockopt, sockopt,
-};
 use nix::sys::time::TimeSpec;
+use udp::{BATCH, Receiver};
 
 use crate::codec::{Schema, WriteError};
 use crate::config::EthernetConfig;
@@ -256,21 +253,19 @@ impl hal::Error for LinkError {
 /// Largest datagram the link can be configured to take (`max_datagram` stays below it).
 const RX_BUFFER: usize = 65536;
 const TX_BUFFER: usize = 16384;
-/// Datagrams read by one receive call (a burst after a stall is read whole, the newest answered).
-const BATCH: usize = 16;
 
 /// The PC side of RSI: a UDP server on the configured address answering the robot's cycles.
 ///
 /// A thin shell around [`RsiSession`], which makes every decision: the shell only reads the clock,
-/// receives and sends. Two system calls per cycle in the steady state: one blocking `recvmmsg`
-/// (`MSG_WAITFORONE`: it waits for the first datagram, then also takes whatever else is queued, so a
-/// backlog is drained in the same call), and one `sendto`. The socket stays blocking; the watchdog is
-/// its receive timeout (`SO_RCVTIMEO`), set only when its value changes. With
-/// [`LinkConfig::spin`] a `ppoll` comes first and the datagram is taken by non-blocking `recvmmsg`
-/// calls (as many as the polling makes).
+/// receives and sends. Two system calls per cycle in the steady state: one blocking `recvmsg` and
+/// one `sendto` ([`udp::Receiver`]: a datagram that had already waited in the socket when the call
+/// began may have company after a stall, and only then is the queue drained with non-blocking
+/// reads, so the newest is answered). The socket stays blocking; the watchdog is its receive
+/// timeout (`SO_RCVTIMEO`), set only when its value changes. With [`LinkConfig::spin`] a `ppoll`
+/// comes first and the datagram is taken by non-blocking reads (as many as the polling makes).
 ///
 /// The socket asks the kernel for each datagram's arrival time (`SO_TIMESTAMPNS`: a software stamp
-/// taken when the datagram reaches the network stack, delivered in the same `recvmmsg` as a control
+/// taken when the datagram reaches the network stack, delivered in the same `recvmsg` as a control
 /// message, no extra system call). The session measures a reply's lateness from it, so a datagram
 /// that waited in the socket while the loop was busy counts. Where the kernel gives no stamp
 /// ([`kernel_stamps`](Self::kernel_stamps) is false, or a datagram came without one) lateness is
@@ -278,10 +273,9 @@ const BATCH: usize = 16;
 pub struct RsiLink {
     session: RsiSession,
     sock: UdpSocket,
-    rx: RxBatch,
+    rx: Receiver,
     tx: Box<[u8]>,
     timeout_set: Option<Duration>,
-    stamps: bool,
 }
 
 impl fmt::Debug for RsiLink {
@@ -293,114 +287,6 @@ impl fmt::Debug for RsiLink {
     }
 }
 
-/// Receive buffers for `recvmmsg`, allocated once.
-pub(crate) struct RxBatch {
-    bufs: [Box<[u8]>; BATCH],
-    /// Length, source and the kernel's arrival stamp (`CLOCK_REALTIME`) of each datagram read.
-    got: [Got; BATCH],
-}
-
-/// One datagram read: its length, its source and the kernel's arrival stamp (`CLOCK_REALTIME`).
-type Got = (usize, Option<SocketAddr>, Option<SystemTime>);
-
-/// Ask the kernel to stamp every datagram's arrival (`SO_TIMESTAMPNS`, nanoseconds, `CLOCK_REALTIME`).
-/// `SO_TIMESTAMPING` would offer hardware stamps too, which no NIC on a robot cell's PC is set up
-/// for, at the cost of a flag set and a three-stamp control message; the software receive stamp is
-/// the same in both. Returns false where the kernel refuses (the link then measures from the
-/// receive call).
-pub(crate) fn enable_stamps(sock: &UdpSocket) -> bool {
-    setsockopt(sock, sockopt::ReceiveTimestampns, &true).is_ok()
-}
-
-/// A kernel stamp (`CLOCK_REALTIME`) on the monotonic clock: `read_at` and `wall` are the two clocks
-/// read together just after the receive call returned. `None` for a stamp after `wall` or more than
-/// a second before it (the wall clock was stepped in between: no arrival is better than a wrong one).
-pub(crate) fn arrival(stamp: SystemTime, wall: SystemTime, read_at: Instant) -> Option<Instant> {
-    let waited = wall.duration_since(stamp).ok()?;
-    if waited > Duration::from_secs(1) {
-        return None;
-    }
-    read_at.checked_sub(waited)
-}
-
-fn system_time(ts: &TimeSpec) -> Option<SystemTime> {
-    let secs = u64::try_from(ts.tv_sec()).ok()?;
-    let nanos = u32::try_from(ts.tv_nsec()).ok()?;
-    SystemTime::UNIX_EPOCH.checked_add(Duration::new(secs, nanos))
-}
-
-thread_local! {
-    /// `recvmmsg`'s message headers, allocated once per receiving thread. nix's `MultiHeaders` holds
-    /// raw pointers and is neither `Send` nor `Sync`; kept here, it leaves `RsiLink` `Send` (a link
-    /// is built on one thread and run on another) without any unsafe code.
-    static HEADERS: RefCell<Option<MultiHeaders<SockaddrStorage>>> = const { RefCell::new(None) };
-}
-
-impl RxBatch {
-    fn new(max_datagram: usize) -> Self {
-        Self {
-            // One byte more than the largest accepted datagram: a longer one shows as oversized.
-            bufs: core::array::from_fn(|_| vec![0; max_datagram + 1].into_boxed_slice()),
-            got: [(0, None, None); BATCH],
-        }
-    }
-
-    /// One `recvmmsg`: `wait` blocks (up to the socket's timeout) for the first datagram, then takes
-    /// what is queued; otherwise nothing blocks. Returns how many were read into `got`, with the
-    /// kernel's arrival stamps where the socket has them (`stamped`: [`enable_stamps`] succeeded).
-    pub(crate) fn recv(
-        &mut self,
-        sock: &UdpSocket,
-        wait: bool,
-        stamped: bool,
-    ) -> io::Result<usize> {
-        let flags = if wait {
-            MsgFlags::MSG_WAITFORONE
-        } else {
-            MsgFlags::MSG_DONTWAIT
-        };
-        let (bufs, got) = (&mut self.bufs, &mut self.got);
-        HEADERS.with(|cell| {
-            let mut iovs = bufs.each_mut().map(|b| [IoSliceMut::new(&mut b[..])]);
-            let mut held = cell.borrow_mut();
-            // Room for one SCM_TIMESTAMPNS per datagram (allocated once per thread).
-            let headers = held.get_or_insert_with(|| {
-                MultiHeaders::preallocate(BATCH, Some(nix::cmsg_space!(TimeSpec)))
-            });
-            let results = recvmmsg(sock.as_raw_fd(), headers, &mut iovs, flags, None)
-                .map_err(io::Error::from)?;
-            let mut n = 0;
-            let mut unstamped = false;
-            for (slot, r) in got.iter_mut().zip(results) {
-                let from = r.address.and_then(|a: SockaddrStorage| {
-                    a.as_sockaddr_in()
-                        .map(|v4| SocketAddr::from(*v4))
-                        .or_else(|| a.as_sockaddr_in6().map(|v6| SocketAddr::from(*v6)))
-                });
-                // A truncated control message (MSG_CTRUNC) reads as no stamp.
-                let stamp = r.cmsgs().ok().and_then(|mut cm| {
-                    cm.find_map(|m| match m {
-                        ControlMessageOwned::ScmTimestampns(ts) => system_time(&ts),
-                        _ => None,
-                    })
-                });
-                // The buffers hold one byte more than the largest accepted datagram: a longer one is cut
-                // there and still reads as oversized.
-                *slot = (r.bytes, from, stamp);
-                unstamped |= stamp.is_none();
-                n += 1;
-            }
-            // The kernel writes each header's used control length back into it: a datagram read
-            // without a stamp would leave its header no room for the next one. Fresh headers then
-            // (an allocation only in that odd case, never in the steady state).
-            if stamped && unstamped {
-                *held = None;
-            }
-            Ok(n)
-        })
-    }
-}
-
 impl RsiLink {
     /// Bind the configured address (never sharing the port) and get ready for the robot.
     pub fn bind(cfg: LinkConfig) -> Result<Self, LinkError> {
@@ -409,21 +295,19 @@ impl RsiLink {
         let addr = cfg.bind_addr();
         // std's bind sets no SO_REUSEADDR / SO_REUSEPORT: a held port fails here, loudly.
         let sock = UdpSocket::bind(addr).map_err(|source| LinkError::Bind { addr, source })?;
-        let stamps = enable_stamps(&sock);
         Ok(Self {
-            rx: RxBatch::new(cfg.max_datagram),
+            rx: Receiver::new(&sock, cfg.max_datagram),
             tx: vec![0; TX_BUFFER].into_boxed_slice(),
             sock,
             session,
             timeout_set: None,
-            stamps,
         })
     }
 
     /// True when the kernel stamps each datagram's arrival (`SO_TIMESTAMPNS` accepted): replies'
     /// lateness is measured from it. False: from the receive call's return (say so once).
     pub fn kernel_stamps(&self) -> bool {
-        self.stamps
+        self.rx.stamped()
     }
 
     /// The address actually bound (useful after binding port 0).
@@ -476,25 +360,23 @@ impl RsiLink {
         Ok(())
     }
 
-    /// One receive call, waiting (up to the socket's timeout) for the first datagram when `wait`,
-    /// and the rest of a burst with it (a full batch means there may be more queued, read without
-    /// waiting); every datagram read is offered to the session. Returns how many were read (0 on a
-    /// timeout or nothing queued).
-    fn receive_burst(&mut self, wait: bool) -> Result<usize, LinkError> {
-        let mut wait = wait;
+    /// One receive: waiting (up to the socket's timeout) for the first datagram when
+    /// `waiting_since` is given (the clock read before the call), and what is queued behind it
+    /// when it had waited in the socket ([`udp::Receiver::recv`]; a full batch means there may be
+    /// more, read without waiting); every datagram read is offered to the session. Returns how many
+    /// were read (0 on a timeout or nothing queued).
+    fn receive_burst(&mut self, waiting_since: Option<Instant>) -> Result<usize, LinkError> {
+        let mut waiting_since = waiting_since;
         let mut total = 0;
         loop {
-            match self.rx.recv(&self.sock, wait, self.stamps) {
-                Ok(n) => {
-                    // Both clocks read together (vDSO: no system call): the kernel stamps are on
-                    // the wall clock, the session's times on the monotonic one.
-                    let (rx_at, wall) = (Instant::now(), SystemTime::now());
-                    self.offer_batch(n, rx_at, wall);
+            match self.rx.recv(&self.sock, waiting_since) {
+                Ok((n, rx_at)) => {
+                    self.offer_batch(n, rx_at);
                     total += n;
                     if n < BATCH {
                         return Ok(total);
                     }
-                    wait = false;
+                    waiting_since = None;
                 }
                 Err(e) if is_transient(&e) => return Ok(total),
                 Err(e) => return Err(LinkError::Io(e)),
@@ -502,14 +384,12 @@ impl RsiLink {
         }
     }
 
-    /// Hand the `n` datagrams just read to the session, oldest first, each with its arrival on the
-    /// monotonic clock (from the kernel's stamp; `wall` is the wall clock read with `rx_at`).
-    fn offer_batch(&mut self, n: usize, rx_at: Instant, wall: SystemTime) {
+    /// Hand the `n` datagrams just read (at `rx_at`) to the session, oldest first, each with its
+    /// arrival on the monotonic clock (from the kernel's stamp).
+    fn offer_batch(&mut self, n: usize, rx_at: Instant) {
         for k in 0..n {
-            let (len, from, stamp) = self.rx.got[k];
+            let (bytes, from, arrived) = self.rx.datagram(k);
             let Some(from) = from else { continue };
-            let bytes = &self.rx.bufs[k][..len.min(self.rx.bufs[k].len())];
-            let arrived = stamp.and_then(|s| arrival(s, wall, rx_at));
             // Rejected datagrams are counted by the session; nothing else to do here.
             let _ = self.session.offer_arrived(bytes, from, rx_at, arrived);
         }
@@ -518,16 +398,7 @@ impl RsiLink {
 
 /// A UDP receive error that only means "nothing usable arrived yet" (timeout, signal, or an ICMP
 /// port-unreachable echoed back by the kernel); shared with the simulated controller.
-pub fn is_transient(e: &io::Error) -> bool {
-    matches!(
-        e.kind(),
-        io::ErrorKind::WouldBlock
-            | io::ErrorKind::TimedOut
-            | io::ErrorKind::Interrupted
-            | io::ErrorKind::ConnectionRefused
-            | io::ErrorKind::ConnectionReset
-    )
-}
+pub use udp::is_transient;
 
 impl RobotLink for RsiLink {
     type Error = LinkError;
@@ -572,7 +443,7 @@ impl RobotLink for RsiLink {
                 }
                 let until = due + spin;
                 while Instant::now() < until {
-                    if self.receive_burst(false)? == 0 {
+                    if self.receive_burst(None)? == 0 {
                         core::hint::spin_loop();
                     } else if let Some(c) = self.session.take_cycle() {
                         return Ok(c);
@@ -587,7 +458,7 @@ impl RobotLink for RsiLink {
             } else {
                 self.set_timeout(remaining)?;
             }
-            self.receive_burst(true)?;
+            self.receive_burst(Some(now))?;
             if let Some(c) = self.session.take_cycle() {
                 return Ok(c);
             }
@@ -618,62 +489,6 @@ impl RobotLink for RsiLink {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// The kernel's stamp is the datagram's arrival: after the peer's clock read before its `send`,
-    /// and before the one after it (both `CLOCK_REALTIME`, the clock `SO_TIMESTAMPNS` stamps with).
-    #[test]
-    fn the_socket_returns_the_kernel_arrival_stamp() {
-        let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
-        assert!(enable_stamps(&sock), "SO_TIMESTAMPNS refused");
-        sock.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
-        let peer = UdpSocket::bind("127.0.0.1:0").unwrap();
-        let mut rx = RxBatch::new(1024);
-        // The first socket in the system to ask for stamps switches the kernel's stamping on through a
-        // deferred work item; until it has run, datagrams are stamped when read. Wait for it (bounded).
-        let mut on = false;
-        for _ in 0..500 {
-            peer.send_to(&[0; 40], sock.local_addr().unwrap()).unwrap();
-            let after = SystemTime::now();
-            assert_eq!(rx.recv(&sock, true, true).unwrap(), 1);
-            if rx.got[0].2.is_some_and(|s| s <= after) {
-                on = true;
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(1));
-        }
-        assert!(on, "the kernel never stamped a datagram on arrival");
-        for k in 0..3u8 {
-            let before = SystemTime::now();
-            peer.send_to(&[k; 40], sock.local_addr().unwrap()).unwrap();
-            let after = SystemTime::now();
-            assert_eq!(rx.recv(&sock, true, true).unwrap(), 1);
-            let (len, from, stamp) = rx.got[0];
-            assert_eq!((len, from), (40, Some(peer.local_addr().unwrap())));
-            let stamp = stamp.expect("a kernel stamp");
-            assert!(
-                before <= stamp && stamp <= after,
-                "{before:?} <= {stamp:?} <= {after:?}"
-            );
-        }
-        // Without the option, no stamp (the link then measures from the receive call).
-        let plain = UdpSocket::bind("127.0.0.1:0").unwrap();
-        plain
-            .set_read_timeout(Some(Duration::from_secs(5)))
-            .unwrap();
-        peer.send_to(&[1; 40], plain.local_addr().unwrap()).unwrap();
-        assert_eq!(rx.recv(&plain, true, false).unwrap(), 1);
-        assert_eq!(rx.got[0].2, None);
-    }
-
-    #[test]
-    fn a_stamp_becomes_an_arrival_on_the_monotonic_clock_or_none() {
-        let (wall, now) = (SystemTime::now(), Instant::now());
-        let ms = Duration::from_millis;
-        assert_eq!(arrival(wall - ms(3), wall, now), Some(now - ms(3)));
-        assert_eq!(arrival(wall, wall, now), Some(now));
-        assert_eq!(arrival(wall + ms(1), wall, now), None, "after the read");
-        assert_eq!(arrival(wall - ms(1500), wall, now), None, "a stepped clock");
-    }
 
     #[test]
     fn link_and_session_can_move_to_another_thread() {
