@@ -1121,7 +1121,7 @@ impl Out<'_> {
         let t = x as i64 as u64;
         let n = t + u64::from(x - t as i64 as f64 >= 0.5);
         let negative = v.is_sign_negative() && n != 0;
-        let (int, frac) = (n / scale, n % scale);
+        let (int, frac) = split_decimals(n, decimals);
         // The common case, written eight digits at a time: up to 8 integer digits and 8 decimals,
         // with room for whole words (the bytes past the number are written over by what follows).
         if int < 100_000_000 && decimals <= 8 && self.buf.len() - self.n >= 24 {
@@ -1177,6 +1177,32 @@ impl Out<'_> {
     }
 }
 
+/// `n / 10^decimals` and `n % 10^decimals`, each divisor a constant (a multiplication and a shift,
+/// where a division by a value read at run time is one of the slowest instructions there is).
+#[inline(always)]
+fn split_decimals(n: u64, decimals: u8) -> (u64, u64) {
+    macro_rules! by {
+        ($d:literal) => {
+            (n / $d, n % $d)
+        };
+    }
+    match decimals {
+        0 => (n, 0),
+        1 => by!(10),
+        2 => by!(100),
+        3 => by!(1_000),
+        4 => by!(10_000),
+        5 => by!(100_000),
+        6 => by!(1_000_000),
+        7 => by!(10_000_000),
+        8 => by!(100_000_000),
+        _ => {
+            let scale = POW10[usize::from(decimals)];
+            (n / scale, n % scale)
+        }
+    }
+}
+
 /// `n` < 10^8 as eight ASCII digits with leading zeros, the most significant in the lowest byte
 /// (the order they are written in): halves, quarters and digits split with multiplications, all
 /// lanes at once.
@@ -1220,6 +1246,28 @@ mod tests {
         assert_eq!(write_one(1e-30, 4), "0.0000");
         assert_eq!(write_one(7.0, 0), "7");
         assert_eq!(write_one(123_456_789.5, 1), "123456789.5");
+    }
+
+    #[test]
+    fn decimals_split_as_a_division_does() {
+        for decimals in 0..=9u8 {
+            let scale = POW10[usize::from(decimals)];
+            for n in [
+                0,
+                1,
+                scale - 1,
+                scale,
+                scale + 1,
+                123_456_789_012,
+                (1 << 53) - 1,
+            ] {
+                assert_eq!(
+                    split_decimals(n, decimals),
+                    (n / scale, n % scale),
+                    "{n} {decimals}"
+                );
+            }
+        }
     }
 
     #[test]

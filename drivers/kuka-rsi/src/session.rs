@@ -175,10 +175,20 @@ pub struct RsiSession {
     in_flight: Option<InFlight>,
     shaper: Shaper,
     last_wire: [f64; 6],
+    /// The last orientations converted (`RIst`, `RSol`, the correction's rotation).
+    memo: Memos,
     stopped: bool,
     diag: Diagnostics,
     /// Datagrams rejected while waiting for the robot, for the rate-limited report.
     rejects: crate::diag::RejectLog,
+}
+
+/// The session's kept orientation conversions ([`wire::Memo`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct Memos {
+    actual: wire::Memo<hal::UnitQuaternion<f64>>,
+    programmed: wire::Memo<hal::UnitQuaternion<f64>>,
+    correction: wire::Memo<[f64; 3]>,
 }
 
 impl fmt::Debug for RsiSession {
@@ -239,6 +249,7 @@ impl RsiSession {
             in_flight: None,
             shaper,
             last_wire: [0.0; 6],
+            memo: Memos::default(),
             stopped: false,
             diag: Diagnostics::default(),
             rejects: crate::diag::RejectLog::new(crate::diag::REJECT_REPORT_INTERVAL),
@@ -571,8 +582,11 @@ impl RsiSession {
             seq: v,
             t: s.t_base + (v - s.v_base) as f64 * s.unit,
             period: self.cfg.period.as_secs_f64(),
-            actual: wire::pose_from_wire(f.get6(self.rob_slots.rist)),
-            programmed: wire::pose_from_wire(f.get6(self.rob_slots.rsol)),
+            actual: wire::pose_from_wire_with(f.get6(self.rob_slots.rist), &mut self.memo.actual),
+            programmed: wire::pose_from_wire_with(
+                f.get6(self.rob_slots.rsol),
+                &mut self.memo.programmed,
+            ),
             late_replies: delay,
             missed: c.missed,
             replied_late: c.late,
@@ -635,7 +649,7 @@ impl RsiSession {
         let p = self.pending.take().ok_or(LinkError::NoCycle)?;
         let total = self.shaper.shape(correction, &mut self.diag.counters);
         let (t, r) = split(total);
-        let wire_total = wire::offset_to_wire(&t, &r);
+        let wire_total = wire::offset_to_wire_with(&t, &r, &mut self.memo.correction);
         let values = match self.cfg.mode {
             CorrectionMode::Absolute => wire_total,
             CorrectionMode::Relative => core::array::from_fn(|i| wire_total[i] - self.last_wire[i]),
