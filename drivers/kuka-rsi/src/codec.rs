@@ -1116,6 +1116,13 @@ impl Out<'_> {
         if x.is_nan() || x >= 9_007_199_254_740_992.0 {
             return Err(WriteError::OutOfRange { slot });
         }
+        // Zero at this precision (a correction's unused axes, most of them every cycle): one block
+        // copy. Below one half it rounds to 0, which is written unsigned.
+        if x < 0.5 && decimals <= 14 && self.buf.len() - self.n >= 16 {
+            self.buf[self.n..self.n + 16].copy_from_slice(b"0.00000000000000");
+            self.n += if decimals == 0 { 1 } else { 2 + usize::from(decimals) };
+            return Ok(());
+        }
         // Below 2^53 the truncation is exact, and so is the remainder: half away from zero.
         // (Through i64: one conversion instruction, where a u64 conversion is a branchy sequence.)
         let t = x as i64 as u64;
@@ -1246,6 +1253,20 @@ mod tests {
         assert_eq!(write_one(1e-30, 4), "0.0000");
         assert_eq!(write_one(7.0, 0), "7");
         assert_eq!(write_one(123_456_789.5, 1), "123456789.5");
+    }
+
+    /// What rounds to zero is written as the formatter writes zero, at every precision.
+    #[test]
+    fn zero_is_written_unsigned_at_every_precision() {
+        for d in 0..=9u8 {
+            let want = format!("{:.*}", usize::from(d), 0.0);
+            let half = 0.5 / POW10[usize::from(d)] as f64;
+            for v in [0.0, -0.0, 1e-300, -1e-300, half * 0.999, -half * 0.999] {
+                assert_eq!(write_one(v, d), want, "{v} at {d} decimals");
+            }
+            // Just past a half it is not zero (half away from zero).
+            assert_ne!(write_one(half * 1.001, d), want);
+        }
     }
 
     #[test]
