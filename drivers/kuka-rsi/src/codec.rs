@@ -1120,7 +1120,11 @@ impl Out<'_> {
         // copy. Below one half it rounds to 0, which is written unsigned.
         if x < 0.5 && decimals <= 14 && self.buf.len() - self.n >= 16 {
             self.buf[self.n..self.n + 16].copy_from_slice(b"0.00000000000000");
-            self.n += if decimals == 0 { 1 } else { 2 + usize::from(decimals) };
+            self.n += if decimals == 0 {
+                1
+            } else {
+                2 + usize::from(decimals)
+            };
             return Ok(());
         }
         // Below 2^53 the truncation is exact, and so is the remainder: half away from zero.
