@@ -6,10 +6,12 @@
 //! ```
 //!
 //! * `recvfrom`: the bare echo (`UdpSocket::recv_from`), stamps off;
-//! * `recvfrom+timeout`: the same with a receive timeout set, as the links' watchdog sets one;
-//! * `Receiver`: this crate's receive (blocking `recvmsg` with the kernel's stamp), with a timeout;
+//! * `recvfrom+timeout 1s`, `… 30s`: the same with a receive timeout set, as the links' watchdog
+//!   sets one (the kernel arms a timer whenever the call sleeps, whatever its length);
+//! * `Receiver`: this crate's receive (blocking `recvmsg` with the kernel's stamp), without and with
+//!   a timeout;
 //! * `recvmmsg16`: the links' former receive, `recvmmsg(MSG_WAITFORONE)` of 16 with stamps (nix's
-//!   wrapper, headers allocated once), with a timeout.
+//!   wrapper, headers allocated once), without and with a timeout.
 //!
 //! Before each timed send the client waits until the echo's thread is asleep (state `S` in
 //! `/proc/self/task/TID/stat`), so no round trip starts while another program is still running on
@@ -27,7 +29,16 @@ use nix::sys::socket::{MsgFlags, MultiHeaders, SockaddrStorage, recvmmsg, setsoc
 use nix::sys::time::TimeSpec;
 use nix::unistd::Pid;
 
-const KINDS: [&str; 4] = ["recvfrom", "recvfrom+timeout", "Receiver", "recvmmsg16"];
+/// The echoes: name, receive (0 `recv_from`, 1 `Receiver`, 2 `recvmmsg`), receive timeout.
+const KINDS: [(&str, u8, Option<u64>); 7] = [
+    ("recvfrom", 0, None),
+    ("recvfrom+timeout 1s", 0, Some(1)),
+    ("recvfrom+timeout 30s", 0, Some(30)),
+    ("Receiver", 1, None),
+    ("Receiver+timeout 1s", 1, Some(1)),
+    ("recvmmsg16", 2, None),
+    ("recvmmsg16+timeout 1s", 2, Some(1)),
+];
 
 fn tid() -> i32 {
     // The thread's id as the kernel knows it: the last path element of /proc/thread-self.
@@ -53,31 +64,34 @@ fn asleep(tid: i32) -> bool {
 fn echo(kind: usize, sock: UdpSocket, me: Arc<AtomicI32>) {
     pin_to_cpu0();
     me.store(tid(), Ordering::SeqCst);
-    if kind > 0 {
-        sock.set_read_timeout(Some(Duration::from_secs(1))).unwrap();
-    }
+    let (_, kind, timeout) = KINDS[kind];
+    sock.set_read_timeout(timeout.map(Duration::from_secs))
+        .unwrap();
     let mut buf = vec![0u8; 2049];
-    let mut rx = udp::Receiver::new(&sock, 2048);
+    let mut rx = (kind == 1).then(|| udp::Receiver::new(&sock, 2048));
     let mut bufs: Vec<Vec<u8>> = (0..16).map(|_| vec![0u8; 2049]).collect();
     let mut headers =
         MultiHeaders::<SockaddrStorage>::preallocate(16, Some(nix::cmsg_space!(TimeSpec)));
-    if kind == 3 {
+    if kind == 2 {
         setsockopt(&sock, sockopt::ReceiveTimestampns, &true).unwrap();
     }
     loop {
         let (n, from): (usize, SocketAddr) = match kind {
-            0 | 1 => match sock.recv_from(&mut buf) {
+            0 => match sock.recv_from(&mut buf) {
                 Ok(r) => r,
                 Err(_) => continue,
             },
-            2 => match rx.recv(&sock, Some(Instant::now())) {
-                Ok(_) => {
-                    let (bytes, from, _) = rx.datagram(0);
-                    buf[..bytes.len()].copy_from_slice(bytes);
-                    (bytes.len(), from.unwrap())
+            1 => {
+                let rx = rx.as_mut().expect("a receiver for this echo");
+                match rx.recv(&sock, Some(Instant::now())) {
+                    Ok(_) => {
+                        let (bytes, from, _) = rx.datagram(0);
+                        buf[..bytes.len()].copy_from_slice(bytes);
+                        (bytes.len(), from.unwrap())
+                    }
+                    Err(_) => continue,
                 }
-                Err(_) => continue,
-            },
+            }
             _ => {
                 let mut iovs: Vec<[IoSliceMut; 1]> = bufs
                     .iter_mut()
@@ -99,7 +113,7 @@ fn echo(kind: usize, sock: UdpSocket, me: Arc<AtomicI32>) {
                 (r.bytes, from.unwrap())
             }
         };
-        if kind == 3 {
+        if kind == 2 {
             buf[..n].copy_from_slice(&bufs[0][..n]);
         }
         if n == 1 {
@@ -150,7 +164,7 @@ fn main() {
         let p = |q: f64| v[((v.len() - 1) as f64 * q) as usize];
         println!(
             "{:<34} {:>6.2} {:>7.2} {:>7.2}",
-            KINDS[k],
+            KINDS[k].0,
             p(0.5),
             p(0.99),
             p(0.999)

@@ -9,8 +9,9 @@
 //! it, after a stall; they are then read with non-blocking `recvmsg` calls, up to [`BATCH`]
 //! in all, so the link can answer the newest. A blocking `recvmmsg(MSG_WAITFORONE)` would drain in
 //! the same call but always tries a second, empty read: on a 2-vCPU Firecracker guest a bare echo
-//! built on it answered 0.4–0.8 µs slower at p50 than one built on `recvmsg` (of a 12.6 µs round
-//! trip), every cycle, to serve a backlog that a cell in step never has.
+//! built on it answered ≈ 0.2 µs slower at p50 than one built on this receive (13.5–13.6 against
+//! 13.3–13.4 µs, both with a receive timeout; `examples/receive_echo.rs`), every cycle, to serve a
+//! backlog that a cell in step never has.
 //!
 //! Sans-IO sessions stay in the drivers; this is the thin shell under them, without unsafe code.
 
