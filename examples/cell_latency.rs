@@ -41,6 +41,10 @@
 //! its own). With a period, the replies later than the period (the robot's cycle: RSI counts them
 //! against its `Timeout`) are counted for the echo and for forcecell (`late`).
 //!
+//! `--echo-times` has the echo time its own receive→send as the links do (the receive call's return
+//! to the send call's return), printed after forcecell's: what this machine gives a program that
+//! does nothing but answer. Off by default: it adds two clock reads to the echo's cycle.
+//!
 //! `--spin-us N` (`--cell run`) sets the RSI link's `spin`: it polls for the datagram from N µs
 //! before it is due until N µs after (`robot.spin_us` in a cell file).
 //!
@@ -88,6 +92,7 @@ struct Opts {
     standin_priority: u8,
     spin_us: u64,
     settle: bool,
+    echo_times: bool,
 }
 
 fn parse_opts() -> Result<Opts> {
@@ -107,6 +112,7 @@ fn parse_opts() -> Result<Opts> {
         standin_priority: 0,
         spin_us: 0,
         settle: false,
+        echo_times: false,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -127,6 +133,7 @@ fn parse_opts() -> Result<Opts> {
             "--realtime" => o.realtime = true,
             "--standin-priority" => o.standin_priority = val()?.parse()?,
             "--settle" => o.settle = true,
+            "--echo-times" => o.echo_times = true,
             _ => bail!("unknown option {a} (see the file's documentation)"),
         }
     }
@@ -492,13 +499,26 @@ fn stand_in_egm(
     Ok(times)
 }
 
-fn echo_server(sock: UdpSocket, done: Arc<AtomicBool>) {
+/// The bare echo: `recv_from`, `send_to` (a 200 ms receive timeout, to notice the end; the links'
+/// watchdog sleeps with one too). With `times`, it also times its own receive→send as the links
+/// do (from the receive call's return to the send call's return; two clock reads a datagram).
+fn echo_server(sock: UdpSocket, done: Arc<AtomicBool>, times: Option<Arc<Mutex<Vec<f64>>>>) {
     let mut buf = vec![0u8; 65536];
+    let mut own = Vec::with_capacity(if times.is_some() { 1 << 20 } else { 0 });
     sock.set_read_timeout(Some(Duration::from_millis(200))).ok();
     while !done.load(Ordering::Relaxed) {
         if let Ok((n, from)) = sock.recv_from(&mut buf) {
+            let got = times.as_ref().map(|_| Instant::now());
             let _ = sock.send_to(&buf[..n], from);
+            if let Some(t) = got
+                && own.len() < own.capacity()
+            {
+                own.push(t.elapsed().as_secs_f64() * 1e6);
+            }
         }
+    }
+    if let Some(t) = times {
+        *t.lock().unwrap() = own;
     }
 }
 
@@ -619,11 +639,13 @@ fn main() -> Result<()> {
     let dir = std::env::temp_dir().join(format!("cell_latency-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
     let done = Arc::new(AtomicBool::new(false));
+    let echo_own: Option<Arc<Mutex<Vec<f64>>>> = o.echo_times.then(Arc::default);
+    let mut echo_thread = None;
     let echo = if o.echo {
         let sock = UdpSocket::bind("127.0.0.1:0")?;
         let addr = sock.local_addr()?;
-        let (d, cpu, rt) = (done.clone(), o.loop_cpu, o.realtime);
-        thread::Builder::new().name("echo".into()).spawn(move || {
+        let (d, cpu, rt, own) = (done.clone(), o.loop_cpu, o.realtime, echo_own.clone());
+        echo_thread = Some(thread::Builder::new().name("echo".into()).spawn(move || {
             pin(cpu).expect("pin the echo");
             if rt {
                 let applied = forcecell::rt::Realtime::default().apply_to_cycle_thread();
@@ -631,8 +653,8 @@ fn main() -> Result<()> {
                     eprintln!("warning: echo: {r}");
                 }
             }
-            echo_server(sock, d);
-        })?;
+            echo_server(sock, d, own);
+        })?);
         Some(addr)
     } else {
         None
@@ -915,6 +937,23 @@ fn main() -> Result<()> {
         println!("forcecell's own receive→send, µs: {}", driver_line(l));
         if let Some(b) = b {
             println!("  of which before the send call, µs: {}", driver_line(b));
+        }
+    }
+    if let (Some(own), Some(h)) = (echo_own, echo_thread) {
+        done.store(true, Ordering::Relaxed);
+        h.join().map_err(|_| anyhow!("the echo panicked"))?;
+        let mut v = std::mem::take(&mut *own.lock().unwrap());
+        v.sort_by(f64::total_cmp);
+        if !v.is_empty() {
+            let p = |q: f64| v[((v.len() - 1) as f64 * q) as usize];
+            println!(
+                "the echo's own receive→send, µs: p50 {:.1}, p99 {:.1}, p99.9 {:.1}, max {:.1} ({} replies)",
+                p(0.5),
+                p(0.99),
+                p(0.999),
+                v[v.len() - 1],
+                v.len()
+            );
         }
     }
     Ok(())
