@@ -41,6 +41,9 @@ pub struct Receiver {
     /// Room for one `SCM_TIMESTAMPNS` control message (nix fills a `Vec` it does not grow).
     cmsg: Vec<u8>,
     stamped: bool,
+    /// The kernel was seen stamping datagrams on arrival ([`arrival_stamping_on`]): only then can a
+    /// stamp tell a datagram that woke the call from one that was queued before it.
+    on_arrival: bool,
 }
 
 impl std::fmt::Debug for Receiver {
@@ -94,6 +97,60 @@ pub fn may_have_backlog(since: Instant, arrived: Option<Instant>) -> bool {
     arrived.is_none_or(|a| a <= since)
 }
 
+/// Whether the kernel stamps datagrams when they arrive, checked on a pair of throwaway loopback
+/// sockets. The first socket of the system to ask for stamps switches stamping on through deferred
+/// work; until that has run, a datagram is stamped when it is read, so a datagram that waited in the
+/// socket would look as if it had woken the call, and a backlog would be answered one stale datagram
+/// a cycle. Waits for it (a millisecond at a time, at most 0.2 s: it takes microseconds where it is
+/// needed at all); false where it never comes, and the receiver then drains after every read.
+pub fn arrival_stamping_on() -> bool {
+    let (Ok(rx), Ok(tx)) = (
+        UdpSocket::bind("127.0.0.1:0"),
+        UdpSocket::bind("127.0.0.1:0"),
+    ) else {
+        return false;
+    };
+    let Ok(to) = rx.local_addr() else {
+        return false;
+    };
+    if !enable_stamps(&rx)
+        || rx
+            .set_read_timeout(Some(Duration::from_millis(50)))
+            .is_err()
+    {
+        return false;
+    }
+    let mut buf = [0u8; 8];
+    let mut cmsg = nix::cmsg_space!(TimeSpec);
+    for _ in 0..200 {
+        if tx.send_to(&[1], to).is_err() {
+            return false;
+        }
+        let before_read = SystemTime::now();
+        let mut iov = [IoSliceMut::new(&mut buf)];
+        let Ok(r) = recvmsg::<SockaddrStorage>(
+            rx.as_raw_fd(),
+            &mut iov,
+            Some(&mut cmsg),
+            MsgFlags::empty(),
+        ) else {
+            return false;
+        };
+        let stamp = r.cmsgs().ok().and_then(|mut cm| {
+            cm.find_map(|m| match m {
+                ControlMessageOwned::ScmTimestampns(ts) => system_time(&ts),
+                _ => None,
+            })
+        });
+        // Stamped before the read began: on arrival.
+        if stamp.is_some_and(|s| s < before_read) {
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    false
+}
+
 fn system_time(ts: &TimeSpec) -> Option<SystemTime> {
     let secs = u64::try_from(ts.tv_sec()).ok()?;
     let nanos = u32::try_from(ts.tv_nsec()).ok()?;
@@ -112,12 +169,19 @@ impl Receiver {
             read_at: (Instant::now(), SystemTime::now()),
             cmsg: nix::cmsg_space!(TimeSpec),
             stamped: enable_stamps(sock),
+            on_arrival: false,
         }
+        .checked()
     }
 
     /// True when the kernel stamps each datagram's arrival (`SO_TIMESTAMPNS` accepted).
     pub fn stamped(&self) -> bool {
         self.stamped
+    }
+
+    fn checked(mut self) -> Self {
+        self.on_arrival = self.stamped && arrival_stamping_on();
+        self
     }
 
     /// Read the next datagram — `waiting_since` given: blocking up to the socket's timeout, the
@@ -140,7 +204,8 @@ impl Receiver {
         // Both clocks together (vDSO: no system call): the stamps are on the wall clock.
         self.read_at = (Instant::now(), SystemTime::now());
         let mut n = 1;
-        if waiting_since.is_none_or(|since| may_have_backlog(since, self.arrival(0))) {
+        let may_have_company = |since| !self.on_arrival || may_have_backlog(since, self.arrival(0));
+        if waiting_since.is_none_or(may_have_company) {
             // A failure here (nothing more: WouldBlock) ends the batch; a lasting one shows on the
             // next call's first read.
             while n < BATCH && self.read_one(sock, n, MsgFlags::MSG_DONTWAIT).is_ok() {
@@ -348,6 +413,21 @@ mod tests {
         assert_eq!(arrival(wall, wall, now), Some(now));
         assert_eq!(arrival(wall + ms(1), wall, now), None, "after the read");
         assert_eq!(arrival(wall - ms(1500), wall, now), None, "a stepped clock");
+    }
+
+    /// Once the kernel stamps on arrival (a socket of this process asked), the check says so, and a
+    /// new receiver relies on its stamps; without stamps on its socket it never does.
+    #[test]
+    fn the_arrival_stamping_check_sees_the_kernel_stamping_on_arrival() {
+        let (sock, peer) = pair();
+        let mut rx = Receiver::new(&sock, 64);
+        stamping_on(&mut rx, &sock, &peer);
+        assert!(arrival_stamping_on());
+        assert!(Receiver::new(&sock, 64).on_arrival);
+        let plain = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let mut unstamped = Receiver::new(&plain, 64);
+        unstamped.stamped = false;
+        assert!(!unstamped.checked().on_arrival);
     }
 
     #[test]
