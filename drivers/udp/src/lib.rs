@@ -21,7 +21,7 @@ use std::os::fd::AsRawFd;
 use std::time::{Duration, Instant, SystemTime};
 
 use nix::sys::socket::{
-    ControlMessageOwned, MsgFlags, SockaddrStorage, recvmsg, setsockopt, sockopt,
+    ControlMessageOwned, MsgFlags, RecvMsg, SockaddrStorage, recvmsg, setsockopt, sockopt,
 };
 use nix::sys::time::TimeSpec;
 
@@ -136,19 +136,24 @@ pub fn arrival_stamping_on() -> bool {
         ) else {
             return false;
         };
-        let stamp = r.cmsgs().ok().and_then(|mut cm| {
-            cm.find_map(|m| match m {
-                ControlMessageOwned::ScmTimestampns(ts) => system_time(&ts),
-                _ => None,
-            })
-        });
         // Stamped before the read began: on arrival.
-        if stamp.is_some_and(|s| s < before_read) {
+        if stamp_of(&r).is_some_and(|s| s < before_read) {
             return true;
         }
         std::thread::sleep(Duration::from_millis(1));
     }
     false
+}
+
+/// The kernel's arrival stamp that came with a read, if any (a truncated control message,
+/// `MSG_CTRUNC`, reads as none).
+fn stamp_of(r: &RecvMsg<'_, '_, SockaddrStorage>) -> Option<SystemTime> {
+    r.cmsgs().ok().and_then(|mut cm| {
+        cm.find_map(|m| match m {
+            ControlMessageOwned::ScmTimestampns(ts) => system_time(&ts),
+            _ => None,
+        })
+    })
 }
 
 fn system_time(ts: &TimeSpec) -> Option<SystemTime> {
@@ -243,14 +248,7 @@ impl Receiver {
                 .map(|v4| SocketAddr::from(*v4))
                 .or_else(|| a.as_sockaddr_in6().map(|v6| SocketAddr::from(*v6)))
         });
-        // A truncated control message (MSG_CTRUNC) reads as no stamp.
-        let stamp = r.cmsgs().ok().and_then(|mut cm| {
-            cm.find_map(|m| match m {
-                ControlMessageOwned::ScmTimestampns(ts) => system_time(&ts),
-                _ => None,
-            })
-        });
-        self.got[k] = (r.bytes, from, stamp);
+        self.got[k] = (r.bytes, from, stamp_of(&r));
         Ok(())
     }
 }
