@@ -502,7 +502,7 @@ fn stand_in_egm(
 /// The bare echo: `recv_from`, `send_to` (a 200 ms receive timeout, to notice the end; the links'
 /// watchdog sleeps with one too). With `times`, it also times its own receive→send as the links
 /// do (from the receive call's return to the send call's return; two clock reads a datagram).
-fn echo_server(sock: UdpSocket, done: Arc<AtomicBool>, times: Option<Arc<Mutex<Vec<f64>>>>) {
+fn echo_server(sock: UdpSocket, done: Arc<AtomicBool>, times: Option<Arc<Mutex<Vec<u32>>>>) {
     let mut buf = vec![0u8; 65536];
     let mut own = Vec::with_capacity(if times.is_some() { 1 << 20 } else { 0 });
     sock.set_read_timeout(Some(Duration::from_millis(200))).ok();
@@ -513,7 +513,7 @@ fn echo_server(sock: UdpSocket, done: Arc<AtomicBool>, times: Option<Arc<Mutex<V
             if let Some(t) = got
                 && own.len() < own.capacity()
             {
-                own.push(t.elapsed().as_secs_f64() * 1e6);
+                own.push(u32::try_from(t.elapsed().as_nanos()).unwrap_or(u32::MAX));
             }
         }
     }
@@ -639,7 +639,7 @@ fn main() -> Result<()> {
     let dir = std::env::temp_dir().join(format!("cell_latency-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
     let done = Arc::new(AtomicBool::new(false));
-    let echo_own: Option<Arc<Mutex<Vec<f64>>>> = o.echo_times.then(Arc::default);
+    let echo_own: Option<Arc<Mutex<Vec<u32>>>> = o.echo_times.then(Arc::default);
     let mut echo_thread = None;
     let echo = if o.echo {
         let sock = UdpSocket::bind("127.0.0.1:0")?;
@@ -943,15 +943,10 @@ fn main() -> Result<()> {
         done.store(true, Ordering::Relaxed);
         h.join().map_err(|_| anyhow!("the echo panicked"))?;
         let mut v = std::mem::take(&mut *own.lock().unwrap());
-        v.sort_by(f64::total_cmp);
         if !v.is_empty() {
-            let p = |q: f64| v[((v.len() - 1) as f64 * q) as usize];
+            let [p50, p99, p999, max] = percentiles(&mut v);
             println!(
-                "the echo's own receive→send, µs: p50 {:.1}, p99 {:.1}, p99.9 {:.1}, max {:.1} ({} replies)",
-                p(0.5),
-                p(0.99),
-                p(0.999),
-                v[v.len() - 1],
+                "the echo's own receive→send, µs: p50 {p50:.1}, p99 {p99:.1}, p99.9 {p999:.1}, max {max:.1} ({} replies)",
                 v.len()
             );
         }

@@ -8,7 +8,7 @@ use std::net::{IpAddr, SocketAddr, UdpSocket};
 use std::time::Instant;
 
 use hal::{Correction, Cycle, ErrorKind, ProcessState, RobotLink};
-use udp::{BATCH, Receiver};
+use udp::Receiver;
 
 use crate::diag::Diagnostics;
 use crate::limits::{CorrectionRange, Limits};
@@ -333,15 +333,6 @@ impl EgmLink {
         Ok(())
     }
 
-    fn offer_batch(&mut self, n: usize, rx_at: Instant) {
-        for k in 0..n {
-            let (bytes, from, arrived) = self.rx.datagram(k);
-            let Some(from) = from else { continue };
-            // Rejected datagrams are counted by the session.
-            let _ = self.session.offer_arrived(bytes, from, rx_at, arrived);
-        }
-    }
-
     /// True when the kernel stamps each datagram's arrival (`SO_TIMESTAMPNS` accepted): replies'
     /// lateness is measured from it. False: from the receive call's return (say so once).
     pub fn kernel_stamps(&self) -> bool {
@@ -398,20 +389,13 @@ impl RobotLink for EgmLink {
                 },
             };
             self.set_timeout(remaining)?;
-            let mut waiting_since = Some(now);
-            loop {
-                match self.rx.recv(&self.sock, waiting_since) {
-                    Ok((n, rx_at)) => {
-                        self.offer_batch(n, rx_at);
-                        if n < BATCH {
-                            break;
-                        }
-                        waiting_since = None;
-                    }
-                    Err(e) if is_transient(&e) => break,
-                    Err(e) => return Err(LinkError::Io(e)),
-                }
-            }
+            let session = &mut self.session;
+            self.rx
+                .recv_all(&self.sock, Some(now), |bytes, from, arrived, rx_at| {
+                    // Rejected datagrams are counted by the session.
+                    let _ = session.offer_arrived(bytes, from, rx_at, arrived);
+                })
+                .map_err(LinkError::Io)?;
             if let Some(c) = self.session.take_cycle() {
                 return Ok(c);
             }

@@ -10,7 +10,7 @@ use std::time::Instant;
 use hal::{Correction, Cycle, ErrorKind, RobotLink};
 use nix::poll::{PollFd, PollFlags, ppoll};
 use nix::sys::time::TimeSpec;
-use udp::{BATCH, Receiver};
+use udp::Receiver;
 
 use crate::codec::{Schema, WriteError};
 use crate::config::EthernetConfig;
@@ -360,39 +360,17 @@ impl RsiLink {
         Ok(())
     }
 
-    /// One receive: waiting (up to the socket's timeout) for the first datagram when
-    /// `waiting_since` is given (the clock read before the call), and what is queued behind it
-    /// when it had waited in the socket ([`udp::Receiver::recv`]; a full batch means there may be
-    /// more, read without waiting); every datagram read is offered to the session. Returns how many
-    /// were read (0 on a timeout or nothing queued).
+    /// Read what the robot sent ([`udp::Receiver::recv_all`]: waiting up to the socket's timeout
+    /// when `waiting_since`, the clock read before the call, is given) and offer every datagram to
+    /// the session. Returns how many were read (0 on a timeout or nothing queued).
     fn receive_burst(&mut self, waiting_since: Option<Instant>) -> Result<usize, LinkError> {
-        let mut waiting_since = waiting_since;
-        let mut total = 0;
-        loop {
-            match self.rx.recv(&self.sock, waiting_since) {
-                Ok((n, rx_at)) => {
-                    self.offer_batch(n, rx_at);
-                    total += n;
-                    if n < BATCH {
-                        return Ok(total);
-                    }
-                    waiting_since = None;
-                }
-                Err(e) if is_transient(&e) => return Ok(total),
-                Err(e) => return Err(LinkError::Io(e)),
-            }
-        }
-    }
-
-    /// Hand the `n` datagrams just read (at `rx_at`) to the session, oldest first, each with its
-    /// arrival on the monotonic clock (from the kernel's stamp).
-    fn offer_batch(&mut self, n: usize, rx_at: Instant) {
-        for k in 0..n {
-            let (bytes, from, arrived) = self.rx.datagram(k);
-            let Some(from) = from else { continue };
-            // Rejected datagrams are counted by the session; nothing else to do here.
-            let _ = self.session.offer_arrived(bytes, from, rx_at, arrived);
-        }
+        let session = &mut self.session;
+        self.rx
+            .recv_all(&self.sock, waiting_since, |bytes, from, arrived, rx_at| {
+                // Rejected datagrams are counted by the session; nothing else to do here.
+                let _ = session.offer_arrived(bytes, from, rx_at, arrived);
+            })
+            .map_err(LinkError::Io)
     }
 }
 

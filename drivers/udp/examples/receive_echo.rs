@@ -67,36 +67,39 @@ fn echo(kind: usize, sock: UdpSocket, me: Arc<AtomicI32>) {
     let (_, kind, timeout) = KINDS[kind];
     sock.set_read_timeout(timeout.map(Duration::from_secs))
         .unwrap();
-    let mut buf = vec![0u8; 2049];
-    let mut rx = (kind == 1).then(|| udp::Receiver::new(&sock, 2048));
-    let mut bufs: Vec<Vec<u8>> = (0..16).map(|_| vec![0u8; 2049]).collect();
-    let mut headers =
-        MultiHeaders::<SockaddrStorage>::preallocate(16, Some(nix::cmsg_space!(TimeSpec)));
-    if kind == 2 {
-        setsockopt(&sock, sockopt::ReceiveTimestampns, &true).unwrap();
-    }
-    loop {
-        let (n, from): (usize, SocketAddr) = match kind {
-            0 => match sock.recv_from(&mut buf) {
-                Ok(r) => r,
-                Err(_) => continue,
-            },
-            1 => {
-                let rx = rx.as_mut().expect("a receiver for this echo");
-                match rx.recv(&sock, Some(Instant::now())) {
-                    Ok(_) => {
-                        let (bytes, from, _) = rx.datagram(0);
-                        buf[..bytes.len()].copy_from_slice(bytes);
-                        (bytes.len(), from.unwrap())
-                    }
-                    Err(_) => continue,
+    match kind {
+        0 => {
+            let mut buf = [0u8; 2049];
+            while let Ok((n, from)) = sock.recv_from(&mut buf) {
+                if n == 1 {
+                    return;
+                }
+                sock.send_to(&buf[..n], from).unwrap();
+            }
+        }
+        1 => {
+            // As the links receive: every datagram offered, answered from the receiver's buffer.
+            let mut rx = udp::Receiver::new(&sock, 2048);
+            loop {
+                let mut end = false;
+                let _ = rx.recv_all(&sock, Some(Instant::now()), |bytes, from, _, _| {
+                    end |= bytes.len() == 1;
+                    sock.send_to(bytes, from).unwrap();
+                });
+                if end {
+                    return;
                 }
             }
-            _ => {
-                let mut iovs: Vec<[IoSliceMut; 1]> = bufs
-                    .iter_mut()
-                    .map(|b| [IoSliceMut::new(&mut b[..])])
-                    .collect();
+        }
+        _ => {
+            // The former receive: buffers, message headers and the I/O vectors' array set up once
+            // per call without allocating, as the links had them.
+            setsockopt(&sock, sockopt::ReceiveTimestampns, &true).unwrap();
+            let mut bufs: [[u8; 2049]; 16] = [[0; 2049]; 16];
+            let mut headers =
+                MultiHeaders::<SockaddrStorage>::preallocate(16, Some(nix::cmsg_space!(TimeSpec)));
+            loop {
+                let mut iovs = bufs.each_mut().map(|b| [IoSliceMut::new(&mut b[..])]);
                 let Ok(mut res) = recvmmsg(
                     sock.as_raw_fd(),
                     &mut headers,
@@ -109,17 +112,15 @@ fn echo(kind: usize, sock: UdpSocket, me: Arc<AtomicI32>) {
                 let r = res.next().unwrap();
                 let from = r
                     .address
-                    .and_then(|a| a.as_sockaddr_in().map(|v| SocketAddr::from(*v)));
-                (r.bytes, from.unwrap())
+                    .and_then(|a| a.as_sockaddr_in().map(|v| SocketAddr::from(*v)))
+                    .unwrap();
+                let n = r.bytes;
+                if n == 1 {
+                    return;
+                }
+                sock.send_to(&bufs[0][..n], from).unwrap();
             }
-        };
-        if kind == 2 {
-            buf[..n].copy_from_slice(&bufs[0][..n]);
         }
-        if n == 1 {
-            return;
-        }
-        sock.send_to(&buf[..n], from).unwrap();
     }
 }
 
